@@ -1,0 +1,103 @@
+"""The ``nsdrake`` command line.
+
+    nsdrake run SCENARIO [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--overwrite]
+    nsdrake list
+
+Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
+status 2, before any simulation starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from .runner import OutputFolderError, default_output_folder, prepare_output_folder, run_to_folder
+from .scenario import ScenarioError, load_scenario, shipped_scenarios
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2, like every other input error
+        self.exit(2, f"nsdrake: error: {message}\n")
+
+
+def _duration(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--duration must be a number of seconds, got '{text}'") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"--duration must be > 0 seconds, got '{text}'")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="nsdrake", description="Null-space velocity control (Nemec & Zlajpah 2000) on Drake."
+    )
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    run = sub.add_parser("run", help="run a shipped scenario and write traces, metrics and plots")
+    run.add_argument("scenario", help=f"a shipped scenario: {', '.join(shipped_scenarios())}")
+    run.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
+    run.add_argument("--out", type=Path, help="output folder (default: runs/SCENARIO, never overwritten)")
+    run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
+    run.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out folder")
+    sub.add_parser("list", help="list the shipped scenarios")
+    return parser
+
+
+class _Progress:
+    """A progress bar on a terminal; silent when stderr is not one (CI logs)."""
+
+    def __init__(self, label: str):
+        self.enabled = sys.stderr.isatty()
+        self.label = label
+        self.start = time.perf_counter()
+
+    def __call__(self, fraction: float):
+        if not self.enabled:
+            return
+        width = 30
+        done = int(round(width * fraction))
+        elapsed = time.perf_counter() - self.start
+        sys.stderr.write(
+            f"\r{self.label} [{'#' * done}{'.' * (width - done)}] {fraction:4.0%} {elapsed:5.1f} s"
+        )
+        if fraction >= 1.0:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _run(args) -> int:
+    scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    out = args.out if args.out is not None else default_output_folder(args.scenario)
+    out = prepare_output_folder(out, overwrite=args.overwrite)
+    print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
+    result = run_to_folder(scenario, out, progress=_Progress(args.scenario))
+    for m in result.metrics:
+        mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
+        bound = f"  (bound: {m.bound})" if m.bound else ""
+        print(f"  {m.name:38s} {m.value:12.6g} {m.unit:9s}{mark}{bound}")
+    files = ", ".join(sorted(p.name for p in out.iterdir()))
+    print(f"nsdrake: wrote {out}/: {files}")
+    return 0 if result.passed else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "list":
+            for name in shipped_scenarios():
+                print(name)
+            return 0
+        return _run(args)
+    except (ScenarioError, OutputFolderError) as e:
+        print(f"nsdrake: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

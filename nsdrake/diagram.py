@@ -1,0 +1,209 @@
+"""Wiring: the station and the controller stack in one Drake diagram.
+
+::
+
+    plant.state ──► robot_terms ─┬─► impedance_controller ─────────────────┐
+                                 ├─► joint_torque_criterion                 │
+                                 │     └─► desired_null_space_velocity      │
+                                 │           └─► null_space_controller ─────┤
+                                 └───────────────► null_space_controller    ▼
+    plant.reaction_forces ──► force_sensor ─┬─► reference ─► impedance   torque_sum
+                                            └─► impedance_controller        │
+                                                        actuation_map ◄─────┘ ─► plant.actuation
+
+Every system is named after its role, and every signal the traces need is
+logged once per control period by a ``VectorLogSink``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain, VectorLogSink
+
+from .impedance import ImpedanceGains
+from .plant import Station, add_station
+from .reference import SlideAndPress
+from .scenario import Scenario
+from .systems import (
+    ContactMonitor,
+    ForceSensor,
+    GradientProjectionSystem,
+    ImpedanceController,
+    JointTorqueCriterionSystem,
+    NullSpaceController,
+    RobotTermsSystem,
+    SlideAndPressReference,
+)
+
+
+@dataclass
+class ControlledStation:
+    """What :func:`build_diagram` returns."""
+
+    diagram: Diagram
+    station: Station
+    loggers: dict[str, VectorLogSink]
+    scenario: Scenario
+
+    def system(self, name: str):
+        return self.diagram.GetSubsystemByName(name)
+
+
+def initial_task_position(station: Station) -> np.ndarray:
+    """x = p(q0), the tool's task position at the initial pose. (m,) [m]."""
+    context = station.plant.CreateDefaultContext()
+    station.plant.SetPositions(context, station.q0)
+    return station.arm_model.task_position(context)
+
+
+def speed_limit_vector(scenario: Scenario, joint_names: tuple[str, ...]) -> np.ndarray:
+    limits = scenario.desired_null_space.joint_speed_limits
+    return np.array([limits.get(name, np.inf) for name in joint_names])
+
+
+def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> ControlledStation:
+    """The Fig. 3 diagram for ``scenario``.
+
+    ``null_space_task`` False sets the criterion gain to zero (q̇_dⁿ = 0): the
+    null-space controller then only damps self-motion.
+    """
+    builder = DiagramBuilder()
+    station = add_station(builder, scenario)
+    plant, arm = station.plant, station.arm_model
+    n, T = arm.n, scenario.control_period
+    ns = scenario.null_space
+    inverse = scenario.generalized_inverse()
+
+    robot_terms = builder.AddNamedSystem(
+        "robot_terms",
+        RobotTermsSystem(
+            arm_model=arm, coriolis_matrix=ns.task_velocity_compensation or ns.coriolis_compensation
+        ),
+    )
+    builder.Connect(plant.get_state_output_port(), robot_terms.get_input_port())
+    model_terms = arm.terms(plant.CreateDefaultContext(), station.q0, station.v0, True)
+
+    sensor = builder.AddNamedSystem(
+        "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
+    )
+    builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
+
+    r = scenario.reference
+    reference = builder.AddNamedSystem(
+        "reference",
+        SlideAndPressReference(
+            reference=SlideAndPress(
+                x0=initial_task_position(station),
+                tangent=station.tangent,
+                normal=station.normal,
+                tangent_speed=r.tangent_speed,
+                approach_speed=r.approach_speed,
+                blend_time=r.blend_time,
+                force=r.force,
+                force_ramp_time=r.force_ramp_time,
+            ),
+            task_rows=arm.rows,
+            contact_threshold=r.contact_threshold,
+            period=T,
+        ),
+    )
+    builder.Connect(sensor.GetOutputPort("force"), reference.GetInputPort("measured_force"))
+
+    imp = scenario.impedance
+    impedance = builder.AddNamedSystem(
+        "impedance_controller",
+        ImpedanceController(
+            gains=ImpedanceGains.along_surface(
+                station.normal, imp.K_p_tangent, imp.K_p_normal, imp.K_v_tangent, imp.K_v_normal, imp.K_f
+            ),
+            task_rows=arm.rows,
+            p_WSo=sensor.p_WSo,
+            gravity_compensation=imp.gravity_compensation,
+            model_terms=model_terms,
+        ),
+    )
+    builder.Connect(robot_terms.GetOutputPort("robot_terms"), impedance.GetInputPort("robot_terms"))
+    for name in ("x_d", "xdot_d", "xddot_d", "f_d"):
+        builder.Connect(reference.GetOutputPort(name), impedance.GetInputPort(name))
+    builder.Connect(sensor.GetOutputPort("wrench"), impedance.GetInputPort("measured_wrench"))
+
+    criterion = builder.AddNamedSystem(
+        "joint_torque_criterion",
+        JointTorqueCriterionSystem(F_d=r.force * station.normal, model_terms=model_terms),
+    )
+    builder.Connect(robot_terms.GetOutputPort("robot_terms"), criterion.get_input_port())
+
+    d = scenario.desired_null_space
+    projection = builder.AddNamedSystem(
+        "desired_null_space_velocity",
+        GradientProjectionSystem(
+            inverse=inverse,
+            gain=d.joint_torque.gain if null_space_task else 0.0,
+            rotate_gradient=d.rotate_gradient,
+            speed_limits=speed_limit_vector(scenario, arm.joint_names),
+            model_terms=model_terms,
+        ),
+    )
+    builder.Connect(robot_terms.GetOutputPort("robot_terms"), projection.GetInputPort("robot_terms"))
+    builder.Connect(criterion.GetOutputPort("gradient"), projection.GetInputPort("gradient"))
+
+    null_space = builder.AddNamedSystem(
+        "null_space_controller",
+        NullSpaceController(
+            inverse=inverse,
+            K_n=ns.K_n,
+            period=T,
+            task_velocity_compensation=ns.task_velocity_compensation,
+            coriolis_compensation=ns.coriolis_compensation,
+            acceleration_feedforward=ns.acceleration_feedforward,
+            model_terms=model_terms,
+        ),
+    )
+    builder.Connect(robot_terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
+    builder.Connect(
+        projection.GetOutputPort("desired_null_space_velocity"),
+        null_space.GetInputPort("desired_null_space_velocity"),
+    )
+
+    torque_sum = builder.AddNamedSystem("torque_sum", Adder(2, n))
+    builder.Connect(impedance.get_output_port(), torque_sum.get_input_port(0))
+    builder.Connect(null_space.GetOutputPort("generalized_force"), torque_sum.get_input_port(1))
+    # τ = B u with B the plant's actuation matrix (a permutation here): u = Bᵀ τ.
+    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(plant.MakeActuationMatrix().T))
+    builder.Connect(torque_sum.get_output_port(), actuation.get_input_port())
+    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
+
+    tool_body = arm.tool_frame.body().index()
+    monitor = builder.AddNamedSystem(
+        "contact_monitor",
+        ContactMonitor(
+            plant=plant,
+            watched=set(plant.GetBodyIndices(station.plate)),
+            allowed={tool_body},
+        ),
+    )
+    builder.Connect(plant.get_contact_results_output_port(), monitor.get_input_port())
+
+    signals = {
+        "x_d": reference.GetOutputPort("x_d"),
+        "f": sensor.GetOutputPort("force"),
+        "f_d": reference.GetOutputPort("f_d"),
+        "state": plant.get_state_output_port(),
+        "tau": torque_sum.get_output_port(),
+        "qns": projection.GetOutputPort("desired_null_space_velocity"),
+        "en": null_space.GetOutputPort("null_space_velocity_error"),
+        "nu": null_space.GetOutputPort("lyapunov"),
+        "p_tau": criterion.GetOutputPort("value"),
+        "forbidden_contacts": monitor.get_output_port(),
+    }
+    loggers = {}
+    for name, port in signals.items():
+        logger = LogVectorOutput(port, builder, publish_period=T)
+        logger.set_name(f"log_{name}")
+        loggers[name] = logger
+    diagram = builder.Build()
+    diagram.set_name("nsdrake")
+    return ControlledStation(diagram=diagram, station=station, loggers=loggers, scenario=scenario)

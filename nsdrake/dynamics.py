@@ -1,0 +1,282 @@
+"""The terms of the equation of motion (Eq. 5) and of the task kinematics (Eqs. 1–2).
+
+    τ = H q̈ + C q̇ + g + Jᵀ F                                         (Eq. 5)
+
+:class:`RobotTerms` holds, for one state (q, q̇), every model quantity the
+controllers and criteria use, so that a diagram evaluates the plant once per
+control period and the math downstream is plain numpy. :class:`ArmModel`
+computes it from a Drake ``MultibodyPlant``:
+
+- H, C q̇ and g come from ``CalcMassMatrix``, ``CalcBiasTerm`` and
+  ``CalcGravityGeneralizedForces`` (Drake's τ_g is the gravity *force*, so
+  g = −τ_g).
+- C itself, when asked for, is the Coriolis matrix built from the Christoffel
+  symbols, the one for which Ḣ − 2C is skew-symmetric (used by Eq. 24). Drake
+  gives b(q, v) = C(q, v) v, a quadratic form in v whose polarisation is
+  C(q, v) e, so column j is C e_j = (b(q, v + s e_j) − b(q, v − s e_j)) / (4 s)
+  for any s > 0 (READING_NOTES). Then Ḣ = C + Cᵀ.
+- J is the translational Jacobian of the tool point, restricted to the task
+  axes, and ∂J/∂q_k is analytic for revolute and prismatic joints: with w_k the
+  axis of a revolute joint and J_i the i-th column,
+      ∂J_i/∂q_k = w_k × J_i   if joint k is joint i or inboard of it (k revolute),
+      ∂J_i/∂q_k = w_i × J_k   if joint k is outboard of joint i (i revolute),
+  and zero otherwise. J̇ = Σ_k ∂J/∂q_k q̇_k, and J̇ q̇ follows.
+
+Nothing here assumes four joints or a planar task: n comes from the plant and m
+from the task axes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.systems.framework import Context
+
+AXIS_NAMES = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class RobotTerms:
+    """Model terms at one state; see the module docstring. n joints, m task axes.
+
+    Derived quantities (J̇, ẋ, Λ, Ḣ, …) are computed on first use and kept, so
+    every consumer of the same RobotTerms shares one evaluation.
+    """
+
+    q: np.ndarray  # (n,) joint positions [rad]
+    v: np.ndarray  # (n,) joint velocities q̇ [rad/s]
+    H: np.ndarray  # (n, n) joint-space inertia [kg m²]
+    H_inv: np.ndarray  # (n, n) its inverse
+    Cv: np.ndarray  # (n,) Coriolis and centrifugal torques C q̇ [N m]
+    g: np.ndarray  # (n,) gravity torques of Eq. 5 [N m]
+    x: np.ndarray  # (m,) task position of the tool point [m]
+    p_WT: np.ndarray  # (3,) tool point T in the world [m]
+    J: np.ndarray  # (m, n) task Jacobian [m/rad]
+    J_spatial: np.ndarray  # (6, n) [angular; translational] Jacobian of T in the world
+    dJ_dq: np.ndarray  # (n, m, n) dJ_dq[k] = ∂J/∂q_k [m/rad²]
+    C: np.ndarray | None = None  # (n, n) Christoffel Coriolis matrix [N m s], if computed
+    _memo: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def n(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.x.shape[0]
+
+    def memo(self, key, compute: Callable[[], object]):
+        """``compute()``, evaluated once per RobotTerms and ``key``."""
+        try:
+            return self._memo[key]
+        except KeyError:
+            value = self._memo[key] = compute()
+            return value
+
+    @cached_property
+    def Jdot(self) -> np.ndarray:
+        """J̇ = Σ_k ∂J/∂q_k q̇_k, (m, n) [m/(rad s)]."""
+        n, m = self.n, self.m
+        return (self.v @ self.dJ_dq.reshape(n, m * n)).reshape(m, n)
+
+    @cached_property
+    def Jdot_v(self) -> np.ndarray:
+        """J̇ q̇, (m,) [m/s²]."""
+        return self.Jdot @ self.v
+
+    @cached_property
+    def xdot(self) -> np.ndarray:
+        """ẋ = J q̇ (Eq. 2), (m,) [m/s]."""
+        return self.J @ self.v
+
+    @cached_property
+    def H_inv_Jt(self) -> np.ndarray:
+        """H⁻¹ Jᵀ, (n, m)."""
+        return self.H_inv @ self.J.T
+
+    @cached_property
+    def Lambda(self) -> np.ndarray:
+        """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1). (m, m) [kg]."""
+        return np.linalg.inv(self.J @ self.H_inv_Jt)
+
+    @cached_property
+    def Hdot(self) -> np.ndarray:
+        """Ḣ = C + Cᵀ (needs C). (n, n)."""
+        if self.C is None:
+            raise ValueError("Ḣ needs the Coriolis matrix C; compute the terms with coriolis=True")
+        return self.C + self.C.T
+
+    @property
+    def H_inv_dot(self) -> np.ndarray:
+        """d/dt H⁻¹ = −H⁻¹ Ḣ H⁻¹ (needs C). (n, n)."""
+        return -self.H_inv @ self.Hdot @ self.H_inv
+
+
+class JacobianPartials:
+    """∂J_v/∂q_k for every k, analytically (module docstring), for a fixed topology.
+
+    Args:
+        revolute: (n,) bool, joint k is revolute (else prismatic).
+        inboard: (n, n) bool, inboard[k, i] = joint k is joint i or inboard of it.
+    """
+
+    def __init__(self, revolute: np.ndarray, inboard: np.ndarray):
+        revolute = np.asarray(revolute, dtype=bool)
+        inboard = np.asarray(inboard, dtype=bool)
+        n = len(revolute)
+        # D[k, :, i] = w_k × J_i where joint k is joint i or inboard of it (k revolute),
+        #            = w_i × J_k where joint k is outboard of joint i (i revolute).
+        self._own = (inboard & revolute[:, None]).astype(float)[:, None, :]
+        self._other = (~inboard & revolute[None, :]).astype(float)[:, None, :]
+        self._n = n
+
+    def __call__(self, J_w: np.ndarray, J_v: np.ndarray) -> np.ndarray:
+        """(n, 3, n) array D with D[k] = ∂J_v/∂q_k, from the (3, n) angular Jacobian
+        J_w (column k is the world axis of revolute joint k) and the (3, n)
+        translational Jacobian J_v of the tool point."""
+        P = skew(J_w.T) @ J_v  # (n, 3, n): P[k, :, i] = w_k × J_i
+        return P * self._own + P.transpose(2, 1, 0) * self._other
+
+
+def skew(w: np.ndarray) -> np.ndarray:
+    """[w]×: the matrix of w × ·, for a (3,) vector or a (k, 3) stack. (…, 3, 3)."""
+    w = np.asarray(w)
+    S = np.zeros(w.shape[:-1] + (3, 3))
+    S[..., 0, 1], S[..., 0, 2] = -w[..., 2], w[..., 1]
+    S[..., 1, 0], S[..., 1, 2] = w[..., 2], -w[..., 0]
+    S[..., 2, 0], S[..., 2, 1] = -w[..., 1], w[..., 0]
+    return S
+
+
+def coriolis_matrix(bias: Callable[[np.ndarray], np.ndarray], v: np.ndarray) -> np.ndarray:
+    """C(q, v) from the bias term b(v) = C(q, v) v by polarisation.
+
+    C e_j = (b(v + s e_j) − b(v − s e_j)) / (4 s); s = max(‖v‖, 1) keeps the
+    rounding error of the difference near machine precision relative to C.
+    """
+    n = v.shape[0]
+    s = max(float(np.linalg.norm(v)), 1.0)
+    probes = v + s * np.vstack([np.eye(n), -np.eye(n)])  # (2n, n): v ± s e_j
+    b = np.array([bias(w) for w in probes])
+    return (b[:n] - b[n:]).T / (4.0 * s)
+
+
+class ArmModel:
+    """Reads :class:`RobotTerms` off a finalized ``MultibodyPlant``.
+
+    The plant's generalized velocities must all belong to revolute or prismatic
+    joints of the arm (the plate and obstacles are welded), and nq == nv.
+
+    Args:
+        plant: the finalized plant.
+        tool_frame: the frame whose origin is the task point (the tool tip).
+        task_axes: world axes of the task, e.g. ("x", "y"); m = len(task_axes).
+    """
+
+    def __init__(self, plant: MultibodyPlant, tool_frame: Frame, task_axes: Sequence[str]):
+        if not plant.is_finalized():
+            raise ValueError("ArmModel needs a finalized MultibodyPlant")
+        if plant.num_positions() != plant.num_velocities():
+            raise ValueError(
+                "nsdrake needs nq == nv (revolute and prismatic joints only); "
+                f"the plant has nq={plant.num_positions()}, nv={plant.num_velocities()}"
+            )
+        bad = [a for a in task_axes if a not in AXIS_NAMES]
+        if bad or len(set(task_axes)) != len(task_axes) or not task_axes:
+            raise ValueError(f"task axes must be distinct names among {AXIS_NAMES}, got {list(task_axes)}")
+        self.plant = plant
+        self.tool_frame = tool_frame
+        self.task_axes = tuple(task_axes)
+        self.rows = np.array([AXIS_NAMES.index(a) for a in task_axes])
+        self.n = plant.num_velocities()
+        self.m = len(task_axes)
+        self.joints = self._joints_by_velocity_index()
+        self.joint_names = tuple(j.name() for j in self.joints)
+        self.revolute = np.array([j.type_name() == "revolute" for j in self.joints])
+        self.inboard = self._inboard_matrix()
+        self._partials = JacobianPartials(self.revolute, self.inboard)
+        self._origin = np.zeros(3)
+        self._world = plant.world_frame()
+
+    def _joints_by_velocity_index(self):
+        plant = self.plant
+        joints = [None] * self.n
+        for index in plant.GetJointIndices():
+            joint = plant.get_joint(index)
+            if joint.num_velocities() == 0:
+                continue
+            if joint.type_name() not in ("revolute", "prismatic"):
+                raise ValueError(
+                    f"joint '{joint.name()}' is {joint.type_name()}; nsdrake's analytic ∂J/∂q "
+                    "supports revolute and prismatic joints only"
+                )
+            joints[joint.velocity_start()] = joint
+        return joints
+
+    def _inboard_matrix(self) -> np.ndarray:
+        plant = self.plant
+        inboard = np.zeros((self.n, self.n), dtype=bool)
+        for k, joint_k in enumerate(self.joints):
+            outboard = set(plant.GetBodiesKinematicallyAffectedBy([joint_k.index()]))
+            for i, joint_i in enumerate(self.joints):
+                inboard[k, i] = joint_i.child_body().index() in outboard
+        return inboard
+
+    def joint_index(self, name: str) -> int:
+        """Velocity index of the joint called ``name``; ValueError lists the valid names."""
+        try:
+            return self.joint_names.index(name)
+        except ValueError:
+            raise ValueError(
+                f"unknown joint '{name}'; the arm's joints are {', '.join(self.joint_names)}"
+            ) from None
+
+    def task_position(self, context: Context) -> np.ndarray:
+        """x = p(q) (Eq. 1) for the positions already in ``context``. (m,) [m]."""
+        p = self.plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)
+        return p[self.rows, 0]
+
+    def terms(self, context: Context, q: np.ndarray, v: np.ndarray, coriolis: bool) -> RobotTerms:
+        """Sets (q, v) into the plant ``context`` and evaluates every term.
+
+        ``coriolis`` also computes the full matrix C (2n more bias evaluations).
+        """
+        plant = self.plant
+        plant.SetPositionsAndVelocities(context, np.concatenate([q, v]))
+        H = plant.CalcMassMatrix(context)
+        H_inv = np.linalg.inv(H)
+        Cv = plant.CalcBiasTerm(context)
+        g = -plant.CalcGravityGeneralizedForces(context)
+        J_spatial = plant.CalcJacobianSpatialVelocity(
+            context, JacobianWrtVariable.kV, self.tool_frame, self._origin, self._world, self._world
+        )
+        J_w, J_v = J_spatial[:3], J_spatial[3:]
+        dJ = self._partials(J_w, J_v)[:, self.rows, :]
+        p_WT = self.plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)[:, 0]
+        C = None
+        if coriolis:
+            C = coriolis_matrix(lambda w: self._bias(context, w), v)
+            plant.SetVelocities(context, v)
+        return RobotTerms(
+            q=q.copy(),
+            v=v.copy(),
+            H=H,
+            H_inv=H_inv,
+            Cv=Cv,
+            g=g,
+            x=p_WT[self.rows],
+            p_WT=p_WT,
+            J=J_v[self.rows],
+            J_spatial=J_spatial,
+            dJ_dq=dJ,
+            C=C,
+        )
+
+    def _bias(self, context: Context, v: np.ndarray) -> np.ndarray:
+        self.plant.SetVelocities(context, v)
+        return self.plant.CalcBiasTerm(context)

@@ -1,0 +1,130 @@
+"""The primary task: task-space impedance control of position and force (Eqs. 6–8, 10).
+
+Control law, Eqs. 6–7 (τ₀ is added by the null-space controller):
+
+    τ = Jᵀ ( Λ (ẍ_c − J̇ q̇) + F ) + C q̇ + g + τ₀
+
+with F the measured force the tool exerts on the environment (Eq. 5's sign) and
+Λ = (J H⁻¹ Jᵀ)⁻¹. With an exact model and J H⁻¹ τ₀ = 0 (Eq. 11), the task
+closed loop is ẍ = ẍ_c.
+
+Eq. 5 treats the tool as a point. nsdrake's tool is a sphere of radius r: the
+friction force acts on its surface, r away from the task point T, and its
+moment r × f_t loads every joint (4 cm × 3 N on the fig3 arm gave a 10%
+normal-force error when left out). The sensor under the plate is a six-axis
+sensor, as the paper's JR3, so :func:`primary_torque` compensates the whole
+measured wrench W_T = [M_T; f] transported to T, with the spatial Jacobian J_T
+of T: the term Jᵀ F becomes J_Tᵀ W_T, which is Jᵀ F when the contact is a pure
+force through T.
+
+The paper says x_d "includes position and force" but leaves the force part of
+the command open. nsdrake's command acceleration, with n the unit task-space
+direction in which the tool pushes on the plate and f_n = nᵀF:
+
+    ẍ_c = ẍ_d + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − f_n)      (Eq. 8 + force term)
+
+K_p = k_p,t (I − n nᵀ) + k_p,n n nᵀ and likewise K_v: stiffness and damping
+along the plate (t) and normal to it (n). Eq. 8 is written with the signs of
+Eq. 10 (READING_NOTES: the OCR's (ẋ − ẋ_d), (x − x_d) are sign slips).
+
+Along the plate this is Eq. 8: the friction force μ f_n is part of F, so the
+Jᵀ F term cancels it and it leaves no position error.
+
+Normal to the plate, in contact with a surface of stiffness k_c (a point
+contact: f_n ≈ k_c × penetration), and with x_d,n held fixed after contact,
+the steady state of ẍ = ẍ_c is
+
+    0 = k_p,n (x_d,n − x_n) + K_f (f_d − f_n)   ⇒   f_n − f_d = (k_p,n / K_f)(x_d,n − x_n).
+
+The normal position loop pulls the tool back toward x_d,n while the force loop
+pushes it in; each extra millimetre of penetration beyond x_d,n costs
+k_p,n/K_f × 1 mm of force. With x_d,n frozen where contact was detected,
+x_n − x_d,n ≈ (f_n − f_contact)/k_c, so the relative steady-state error is
+≈ −k_p,n / (k_p,n + K_f k_c): small when K_f k_c ≫ k_p,n (0.2% for the fig3
+gains), zero for k_p,n = 0. This is the paper's observation that the position
+loop stabilises force tracking but leaves a steady-state force error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .dynamics import RobotTerms
+
+
+@dataclass(frozen=True)
+class ImpedanceGains:
+    """Gains of Eq. 8 and the force term, as task-space matrices. m task axes."""
+
+    K_p: np.ndarray  # (m, m) position gain [1/s²]
+    K_v: np.ndarray  # (m, m) velocity gain [1/s]
+    K_f: float  # force gain [m/(s² N)]
+    normal: np.ndarray  # (m,) unit direction in which the tool pushes
+
+    @classmethod
+    def along_surface(
+        cls,
+        normal: np.ndarray,
+        K_p_tangent: float,
+        K_p_normal: float,
+        K_v_tangent: float,
+        K_v_normal: float,
+        K_f: float,
+    ) -> ImpedanceGains:
+        """Gains diagonal in the frame of a surface with unit normal ``normal``."""
+        n = np.asarray(normal, dtype=float)
+        n = n / np.linalg.norm(n)
+        P_n = np.outer(n, n)
+        P_t = np.eye(n.shape[0]) - P_n
+        return cls(
+            K_p=K_p_tangent * P_t + K_p_normal * P_n,
+            K_v=K_v_tangent * P_t + K_v_normal * P_n,
+            K_f=K_f,
+            normal=n,
+        )
+
+
+def command_acceleration(
+    x: np.ndarray,
+    xdot: np.ndarray,
+    x_d: np.ndarray,
+    xdot_d: np.ndarray,
+    xddot_d: np.ndarray,
+    F: np.ndarray,
+    f_d: float,
+    gains: ImpedanceGains,
+) -> np.ndarray:
+    """ẍ_c = ẍ_d + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − nᵀF). (m,) [m/s²]."""
+    f_n = gains.normal @ F
+    return (
+        xddot_d
+        + gains.K_v @ (xdot_d - xdot)
+        + gains.K_p @ (x_d - x)
+        + gains.normal * (gains.K_f * (f_d - f_n))
+    )
+
+
+def wrench_at_tool(wrench_So: np.ndarray, p_WSo: np.ndarray, p_WT: np.ndarray) -> np.ndarray:
+    """[M_T; f] from [M_So; f]: the moment moves from the sensor origin So to the
+    tool point T, M_T = M_So + (p_So − p_T) × f. (6,) world [N m, N]."""
+    f = wrench_So[3:]
+    r = p_WSo - p_WT
+    r_cross_f = np.array([r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]])
+    return np.concatenate([wrench_So[:3] + r_cross_f, f])
+
+
+def primary_torque(
+    terms: RobotTerms, xddot_c: np.ndarray, W_T: np.ndarray, gravity_compensation: bool = True
+) -> np.ndarray:
+    """τ − τ₀ = Jᵀ Λ (ẍ_c − J̇ q̇) + J_Tᵀ W_T + C q̇ + g (Eqs. 6–7). (n,) [N m].
+
+    W_T = [M_T; f] (6) is the wrench the tool exerts on the environment, about
+    the tool point, in world coordinates; for a pure force, J_Tᵀ W_T = Jᵀ F.
+    ``gravity_compensation`` False drops g (harmless in the horizontal plane).
+    """
+    tau = terms.J.T @ (terms.Lambda @ (xddot_c - terms.Jdot_v)) + terms.J_spatial.T @ W_T + terms.Cv
+    if gravity_compensation:
+        tau = tau + terms.g
+    return tau

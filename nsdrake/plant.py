@@ -1,0 +1,125 @@
+"""The simulated station: the arm, the plate on its force sensor, compliant contact.
+
+A discrete ``MultibodyPlant`` whose time step is the control period, point
+contact with Coulomb friction between the tool and the plate (the contact
+properties live in the URDFs; urdf/README.md says where each comes from), and
+the plate welded to the world by a fixed joint named ``force_sensor``, whose
+reaction force the force sensor reads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import ModelInstanceIndex, WeldJoint
+from pydrake.systems.framework import DiagramBuilder
+
+from .dynamics import ArmModel
+from .models import resolve_model
+from .scenario import Scenario, ScenarioError, check_against_plant
+
+SENSOR_JOINT = "force_sensor"
+GRAVITY = 9.81  # [m/s²]
+
+
+@dataclass
+class Station:
+    """Handles to what :func:`add_station` built."""
+
+    plant: MultibodyPlant
+    scene_graph: object
+    arm: ModelInstanceIndex
+    plate: ModelInstanceIndex
+    arm_model: ArmModel
+    sensor_joint: WeldJoint
+    # Task-space direction (m,) in which the tool pushes on the plate (unit).
+    normal: np.ndarray
+    # Task-space direction (m,) along the plate, perpendicular to ``normal`` (unit), when m ≥ 2.
+    tangent: np.ndarray
+    q0: np.ndarray  # (n,) initial joint positions [rad]
+    v0: np.ndarray  # (n,) initial joint velocities [rad/s]
+
+
+def gravity_vector(plane: str) -> np.ndarray:
+    """World gravity for the arm's plane: along −z (horizontal) or −y (vertical)."""
+    return np.array([0.0, 0.0, -GRAVITY]) if plane == "horizontal" else np.array([0.0, -GRAVITY, 0.0])
+
+
+def _model_file(scenario: Scenario, where: str, name: str) -> Path:
+    try:
+        return resolve_model(name, Path(scenario.base_dir) if scenario.base_dir else None)
+    except FileNotFoundError as e:
+        raise ScenarioError(f"{scenario.source or 'scenario'}: {where}: {e}") from None
+
+
+def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
+    """Adds the plant and scene graph for ``scenario`` to ``builder``; finalizes the plant."""
+    src = scenario.source or "scenario"
+    config = MultibodyPlantConfig(
+        time_step=scenario.control_period,
+        contact_model=scenario.contact.model,
+        discrete_contact_approximation=scenario.contact.approximation,
+    )
+    plant, scene_graph = AddMultibodyPlant(config, builder)
+    plant.set_name("plant")
+    scene_graph.set_name("scene_graph")
+    parser = Parser(plant)
+    arm_file = _model_file(scenario, "arm.urdf", scenario.arm.urdf)
+    plate_file = _model_file(scenario, "plate.urdf", scenario.plate.urdf)
+    try:
+        (arm,) = parser.AddModels(str(arm_file))
+        (plate,) = parser.AddModels(str(plate_file))
+    except Exception as e:
+        raise ScenarioError(f"{src}: cannot parse a model: {' '.join(str(e).split())}") from None
+    plate_bodies = plant.GetBodyIndices(plate)
+    if len(plate_bodies) != 1:
+        raise ScenarioError(f"{src}: plate.urdf: the plate model must have exactly one body")
+    plate_body = plant.get_body(plate_bodies[0])
+    X_WP = RigidTransform(RollPitchYaw(0.0, 0.0, scenario.plate.yaw), np.asarray(scenario.plate.position))
+    sensor_joint = plant.AddJoint(WeldJoint(SENSOR_JOINT, plant.world_frame(), plate_body.body_frame(), X_WP))
+    plant.mutable_gravity_field().set_gravity_vector(gravity_vector(scenario.plane))
+    plant.Finalize()
+
+    if not plant.HasFrameNamed(scenario.arm.tool_frame, arm):
+        raise ScenarioError(f"{src}: arm.tool_frame: no frame '{scenario.arm.tool_frame}' in {arm_file.name}")
+    tool = plant.GetFrameByName(scenario.arm.tool_frame, arm)
+    try:
+        arm_model = ArmModel(plant, tool, scenario.task.axes)
+    except ValueError as e:
+        raise ScenarioError(f"{src}: arm.urdf: {e}") from None
+    check_against_plant(scenario, arm_model.joint_names)
+    if plant.num_actuators() != arm_model.n:
+        raise ScenarioError(
+            f"{src}: arm.urdf: the arm needs one actuator per joint ({arm_model.n}), "
+            f"it has {plant.num_actuators()}"
+        )
+    names = arm_model.joint_names
+    q0 = np.array([scenario.arm.initial_positions[j] for j in names])
+    v0 = np.array([scenario.arm.initial_velocities.get(j, 0.0) for j in names])
+    plant.SetDefaultPositions(q0)  # survives context resets (DRAKE_NOTES)
+
+    # The plate frame's +y axis points into the plate: the direction the tool pushes.
+    push_W = X_WP.rotation().matrix()[:, 1]
+    normal = push_W[arm_model.rows]
+    if np.linalg.norm(normal) < 0.99:
+        raise ScenarioError(f"{src}: plate.yaw: the plate's normal leaves the task axes {scenario.task.axes}")
+    normal = normal / np.linalg.norm(normal)
+    along_W = X_WP.rotation().matrix()[:, 0]
+    tangent = along_W[arm_model.rows]
+    return Station(
+        plant=plant,
+        scene_graph=scene_graph,
+        arm=arm,
+        plate=plate,
+        arm_model=arm_model,
+        sensor_joint=sensor_joint,
+        normal=normal,
+        tangent=tangent,
+        q0=q0,
+        v0=v0,
+    )

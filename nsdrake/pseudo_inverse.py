@@ -1,0 +1,154 @@
+"""Generalised inverses of the task Jacobian and their null-space projectors.
+
+Section 3.2 of Nemec & Zlajpah (2000). Every inverse here is a member of one
+family, the weighted, optionally damped right inverse
+
+    J^# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ + λ² I)⁻¹,
+
+with
+
+- W = H, λ = 0: the dynamically consistent (inertia-weighted) inverse
+  J̄ = H⁻¹ Jᵀ Λ, Λ = (J H⁻¹ Jᵀ)⁻¹ (Eq. 13);
+- W = I, λ = 0: the Moore–Penrose inverse J⁺ = Jᵀ (J Jᵀ)⁻¹;
+- W = I, λ > 0: the damped least-squares inverse.
+
+The null-space projector is N = I − J^# J (Eq. 4). For λ = 0, J J^# = I and
+J N = 0; for λ > 0 neither holds exactly, which is what damping costs.
+
+Shapes: J is (m, n) [m/rad], H and W are (n, n), J^# is (n, m).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class PseudoInverseKind(str, enum.Enum):
+    """Which generalised inverse the null-space controller and projection use."""
+
+    dynamically_consistent = "dynamically_consistent"  # Eq. (13)
+    moore_penrose = "moore_penrose"
+    damped_least_squares = "damped_least_squares"
+
+
+def operational_space_inertia(J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
+    """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1). (m, m) [kg]."""
+    return np.linalg.inv(J @ H_inv @ J.T)
+
+
+def weighted_inverse(J: np.ndarray, W_inv: np.ndarray, damping: float = 0.0) -> np.ndarray:
+    """J^# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ + λ² I)⁻¹ for a symmetric positive-definite W."""
+    A = J @ W_inv @ J.T
+    if damping:
+        A = A + damping**2 * np.eye(J.shape[0])
+    # A is symmetric, so J^# = (A⁻¹ J W⁻¹)ᵀ.
+    return np.linalg.solve(A, J @ W_inv).T
+
+
+def weighted_inverse_derivative(
+    J: np.ndarray,
+    Jdot: np.ndarray,
+    W_inv: np.ndarray,
+    W_inv_dot: np.ndarray | None,
+    damping: float = 0.0,
+) -> np.ndarray:
+    """d/dt J^# for J^# = W⁻¹ Jᵀ A⁻¹, A = J W⁻¹ Jᵀ + λ² I.
+
+    d(J^#) = Ẇ⁻¹ Jᵀ A⁻¹ + W⁻¹ J̇ᵀ A⁻¹ − W⁻¹ Jᵀ A⁻¹ Ȧ A⁻¹, with
+    Ȧ = J̇ W⁻¹ Jᵀ + J Ẇ⁻¹ Jᵀ + J W⁻¹ J̇ᵀ. ``W_inv_dot`` None means W is constant.
+    """
+    m = J.shape[0]
+    A = J @ W_inv @ J.T
+    if damping:
+        A = A + damping**2 * np.eye(m)
+    A_inv = np.linalg.inv(A)
+    WJt = W_inv @ J.T
+    A_dot = Jdot @ WJt
+    A_dot = A_dot + A_dot.T
+    term = W_inv @ Jdot.T
+    if W_inv_dot is not None:
+        A_dot = A_dot + J @ W_inv_dot @ J.T
+        term = term + W_inv_dot @ J.T
+    return (term - WJt @ A_inv @ A_dot) @ A_inv
+
+
+@dataclass(frozen=True)
+class InverseAtState:
+    """A generalised inverse evaluated at one state."""
+
+    J_pinv: np.ndarray  # (n, m) J^#
+    N: np.ndarray  # (n, n) null-space projector I − J^# J (Eq. 4)
+    A_inv: np.ndarray  # (m, m) (J W⁻¹ Jᵀ + λ² I)⁻¹; Λ for Eq. 13
+    W_inv: np.ndarray  # (n, n) the weight's inverse: H⁻¹ (Eq. 13) or I
+
+
+@dataclass(frozen=True)
+class GeneralizedInverse:
+    """A choice of J^# (one of :class:`PseudoInverseKind`) with its damping λ [m]."""
+
+    kind: PseudoInverseKind = PseudoInverseKind.dynamically_consistent
+    damping: float = 0.0
+
+    def __post_init__(self):
+        kind = PseudoInverseKind(self.kind)
+        object.__setattr__(self, "kind", kind)
+        if not np.isfinite(self.damping) or self.damping < 0:
+            raise ValueError(f"pseudo-inverse damping must be a finite number >= 0, got {self.damping}")
+        if kind is PseudoInverseKind.damped_least_squares and self.damping == 0:
+            raise ValueError("the damped least-squares inverse needs a damping > 0")
+        if kind is not PseudoInverseKind.damped_least_squares and self.damping != 0:
+            raise ValueError(f"damping is only used by damped_least_squares, not by {kind.value}")
+
+    @property
+    def inertia_weighted(self) -> bool:
+        return self.kind is PseudoInverseKind.dynamically_consistent
+
+    def of(self, J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
+        """J^# (n, m)."""
+        W_inv = H_inv if self.inertia_weighted else np.eye(J.shape[1])
+        return weighted_inverse(J, W_inv, self.damping)
+
+    def derivative(
+        self, J: np.ndarray, Jdot: np.ndarray, H_inv: np.ndarray, H_inv_dot: np.ndarray
+    ) -> np.ndarray:
+        """d/dt J^# (n, m); H_inv_dot = d/dt H⁻¹ = −H⁻¹ Ḣ H⁻¹."""
+        if self.inertia_weighted:
+            return weighted_inverse_derivative(J, Jdot, H_inv, H_inv_dot, self.damping)
+        return weighted_inverse_derivative(J, Jdot, np.eye(J.shape[1]), None, self.damping)
+
+    def at(self, terms) -> InverseAtState:
+        """J^#, N, A⁻¹ at the state of ``terms`` (a :class:`nsdrake.dynamics.RobotTerms`),
+        computed once per RobotTerms and shared by every consumer."""
+        return terms.memo(("inverse", self), lambda: self._at(terms))
+
+    def _at(self, terms) -> InverseAtState:
+        J, n = terms.J, terms.n
+        if self.inertia_weighted:
+            W_inv, A_inv = terms.H_inv, terms.Lambda
+            J_pinv = terms.H_inv_Jt @ A_inv
+        else:
+            W_inv = np.eye(n)
+            A = J @ J.T
+            if self.damping:
+                A = A + self.damping**2 * np.eye(J.shape[0])
+            A_inv = np.linalg.inv(A)
+            J_pinv = J.T @ A_inv
+        return InverseAtState(J_pinv=J_pinv, N=np.eye(n) - J_pinv @ J, A_inv=A_inv, W_inv=W_inv)
+
+
+def dynamically_consistent_inverse(J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
+    """J̄ = H⁻¹ Jᵀ Λ (Eq. 13), the inertia-weighted pseudo-inverse. (n, m)."""
+    return weighted_inverse(J, H_inv)
+
+
+def moore_penrose_inverse(J: np.ndarray) -> np.ndarray:
+    """J⁺ = Jᵀ (J Jᵀ)⁻¹ for a full-row-rank J. (n, m)."""
+    return weighted_inverse(J, np.eye(J.shape[1]))
+
+
+def null_space_projector(J: np.ndarray, J_pinv: np.ndarray) -> np.ndarray:
+    """N = I − J^# J (Eq. 4). (n, n)."""
+    return np.eye(J.shape[1]) - J_pinv @ J

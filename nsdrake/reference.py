@@ -1,0 +1,79 @@
+"""Desired task trajectories: the Fig. 3 task of Section 4.
+
+"x is the ramp function with the constant velocity; y changes until the robot
+hits the wall", then the desired force is tracked. :class:`SlideAndPress`
+gives, at time t and for a contact time t_c (∞ before contact):
+
+- along the plate (unit tangent t): a constant-velocity ramp that reaches its
+  speed v_t from rest with constant acceleration over ``blend_time``;
+- normal to the plate (unit normal n): the same profile at the approach speed
+  v_a, frozen where contact was detected;
+- the desired normal force f_d: 0 before contact, then a smoothstep from 0 to
+  ``force`` over ``force_ramp_time``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def ramp_profile(t: float, speed: float, blend_time: float) -> tuple[float, float, float]:
+    """(s, ṡ, s̈) of a ramp that starts at rest, accelerates uniformly for
+    ``blend_time`` and then moves at ``speed``. s(0) = 0."""
+    if t <= 0.0:
+        return 0.0, 0.0, 0.0
+    if blend_time > 0.0 and t < blend_time:
+        a = speed / blend_time
+        return 0.5 * a * t * t, a * t, a
+    return speed * (t - 0.5 * blend_time), speed, 0.0
+
+
+def smoothstep(u: float) -> float:
+    """3u² − 2u³ on [0, 1], 0 below, 1 above."""
+    if u <= 0.0:
+        return 0.0
+    if u >= 1.0:
+        return 1.0
+    return u * u * (3.0 - 2.0 * u)
+
+
+@dataclass(frozen=True)
+class SlideAndPress:
+    """The Fig. 3 reference. m task axes; see the module docstring."""
+
+    x0: np.ndarray  # (m,) tool position at t = 0 [m]
+    tangent: np.ndarray  # (m,) unit direction of the ramp along the plate
+    normal: np.ndarray  # (m,) unit direction toward (into) the plate
+    tangent_speed: float  # [m/s]
+    approach_speed: float  # [m/s]
+    blend_time: float  # [s]
+    force: float  # [N]
+    force_ramp_time: float  # [s]
+
+    def at(self, t: float, t_contact: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact)."""
+        s, sd, sdd = ramp_profile(t, self.tangent_speed, self.blend_time)
+        if t < t_contact:
+            r, rd, rdd = ramp_profile(t, self.approach_speed, self.blend_time)
+            f_d = 0.0
+        else:
+            r = ramp_profile(t_contact, self.approach_speed, self.blend_time)[0]
+            rd = rdd = 0.0
+            if self.force_ramp_time > 0.0:
+                f_d = self.force * smoothstep((t - t_contact) / self.force_ramp_time)
+            else:
+                f_d = self.force
+        x_d = self.x0 + s * self.tangent + r * self.normal
+        xdot_d = sd * self.tangent + rd * self.normal
+        xddot_d = sdd * self.tangent + rdd * self.normal
+        return x_d, xdot_d, xddot_d, f_d
+
+
+def detect_contact(t: float, t_contact: float, f_n: float, threshold: float) -> float:
+    """The contact time: unchanged once set, else t when the normal force reaches ``threshold``."""
+    if math.isfinite(t_contact):
+        return t_contact
+    return t if f_n >= threshold else math.inf

@@ -1,0 +1,103 @@
+"""One run of a scenario into an output folder: traces, metrics, plots."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from .metrics import Metric, fig3_metrics, first_contact_index, write_metrics
+from .plots import plot_fig3
+from .scenario import Scenario
+from .simulate import run
+from .traces import Traces
+
+
+class OutputFolderError(ValueError):
+    """The output folder cannot be used without losing what is in it."""
+
+
+def prepare_output_folder(out: Path, *, overwrite: bool) -> Path:
+    """Creates ``out``; refuses a non-empty folder unless ``overwrite``."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputFolderError(f"{out}: exists and is not a folder")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise OutputFolderError(f"{out}: folder is not empty; choose another --out or pass --overwrite")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def default_output_folder(name: str, root: Path = Path("runs")) -> Path:
+    """runs/NAME, or runs/NAME-2, -3, … : the first that does not exist or is empty."""
+    candidate, k = root / name, 1
+    while candidate.exists() and (not candidate.is_dir() or any(candidate.iterdir())):
+        k += 1
+        candidate = root / f"{name}-{k}"
+    return candidate
+
+
+def scenario_yaml(scenario: Scenario) -> str:
+    """The effective scenario as YAML that load_scenario_file reads back."""
+    data = dataclasses.asdict(scenario)
+    for f in dataclasses.fields(scenario):
+        if not f.metadata.get("yaml", True):
+            data.pop(f.name)
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+@dataclass
+class RunResult:
+    out: Path
+    metrics: list[Metric]
+
+    @property
+    def passed(self) -> bool:
+        return all(m.passed for m in self.metrics if m.passed is not None)
+
+
+def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
+    """Simulates ``scenario`` and writes into ``out`` (which must be ready):
+
+    - traces.csv: one row per control period (see README for the columns);
+    - traces_without_null_space_task.csv: the same run with q̇_dⁿ = 0, if the
+      scenario asks for the comparison;
+    - metrics.json: the acceptance figures, computed from the CSV files;
+    - fig3.png: the Fig. 3-style plots;
+    - scenario.yaml: the scenario as run.
+    """
+    out = Path(out)
+    (out / "scenario.yaml").write_text(scenario_yaml(scenario))
+    compare = scenario.report.compare_without_null_space_task
+    stages = 2 if compare else 1
+    report = (lambda k: lambda f: progress((k + f) / stages)) if progress else (lambda k: None)
+    traces, built = run(scenario, progress=report(0))
+    traces.write_csv(out / "traces.csv")
+    baseline = None
+    if compare:
+        baseline_traces, _ = run(scenario, null_space_task=False, progress=report(1))
+        baseline_traces.write_csv(out / "traces_without_null_space_task.csv")
+        baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
+    traces = Traces.read_csv(out / "traces.csv")
+    station = built.station
+    threshold = scenario.reference.contact_threshold
+    metrics = fig3_metrics(
+        traces,
+        tangent=station.tangent,
+        task_axes=station.arm_model.task_axes,
+        contact_threshold=threshold,
+        p_tau_without_null_space_task=float(baseline["p_tau"][-1]) if baseline is not None else None,
+    )
+    write_metrics(out / "metrics.json", metrics, {"scenario": scenario.source, "duration": scenario.duration})
+    k0 = first_contact_index(traces, threshold)
+    plot_fig3(
+        traces,
+        out / "fig3.png",
+        task_axes=station.arm_model.task_axes,
+        title=scenario.description,
+        baseline=baseline,
+        contact_time=float(traces["t"][k0]) if k0 is not None else None,
+    )
+    return RunResult(out=out, metrics=metrics)

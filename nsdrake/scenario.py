@@ -1,0 +1,413 @@
+"""Scenarios: typed dataclasses loaded from YAML with Drake's ``yaml_load_typed``.
+
+(No ``from __future__ import annotations`` here: ``yaml_load_typed`` reads the
+dataclass field types at run time.)
+
+A scenario file sets any subset of the fields below; the rest keep their
+defaults. Every field names its unit. :func:`load_scenario` reads a shipped
+scenario by name, optionally overlays a user's YAML file on it, and validates
+the result; every problem is a :class:`ScenarioError` whose one-line message
+names the file and the field.
+"""
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from pydrake.common.yaml import yaml_load_typed
+
+from .pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+PLANES = ("horizontal", "vertical")
+CONTACT_APPROXIMATIONS = ("lagged", "sap", "similar")
+CONTACT_MODELS = ("point", "hydroelastic_with_fallback")
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be run; the message is one line naming file and field."""
+
+
+@dataclass
+class ArmConfig:
+    # Model file: a shipped model name (urdf/) or a path relative to the scenario file [-].
+    urdf: str = "arm4.urdf"
+    # Frame of the arm whose origin is the task point (the tool tip) [-].
+    tool_frame: str = "tool"
+    # Joint positions at t = 0, keyed by joint name; every joint must be given [rad].
+    initial_positions: dict[str, float] = field(default_factory=dict)
+    # Joint velocities at t = 0, keyed by joint name; missing joints start at rest [rad/s].
+    initial_velocities: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class PlateConfig:
+    # Model file of the plate (the force-sensor mount welds its root body to the world) [-].
+    urdf: str = "plate.urdf"
+    # Position of the plate frame (centre of its contact face) in the world [m].
+    position: list[float] = field(default_factory=lambda: [0.0, 0.6, 0.0])
+    # Rotation of the plate about the world z axis; at 0 the tool pushes along +y [rad].
+    yaw: float = 0.0
+
+
+@dataclass
+class ContactConfig:
+    # Drake's discrete contact approximation: lagged, sap or similar [-].
+    approximation: str = "lagged"
+    # Drake's contact model: point, or hydroelastic_with_fallback [-].
+    model: str = "point"
+
+
+@dataclass
+class TaskConfig:
+    # World axes of the primary task, the tool point's coordinates x (Eq. 1) [-].
+    axes: list[str] = field(default_factory=lambda: ["x", "y"])
+
+
+@dataclass
+class ReferenceConfig:
+    """The Fig. 3 task: slide along the plate, approach it until contact, then press."""
+
+    # Speed of the constant-velocity ramp along the plate [m/s].
+    tangent_speed: float = 0.05
+    # Speed of the approach toward the plate, held until contact is detected [m/s].
+    approach_speed: float = 0.03
+    # Time over which both speeds rise from rest (constant acceleration) [s].
+    blend_time: float = 0.2
+    # Desired normal force once in contact, f_d [N].
+    force: float = 10.0
+    # Time over which f_d rises from 0 to its value after contact (smoothstep) [s].
+    force_ramp_time: float = 0.2
+    # Measured normal force above which the tool counts as touching [N].
+    contact_threshold: float = 0.5
+
+
+@dataclass
+class ImpedanceConfig:
+    """Gains of the primary task law, Eqs. 6–8 (acceleration units: the law multiplies by Λ)."""
+
+    # Position gain along the plate [1/s²].
+    K_p_tangent: float = 400.0
+    # Velocity gain along the plate [1/s].
+    K_v_tangent: float = 40.0
+    # Position gain normal to the plate [1/s²].
+    K_p_normal: float = 100.0
+    # Velocity gain normal to the plate [1/s].
+    K_v_normal: float = 200.0
+    # Force gain normal to the plate [m/(s² N)].
+    K_f: float = 1.0
+    # Add the gravity torques g of Eq. 7 (needed in the vertical plane) [-].
+    gravity_compensation: bool = True
+
+
+@dataclass
+class NullSpaceConfig:
+    """The null-space velocity controller, Eq. 21."""
+
+    # Null-space velocity gain K_n (a scalar: Eq. 24 needs K_n H positive definite) [1/s].
+    K_n: float = 40.0
+    # Generalised inverse: dynamically_consistent (Eq. 13), moore_penrose, damped_least_squares [-].
+    pseudo_inverse: str = "dynamically_consistent"
+    # Damping λ of the damped least-squares inverse [m]; 0 for the others.
+    damping: float = 0.0
+    # Task-velocity compensation (J̄̇ J + J̄ J̇) q̇ of Eq. 21 [-].
+    task_velocity_compensation: bool = True
+    # Coriolis compensation H⁻¹ C eⁿ of Eq. 21 [-].
+    coriolis_compensation: bool = True
+    # Feed forward q̈_dⁿ, the backward difference of q̇_dⁿ over one control period [-].
+    acceleration_feedforward: bool = True
+
+
+@dataclass
+class JointTorqueCriterionConfig:
+    """Joint torque due to the desired end-effector force, Eqs. 32–33: p = ‖Jᵀ F_d‖²."""
+
+    # Step gain K of Eq. 30; negative minimises p [rad/s per N² m² · kg m²].
+    gain: float = -0.02
+
+
+@dataclass
+class DesiredNullSpaceConfig:
+    """The desired null-space velocity q̇_dⁿ by gradient projection (Eqs. 28–30)."""
+
+    # Rotate the gradient by H⁻¹ before projecting (Eq. 30); false gives Eq. 28's form [-].
+    rotate_gradient: bool = True
+    # Joint-torque criterion of Eqs. 32–33.
+    joint_torque: JointTorqueCriterionConfig = field(default_factory=JointTorqueCriterionConfig)
+    # Largest joint speed of q̇_dⁿ, keyed by joint name; q̇_dⁿ is scaled, keeping its direction,
+    # so no joint exceeds its limit. Missing joints are unlimited [rad/s].
+    joint_speed_limits: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class ReportConfig:
+    # Also run the scenario with q̇_dⁿ = 0 and report its final joint-torque criterion [-].
+    compare_without_null_space_task: bool = True
+
+
+@dataclass
+class Scenario:
+    # One line saying what the scenario shows [-].
+    description: str = ""
+    # Simulated time [s].
+    duration: float = 5.0
+    # Control period; the discrete plant steps at this period too [s].
+    control_period: float = 0.002
+    # horizontal: gravity along −z, normal to the arm's plane; vertical: gravity along −y [-].
+    plane: str = "horizontal"
+    arm: ArmConfig = field(default_factory=ArmConfig)
+    plate: PlateConfig = field(default_factory=PlateConfig)
+    contact: ContactConfig = field(default_factory=ContactConfig)
+    task: TaskConfig = field(default_factory=TaskConfig)
+    reference: ReferenceConfig = field(default_factory=ReferenceConfig)
+    impedance: ImpedanceConfig = field(default_factory=ImpedanceConfig)
+    null_space: NullSpaceConfig = field(default_factory=NullSpaceConfig)
+    desired_null_space: DesiredNullSpaceConfig = field(default_factory=DesiredNullSpaceConfig)
+    report: ReportConfig = field(default_factory=ReportConfig)
+    # Where the scenario was read from (set by the loader; not a YAML field).
+    source: str = field(default="", metadata={"yaml": False})
+    # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
+    base_dir: str = field(default="", metadata={"yaml": False})
+
+    def generalized_inverse(self) -> GeneralizedInverse:
+        return GeneralizedInverse(PseudoInverseKind(self.null_space.pseudo_inverse), self.null_space.damping)
+
+
+def shipped_scenarios() -> list[str]:
+    """Names of the scenarios that ship with nsdrake."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """A YAML loader that refuses duplicate keys instead of keeping the last one."""
+
+
+def _no_duplicates(loader, node, deep=False):
+    seen = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            line = key_node.start_mark.line + 1
+            raise yaml.constructor.ConstructorError(None, None, f"line {line}: duplicate key '{key}'")
+        seen.add(key)
+    return loader.construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _no_duplicates)
+
+
+def _kind(t) -> str:
+    origin = typing.get_origin(t)
+    if dataclasses.is_dataclass(t):
+        return "a mapping of fields"
+    if origin is dict:
+        return "a mapping"
+    if origin is list:
+        return "a list"
+    return {float: "a number", int: "an integer", bool: "true or false", str: "a string"}.get(t, str(t))
+
+
+def _check_shape(data, schema, where: str) -> str | None:
+    """The first place where ``data`` (parsed YAML) does not fit ``schema``, as "path: problem"."""
+    if dataclasses.is_dataclass(schema):
+        if not isinstance(data, dict):
+            return f"{where or 'the file'}: must be {_kind(schema)}, got {data!r}"
+        hints = typing.get_type_hints(schema)
+        fields = {f.name: f for f in dataclasses.fields(schema) if f.metadata.get("yaml", True)}
+        for key, value in data.items():
+            path = f"{where}.{key}" if where else str(key)
+            if key not in fields:
+                return f"{path}: unknown field; valid fields here are {', '.join(fields)}"
+            problem = _check_shape(value, hints[key], path)
+            if problem:
+                return problem
+        return None
+    origin, args = typing.get_origin(schema), typing.get_args(schema)
+    if origin is dict:
+        if not isinstance(data, dict):
+            return f"{where}: must be {_kind(schema)}, got {data!r}"
+        for key, value in data.items():
+            problem = _check_shape(value, args[1], f"{where}.{key}")
+            if problem:
+                return problem
+        return None
+    if origin is list:
+        if not isinstance(data, list):
+            return f"{where}: must be {_kind(schema)}, got {data!r}"
+        for i, value in enumerate(data):
+            problem = _check_shape(value, args[0], f"{where}[{i}]")
+            if problem:
+                return problem
+        return None
+    ok = {
+        float: lambda x: isinstance(x, (int, float)) and not isinstance(x, bool),
+        int: lambda x: isinstance(x, int) and not isinstance(x, bool),
+        bool: lambda x: isinstance(x, bool),
+        str: lambda x: isinstance(x, str),
+    }[schema]
+    if not ok(data):
+        return f"{where}: must be {_kind(schema)}, got {data!r}"
+    return None
+
+
+def _read(path: Path, defaults: Scenario | None) -> Scenario:
+    if not path.is_file():
+        raise ScenarioError(f"{path}: no such scenario file")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(f"{path}: cannot read: {_one_line(e)}") from None
+    try:
+        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+    except yaml.YAMLError as e:
+        raise ScenarioError(f"{path}: malformed YAML: {_one_line(e)}") from None
+    if data is None:
+        raise ScenarioError(f"{path}: the file is empty")
+    problem = _check_shape(data, Scenario, "")
+    if problem:
+        raise ScenarioError(f"{path}: {problem}")
+    try:
+        return yaml_load_typed(schema=Scenario, data=text, defaults=defaults or Scenario())
+    except Exception as e:  # anything the shape check missed
+        raise ScenarioError(f"{path}: {_one_line(e)}") from None
+
+
+def load_scenario(name: str, config: str | Path | None = None, duration: float | None = None) -> Scenario:
+    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated.
+
+    ``duration`` (command line) overrides the files. Raises ScenarioError.
+    """
+    known = shipped_scenarios()
+    if name not in known:
+        raise ScenarioError(f"unknown scenario '{name}'; the shipped scenarios are {', '.join(known)}")
+    path = SCENARIO_DIR / f"{name}.yaml"
+    scenario = _read(path, None)
+    scenario.source, scenario.base_dir = str(path), str(path.parent)
+    if config is not None:
+        config = Path(config)
+        scenario = _read(config, scenario)
+        scenario.source, scenario.base_dir = f"{path.name} + {config}", str(config.resolve().parent)
+    if duration is not None:
+        scenario = dataclasses.replace(scenario, duration=duration)
+        check_positive(scenario.source, "--duration", duration)
+    validate(scenario)
+    return scenario
+
+
+def load_scenario_file(path: str | Path) -> Scenario:
+    """A scenario from a standalone YAML file (defaults for everything it leaves out), validated."""
+    path = Path(path)
+    scenario = _read(path, None)
+    scenario.source, scenario.base_dir = str(path), str(path.resolve().parent)
+    validate(scenario)
+    return scenario
+
+
+def _fail(source: str, where: str, problem: str):
+    raise ScenarioError(f"{source}: {where}: {problem}")
+
+
+def check_finite(source: str, where: str, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        _fail(source, where, f"must be a finite number, got {value!r}")
+
+
+def check_positive(source: str, where: str, value) -> None:
+    check_finite(source, where, value)
+    if value <= 0:
+        _fail(source, where, f"must be > 0, got {value!r}")
+
+
+def check_non_negative(source: str, where: str, value) -> None:
+    check_finite(source, where, value)
+    if value < 0:
+        _fail(source, where, f"must be >= 0, got {value!r}")
+
+
+def check_choice(source: str, where: str, value, choices) -> None:
+    if value not in choices:
+        _fail(source, where, f"must be one of {', '.join(choices)}, got {value!r}")
+
+
+def validate(s: Scenario) -> None:
+    """Checks every field that does not need the plant; raises ScenarioError."""
+    src = s.source or "scenario"
+    check_positive(src, "duration", s.duration)
+    check_positive(src, "control_period", s.control_period)
+    if s.control_period > s.duration:
+        _fail(src, "control_period", f"{s.control_period} s is longer than the duration {s.duration} s")
+    check_choice(src, "plane", s.plane, PLANES)
+    for name, value in s.arm.initial_positions.items():
+        check_finite(src, f"arm.initial_positions.{name}", value)
+    for name, value in s.arm.initial_velocities.items():
+        check_finite(src, f"arm.initial_velocities.{name}", value)
+    if not s.arm.initial_positions:
+        _fail(src, "arm.initial_positions", "must give a position for every joint")
+    if len(s.plate.position) != 3:
+        _fail(src, "plate.position", f"must be [x, y, z], got {s.plate.position!r}")
+    for i, value in enumerate(s.plate.position):
+        check_finite(src, f"plate.position[{i}]", value)
+    check_finite(src, "plate.yaw", s.plate.yaw)
+    check_choice(src, "contact.approximation", s.contact.approximation, CONTACT_APPROXIMATIONS)
+    check_choice(src, "contact.model", s.contact.model, CONTACT_MODELS)
+    axes = s.task.axes
+    for i, a in enumerate(axes):
+        check_choice(src, f"task.axes[{i}]", a, ("x", "y", "z"))
+    if not axes or len(set(axes)) != len(axes):
+        _fail(src, "task.axes", f"must be distinct axes, got {axes!r}")
+    r = s.reference
+    for name in ("tangent_speed", "approach_speed"):
+        check_finite(src, f"reference.{name}", getattr(r, name))
+    check_positive(src, "reference.approach_speed", r.approach_speed)
+    for name in ("blend_time", "force_ramp_time"):
+        check_non_negative(src, f"reference.{name}", getattr(r, name))
+    check_positive(src, "reference.force", r.force)
+    check_positive(src, "reference.contact_threshold", r.contact_threshold)
+    if r.contact_threshold >= r.force:
+        _fail(
+            src,
+            "reference.contact_threshold",
+            f"{r.contact_threshold} N must be below reference.force {r.force} N",
+        )
+    imp = s.impedance
+    for name in ("K_p_tangent", "K_v_tangent", "K_v_normal", "K_f"):
+        check_positive(src, f"impedance.{name}", getattr(imp, name))
+    check_non_negative(src, "impedance.K_p_normal", imp.K_p_normal)
+    ns = s.null_space
+    check_positive(src, "null_space.K_n", ns.K_n)
+    check_choice(src, "null_space.pseudo_inverse", ns.pseudo_inverse, [k.value for k in PseudoInverseKind])
+    check_non_negative(src, "null_space.damping", ns.damping)
+    try:
+        s.generalized_inverse()
+    except ValueError as e:
+        _fail(src, "null_space.damping", _one_line(e))
+    d = s.desired_null_space
+    check_finite(src, "desired_null_space.joint_torque.gain", d.joint_torque.gain)
+    for name, value in d.joint_speed_limits.items():
+        check_positive(src, f"desired_null_space.joint_speed_limits.{name}", value)
+
+
+def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:
+    """Checks the fields keyed by joint name against the arm's joints."""
+    src = s.source or "scenario"
+    valid = ", ".join(joint_names)
+    tables = {
+        "arm.initial_positions": s.arm.initial_positions,
+        "arm.initial_velocities": s.arm.initial_velocities,
+        "desired_null_space.joint_speed_limits": s.desired_null_space.joint_speed_limits,
+    }
+    for where, table in tables.items():
+        for name in table:
+            if name not in joint_names:
+                _fail(src, f"{where}.{name}", f"unknown joint; the arm's joints are {valid}")
+    missing = [j for j in joint_names if j not in s.arm.initial_positions]
+    if missing:
+        _fail(src, "arm.initial_positions", f"no position for joint(s) {', '.join(missing)}")

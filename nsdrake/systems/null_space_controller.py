@@ -1,0 +1,108 @@
+"""NullSpaceController: the null-space velocity controller of Eq. 21."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from ..dynamics import RobotTerms
+from ..null_space import null_space_torque
+from ..pseudo_inverse import GeneralizedInverse
+from ._util import python_value_producer
+
+
+class NullSpaceController(LeafSystem):
+    """τ₀ = H N (q̈_dⁿ + (J̇^# J + J^# J̇) q̇ + K_n eⁿ + H⁻¹ C eⁿ), eⁿ = q̇_dⁿ − N q̇,
+    ν = ½ eⁿᵀ H eⁿ (Eqs. 14, 21, 23; :mod:`nsdrake.null_space`).
+
+    q̈_dⁿ is the backward difference of q̇_dⁿ over one control period, as the
+    paper did ("numerical differentiation was sufficient"): the discrete state
+    holds the previous sample of q̇_dⁿ. Each compensation term and the q̈_dⁿ
+    feedforward can be switched off.
+
+    .. pydrake_system::
+
+        name: NullSpaceController
+        input_ports:
+        - robot_terms
+        - desired_null_space_velocity
+        output_ports:
+        - generalized_force
+        - null_space_velocity_error
+        - lyapunov
+
+    ``desired_null_space_velocity`` is q̇_dⁿ (n) [rad/s];
+    ``generalized_force`` is τ₀ (n) [N m]; ``null_space_velocity_error`` is eⁿ
+    (n) [rad/s]; ``lyapunov`` is ν (1) [J].
+    """
+
+    def __init__(
+        self,
+        *,
+        inverse: GeneralizedInverse,
+        K_n: float,
+        period: float,
+        task_velocity_compensation: bool,
+        coriolis_compensation: bool,
+        acceleration_feedforward: bool,
+        model_terms: RobotTerms,
+    ):
+        super().__init__()
+        n = model_terms.n
+        self._n = n
+        self._inverse = inverse
+        self._K_n = K_n
+        self._period = period
+        self._tvc = task_velocity_compensation
+        self._cc = coriolis_compensation
+        self._ff = acceleration_feedforward
+        self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
+        self._qdot_ns_d = self.DeclareVectorInputPort("desired_null_space_velocity", n)
+        # [previous q̇_dⁿ (n), 1 if that sample exists]
+        self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._store)
+        deps = {self.input_port_ticket(p.get_index()) for p in (self._terms, self._qdot_ns_d)}
+        deps.add(self.discrete_state_ticket(self._previous))
+        self._result = self.DeclareCacheEntry(
+            description="null-space law",
+            value_producer=python_value_producer(self._compute),
+            prerequisites_of_calc=deps,
+        )
+        self.DeclareVectorOutputPort(
+            "generalized_force",
+            n,
+            lambda c, o: o.SetFromVector(self._result.Eval(c).tau0),
+            prerequisites_of_calc=deps,
+        )
+        self.DeclareVectorOutputPort(
+            "null_space_velocity_error",
+            n,
+            lambda c, o: o.SetFromVector(self._result.Eval(c).e_n),
+            prerequisites_of_calc=deps,
+        )
+        self.DeclareVectorOutputPort(
+            "lyapunov", 1, lambda c, o: o.SetAtIndex(0, self._result.Eval(c).nu), prerequisites_of_calc=deps
+        )
+
+    def desired_acceleration(self, context) -> np.ndarray:
+        """q̈_dⁿ: (q̇_dⁿ(t) − q̇_dⁿ(t − T)) / T, or zero without a previous sample or feedforward."""
+        previous = context.get_discrete_state(self._previous).value()
+        if not self._ff or previous[self._n] == 0.0:
+            return np.zeros(self._n)
+        return (self._qdot_ns_d.Eval(context) - previous[: self._n]) / self._period
+
+    def _compute(self, context):
+        return null_space_torque(
+            self._terms.Eval(context),
+            self._inverse,
+            self._qdot_ns_d.Eval(context),
+            self.desired_acceleration(context),
+            self._K_n,
+            self._tvc,
+            self._cc,
+        )
+
+    def _store(self, context, discrete_state):
+        sample = np.append(self._qdot_ns_d.Eval(context), 1.0)
+        discrete_state.get_mutable_vector(self._previous).SetFromVector(sample)
