@@ -15,7 +15,13 @@ import sys
 import time
 from pathlib import Path
 
-from .runner import OutputFolderError, default_output_folder, prepare_output_folder, run_to_folder
+from .runner import (
+    OutputFolderError,
+    check_scenario,
+    default_output_folder,
+    prepare_output_folder,
+    run_to_folder,
+)
 from .scenario import ScenarioError, load_scenario, shipped_scenarios
 
 
@@ -73,6 +79,7 @@ class _Progress:
 
 def _run(args) -> int:
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    check_scenario(scenario)  # model files, joint names: fail before anything is written
     out = args.out if args.out is not None else default_output_folder(args.scenario)
     out = prepare_output_folder(out, overwrite=args.overwrite)
     print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")

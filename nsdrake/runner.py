@@ -8,6 +8,7 @@ from pathlib import Path
 
 import yaml
 
+from .diagram import build_diagram
 from .metrics import Metric, fig3_metrics, first_contact_index, write_metrics
 from .plots import plot_fig3
 from .scenario import Scenario
@@ -37,6 +38,12 @@ def default_output_folder(name: str, root: Path = Path("runs")) -> Path:
         k += 1
         candidate = root / f"{name}-{k}"
     return candidate
+
+
+def check_scenario(scenario: Scenario) -> None:
+    """Builds the diagram once, so that every field checked against the model (files,
+    joint and frame names) fails now, before an output folder is made."""
+    build_diagram(scenario)
 
 
 def scenario_yaml(scenario: Scenario) -> str:

@@ -1,0 +1,85 @@
+"""Shared fixtures: the paper's arm, test arms of other shapes, and seeded states."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
+
+from nsdrake.dynamics import ArmModel
+from nsdrake.models import models_dir
+
+sys.path.insert(0, str(Path(__file__).parent))
+from models import TEST_ARMS  # noqa: E402
+
+
+def arm_from_urdf_text(text: str, axes) -> ArmModel:
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModelsFromString(text, "urdf")
+    plant.Finalize()
+    return ArmModel(plant, plant.GetFrameByName("tool"), axes)
+
+
+def paper_arm() -> ArmModel:
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModels(str(models_dir() / "arm4.urdf"))
+    plant.Finalize()
+    return ArmModel(plant, plant.GetFrameByName("tool"), ("x", "y"))
+
+
+ARM_NAMES = ["arm4", *TEST_ARMS]
+
+
+def make_arm(name: str) -> ArmModel:
+    if name == "arm4":
+        return paper_arm()
+    text, axes = TEST_ARMS[name]
+    return arm_from_urdf_text(text, axes)
+
+
+@pytest.fixture(params=ARM_NAMES)
+def arm(request) -> ArmModel:
+    """Every test arm in turn: the paper's 4-DOF planar arm and arms of other shapes."""
+    return make_arm(request.param)
+
+
+@pytest.fixture
+def arm4() -> ArmModel:
+    return paper_arm()
+
+
+def terms_at(arm: ArmModel, q, v, coriolis=True):
+    return arm.terms(arm.plant.CreateDefaultContext(), np.asarray(q, float), np.asarray(v, float), coriolis)
+
+
+def fig3_with(tmp_path, overrides: str = "", duration: float | None = None):
+    """The shipped fig3 scenario with a YAML overlay (written to a file, as a user would)."""
+    from nsdrake.scenario import load_scenario
+
+    if not overrides:
+        return load_scenario("fig3", duration=duration)
+    path = tmp_path / "overrides.yaml"
+    path.write_text(overrides)
+    return load_scenario("fig3", config=path, duration=duration)
+
+
+def simulate_to(scenario, t_end: float):
+    """Builds the diagram, simulates to ``t_end`` and returns (built, root context)."""
+    from pydrake.systems.analysis import Simulator
+
+    from nsdrake.diagram import build_diagram
+
+    built = build_diagram(scenario)
+    simulator = Simulator(built.diagram)
+    context = simulator.get_mutable_context()
+    plant = built.station.plant
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    plant.SetPositions(plant_context, built.station.q0)
+    plant.SetVelocities(plant_context, built.station.v0)
+    simulator.Initialize()
+    simulator.AdvanceTo(t_end)
+    return built, context
