@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from pydrake.math import inv  # Eigen's: a third of numpy's cost on small matrices
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import Context
@@ -102,7 +103,7 @@ class RobotTerms:
     @cached_property
     def Lambda(self) -> np.ndarray:
         """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1). (m, m) [kg]."""
-        return np.linalg.inv(self.J @ self.H_inv_Jt)
+        return inv(self.J @ self.H_inv_Jt)
 
     @cached_property
     def Hdot(self) -> np.ndarray:
@@ -118,28 +119,35 @@ class RobotTerms:
 
 
 class JacobianPartials:
-    """∂J_v/∂q_k for every k, analytically (module docstring), for a fixed topology.
+    """∂J/∂q_k for every k, analytically (module docstring), for a fixed topology
+    and a fixed set of task rows.
 
     Args:
         revolute: (n,) bool, joint k is revolute (else prismatic).
         inboard: (n, n) bool, inboard[k, i] = joint k is joint i or inboard of it.
+        rows: indices of the world axes kept in J (the task axes).
     """
 
-    def __init__(self, revolute: np.ndarray, inboard: np.ndarray):
+    def __init__(self, revolute: np.ndarray, inboard: np.ndarray, rows=(0, 1, 2)):
         revolute = np.asarray(revolute, dtype=bool)
         inboard = np.asarray(inboard, dtype=bool)
-        n = len(revolute)
+        rows = np.asarray(rows)
         # D[k, :, i] = w_k × J_i where joint k is joint i or inboard of it (k revolute),
         #            = w_i × J_k where joint k is outboard of joint i (i revolute).
         self._own = (inboard & revolute[:, None]).astype(float)[:, None, :]
         self._other = (~inboard & revolute[None, :]).astype(float)[:, None, :]
-        self._n = n
+        # w ↦ the task rows of [w]×, flattened: [w]×[rows] = (w @ G).reshape(m, 3).
+        G = np.stack([skew(e)[rows].ravel() for e in np.eye(3)])  # (3, 3m)
+        self._G = G
+        self._m = len(rows)
 
     def __call__(self, J_w: np.ndarray, J_v: np.ndarray) -> np.ndarray:
-        """(n, 3, n) array D with D[k] = ∂J_v/∂q_k, from the (3, n) angular Jacobian
-        J_w (column k is the world axis of revolute joint k) and the (3, n)
-        translational Jacobian J_v of the tool point."""
-        P = skew(J_w.T) @ J_v  # (n, 3, n): P[k, :, i] = w_k × J_i
+        """(n, m, n) array D with D[k] = ∂J/∂q_k (task rows of the translational
+        Jacobian), from the (3, n) angular Jacobian J_w (column k is the world axis
+        of revolute joint k) and the (3, n) translational Jacobian J_v of the tool point."""
+        n = J_w.shape[1]
+        S = (J_w.T @ self._G).reshape(n, self._m, 3)  # S[k] = rows of [w_k]×
+        P = S @ J_v  # (n, m, n): P[k, :, i] = (w_k × J_i)[rows]
         return P * self._own + P.transpose(2, 1, 0) * self._other
 
 
@@ -199,7 +207,7 @@ class ArmModel:
         self.joint_names = tuple(j.name() for j in self.joints)
         self.revolute = np.array([j.type_name() == "revolute" for j in self.joints])
         self.inboard = self._inboard_matrix()
-        self._partials = JacobianPartials(self.revolute, self.inboard)
+        self._partials = JacobianPartials(self.revolute, self.inboard, self.rows)
         self._origin = np.zeros(3)
         self._world = plant.world_frame()
 
@@ -249,14 +257,14 @@ class ArmModel:
         plant = self.plant
         plant.SetPositionsAndVelocities(context, np.concatenate([q, v]))
         H = plant.CalcMassMatrix(context)
-        H_inv = np.linalg.inv(H)
+        H_inv = inv(H)
         Cv = plant.CalcBiasTerm(context)
         g = -plant.CalcGravityGeneralizedForces(context)
         J_spatial = plant.CalcJacobianSpatialVelocity(
             context, JacobianWrtVariable.kV, self.tool_frame, self._origin, self._world, self._world
         )
         J_w, J_v = J_spatial[:3], J_spatial[3:]
-        dJ = self._partials(J_w, J_v)[:, self.rows, :]
+        dJ = self._partials(J_w, J_v)
         p_WT = self.plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)[:, 0]
         C = None
         if coriolis:

@@ -28,9 +28,7 @@ def gradient_step(N: np.ndarray, H_inv: np.ndarray, Phi: np.ndarray, K: float, r
 
 def scale_to_speed_limits(qdot: np.ndarray, limits: np.ndarray) -> tuple[np.ndarray, float]:
     """(s q̇, s) with the largest s ≤ 1 such that |s q̇_i| ≤ limits_i. Infinite limits never bind."""
-    speeds = np.abs(qdot)
-    over = speeds > limits
-    if not over.any():
+    ratio = float(np.max(np.abs(qdot) / limits))  # inf limits give 0
+    if ratio <= 1.0:
         return qdot, 1.0
-    s = float(np.min(limits[over] / speeds[over]))
-    return qdot * s, s
+    return qdot / ratio, 1.0 / ratio

@@ -24,6 +24,7 @@ import enum
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.math import inv
 
 
 class PseudoInverseKind(str, enum.Enum):
@@ -134,9 +135,11 @@ class GeneralizedInverse:
             A = J @ J.T
             if self.damping:
                 A = A + self.damping**2 * np.eye(J.shape[0])
-            A_inv = np.linalg.inv(A)
+            A_inv = inv(A)
             J_pinv = J.T @ A_inv
-        return InverseAtState(J_pinv=J_pinv, N=np.eye(n) - J_pinv @ J, A_inv=A_inv, W_inv=W_inv)
+        N = -(J_pinv @ J)
+        N[np.diag_indices(n)] += 1.0  # I − J^# J
+        return InverseAtState(J_pinv=J_pinv, N=N, A_inv=A_inv, W_inv=W_inv)
 
 
 def dynamically_consistent_inverse(J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
