@@ -2,14 +2,15 @@
 
 ::
 
-    plant.state ──► robot_terms ─┬─► impedance_controller ─────────────────┐
-                                 ├─► joint_torque_criterion                 │
-                                 │     └─► desired_null_space_velocity      │
-                                 │           └─► null_space_controller ─────┤
-                                 └───────────────► null_space_controller    ▼
-    plant.reaction_forces ──► force_sensor ─┬─► reference ─► impedance   torque_sum
-                                            └─► impedance_controller        │
-                                                        actuation_map ◄─────┘ ─► plant.actuation
+    plant.state ─► robot_terms ─┬──────────────────────────────► impedance_controller ─┐
+                                ├─► obstacle_criterion ───────┐                       │
+    scene_graph.query ──────────┘   joint_torque_criterion ───┼─► priority_selector   │
+                                    manipulability_criterion ─┘         │             │
+                                                                        ▼             ▼
+                                                        null_space_controller ─► torque_sum
+    plant.reaction_forces ─► force_sensor ─┬─► reference ─► impedance_controller      │
+                                           └─► impedance_controller                   ▼
+                                                          plant.actuation ◄─ actuation_map
 
 Every system is named after its role, and every signal the traces need is
 logged once per control period by a ``VectorLogSink``.
@@ -23,17 +24,21 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain, VectorLogSink
 
+from .criteria.obstacle import ObstacleDistances
 from .impedance import ImpedanceGains
 from .plant import Station, add_station
+from .priority import Criterion, SelectorLimits
 from .reference import SlideAndPress
-from .scenario import Scenario
+from .scenario import Scenario, ScenarioError
 from .systems import (
     ContactMonitor,
     ForceSensor,
-    GradientProjectionSystem,
     ImpedanceController,
     JointTorqueCriterionSystem,
+    ManipulabilityCriterionSystem,
     NullSpaceController,
+    ObstacleCriterionSystem,
+    PrioritySelector,
     RobotTermsSystem,
     SlideAndPressReference,
 )
@@ -67,7 +72,7 @@ def speed_limit_vector(scenario: Scenario, joint_names: tuple[str, ...]) -> np.n
 def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> ControlledStation:
     """The Fig. 3 diagram for ``scenario``.
 
-    ``null_space_task`` False sets the criterion gain to zero (q̇_dⁿ = 0): the
+    ``null_space_task`` False sets every criterion gain to zero (q̇_dⁿ = 0): the
     null-space controller then only damps self-motion.
     """
     builder = DiagramBuilder()
@@ -130,25 +135,62 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
         builder.Connect(reference.GetOutputPort(name), impedance.GetInputPort(name))
     builder.Connect(sensor.GetOutputPort("wrench"), impedance.GetInputPort("measured_wrench"))
 
-    criterion = builder.AddNamedSystem(
+    d = scenario.desired_null_space
+    crit = d.criteria
+    if crit.obstacle.gain > 0 and not station.link_geometries:
+        raise ScenarioError(
+            f"{scenario.source or 'scenario'}: desired_null_space.criteria.obstacle.gain: the arm has no "
+            "link collision geometry to keep away from obstacles (set the gain to 0)"
+        )
+    terms_port = robot_terms.GetOutputPort("robot_terms")
+    joint_torque = builder.AddNamedSystem(
         "joint_torque_criterion",
         JointTorqueCriterionSystem(F_d=r.force * station.normal, model_terms=model_terms),
     )
-    builder.Connect(robot_terms.GetOutputPort("robot_terms"), criterion.get_input_port())
-
-    d = scenario.desired_null_space
-    projection = builder.AddNamedSystem(
-        "desired_null_space_velocity",
-        GradientProjectionSystem(
-            inverse=inverse,
-            gain=d.joint_torque.gain if null_space_task else 0.0,
-            rotate_gradient=d.rotate_gradient,
-            speed_limits=speed_limit_vector(scenario, arm.joint_names),
+    manipulability = builder.AddNamedSystem(
+        "manipulability_criterion", ManipulabilityCriterionSystem(model_terms=model_terms)
+    )
+    obstacle = builder.AddNamedSystem(
+        "obstacle_criterion",
+        ObstacleCriterionSystem(
+            distances=ObstacleDistances(
+                plant,
+                station.link_geometries,
+                station.obstacle_geometries,
+                station.scene_graph.model_inspector(),
+            ),
+            influence_distance=crit.obstacle.influence_distance,
             model_terms=model_terms,
         ),
     )
-    builder.Connect(robot_terms.GetOutputPort("robot_terms"), projection.GetInputPort("robot_terms"))
-    builder.Connect(criterion.GetOutputPort("gradient"), projection.GetInputPort("gradient"))
+    builder.Connect(station.scene_graph.get_query_output_port(), obstacle.GetInputPort("geometry_query"))
+    criteria = {
+        Criterion.obstacle: (obstacle, crit.obstacle.gain),
+        Criterion.joint_torque: (joint_torque, crit.joint_torque.gain),
+        Criterion.manipulability: (manipulability, crit.manipulability.gain),
+    }
+    sel = d.selector
+    selector = builder.AddNamedSystem(
+        "priority_selector",
+        PrioritySelector(
+            inverse=inverse,
+            gains={c: (gain if null_space_task else 0.0) for c, (_, gain) in criteria.items()},
+            limits=SelectorLimits(d_lim=sel.d_lim, w_lim=sel.w_lim, d_band=sel.d_band, w_band=sel.w_band),
+            blend_time=sel.blend_time,
+            rotate_gradient=d.rotate_gradient,
+            speed_limits=speed_limit_vector(scenario, arm.joint_names),
+            speed_headroom=d.speed_headroom,
+            period=T,
+            model_terms=model_terms,
+        ),
+    )
+    builder.Connect(terms_port, selector.GetInputPort("robot_terms"))
+    for c, (system, _) in criteria.items():
+        builder.Connect(terms_port, system.GetInputPort("robot_terms"))
+        builder.Connect(system.GetOutputPort("gradient"), selector.GetInputPort(f"{c.value}_gradient"))
+    builder.Connect(obstacle.GetOutputPort("d_min"), selector.GetInputPort("d_min"))
+    builder.Connect(manipulability.GetOutputPort("value"), selector.GetInputPort("manipulability"))
+    builder.Connect(obstacle.GetOutputPort("activation"), selector.GetInputPort("obstacle_activation"))
 
     null_space = builder.AddNamedSystem(
         "null_space_controller",
@@ -164,7 +206,7 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
     )
     builder.Connect(robot_terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
     builder.Connect(
-        projection.GetOutputPort("desired_null_space_velocity"),
+        selector.GetOutputPort("desired_null_space_velocity"),
         null_space.GetInputPort("desired_null_space_velocity"),
     )
 
@@ -181,7 +223,7 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
         "contact_monitor",
         ContactMonitor(
             plant=plant,
-            watched=set(plant.GetBodyIndices(station.plate)),
+            watched={*plant.GetBodyIndices(station.plate), *(b.index() for b in station.obstacle_bodies)},
             allowed={tool_body},
         ),
     )
@@ -193,10 +235,15 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
         "f_d": reference.GetOutputPort("f_d"),
         "state": plant.get_state_output_port(),
         "tau": torque_sum.get_output_port(),
-        "qns": projection.GetOutputPort("desired_null_space_velocity"),
+        "qns": selector.GetOutputPort("desired_null_space_velocity"),
+        "mode": selector.GetOutputPort("mode"),
+        "speed_scale": selector.GetOutputPort("speed_scale"),
+        "w": manipulability.GetOutputPort("value"),
+        "d_min": obstacle.GetOutputPort("d_min"),
+        "p_obstacle": obstacle.GetOutputPort("value"),
         "en": null_space.GetOutputPort("null_space_velocity_error"),
         "nu": null_space.GetOutputPort("lyapunov"),
-        "p_tau": criterion.GetOutputPort("value"),
+        "p_tau": joint_torque.GetOutputPort("value"),
         "forbidden_contacts": monitor.get_output_port(),
     }
     loggers = {}

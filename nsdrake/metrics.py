@@ -1,10 +1,14 @@
-"""Acceptance figures of the Fig. 3 experiment, computed from the traces alone.
+"""Acceptance figures, computed from the traces alone.
 
 Each figure is a :class:`Metric` with its value, unit, the bound it must meet
 and whether it does, so that metrics.json and the report show pass/fail.
 
-The window: from ``settle_time`` (0.5 s) after first contact (the first row
-whose normal force reaches the contact threshold) to the end of the run.
+- :func:`fig3_metrics`: the Fig. 3 experiment. The window runs from 0.5 s after
+  first contact (the first row whose normal force reaches the contact threshold)
+  to the end of the run.
+- :func:`priority_metrics`: Fig. 1's switching: modes visited, each mode's
+  criterion improving while the mode is active, torque steps at switches.
+- :func:`joint_speed_metric`: the measured joint speeds against their limits.
 """
 
 from __future__ import annotations
@@ -24,6 +28,9 @@ FORCE_MAX_BOUND = 0.10  # max |f_n − f_d| ≤ 10% of f_d
 POSITION_RMS_BOUND = 1e-3  # RMS of the tangential position error ≤ 1 mm [m]
 NULL_SPACE_RELATIVE_BOUND = 0.05  # RMS ‖eⁿ‖ ≤ 5% of RMS ‖q̇_dⁿ‖ …
 NULL_SPACE_ABSOLUTE_BOUND = 1e-3  # … or 1e-3 rad/s, whichever is larger [rad/s]
+D_MIN_AFTER = 1.0  # [s] from this time on, d_min must stay above d_lim
+TORQUE_STEP_RATIO_BOUND = 2.0  # largest torque step at a switch ≤ 2 × the 99th percentile elsewhere
+CONTACT_ONSET_EXCLUDED = (-0.01, 0.3)  # [s] around first contact, excluded from the torque-step baseline
 
 
 @dataclass
@@ -62,6 +69,7 @@ def fig3_metrics(
     task_axes: tuple[str, ...],
     contact_threshold: float,
     p_tau_without_null_space_task: float | None = None,
+    d_lim: float | None = None,
 ) -> list[Metric]:
     """The acceptance figures of the fig3 issue from one run's traces.
 
@@ -72,6 +80,8 @@ def fig3_metrics(
         contact_threshold: normal force that counts as contact [N].
         p_tau_without_null_space_task: final joint-torque criterion of the same
             run with q̇_dⁿ = 0, if it was run.
+        d_lim: the selector's obstacle limit: after the first second d_min must
+            stay above it [m].
     """
     t = traces["t"]
     metrics: list[Metric] = []
@@ -145,6 +155,12 @@ def fig3_metrics(
             rms_en <= bound,
         )
     )
+    if d_lim is not None and "d_min" in traces:
+        late = t >= D_MIN_AFTER
+        d_late = float(traces["d_min"][late].min()) if late.any() else math.inf
+        metrics.append(
+            Metric(f"d_min_after_{D_MIN_AFTER:g}s", d_late, "m", f"> d_lim = {d_lim:g} m", d_late > d_lim)
+        )
     forbidden = float(traces["forbidden_contacts"].max())
     metrics.append(
         Metric(
@@ -171,6 +187,111 @@ def fig3_metrics(
         )
         metrics.append(
             Metric("p_tau_end_without_null_space_task", p_tau_without_null_space_task, "N^2 m^2", "", None)
+        )
+    return metrics
+
+
+def joint_speed_metric(traces: Traces, limits: np.ndarray) -> Metric:
+    """max over the run and the joints of |q̇_i| / limit_i (≤ 1: no joint exceeds its limit)."""
+    v = np.abs(traces.block("v"))
+    finite = np.isfinite(limits)
+    if not finite.any():
+        return Metric("joint_speed_ratio_max", 0.0, "-", "no joint has a speed limit", None)
+    ratio = float(np.max(v[:, finite] / limits[finite]))
+    return Metric("joint_speed_ratio_max", ratio, "-", "<= 1 (no joint exceeds its limit)", ratio <= 1.0)
+
+
+def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end] row indices of the runs of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
+def torque_steps(traces: Traces) -> np.ndarray:
+    """Δτ_k = max_i |τ_i(t_{k+1}) − τ_i(t_k)|, the largest change of commanded torque
+    between consecutive control periods, per row k (len = rows − 1) [N m]."""
+    return np.max(np.abs(np.diff(traces.block("tau"), axis=0)), axis=1)
+
+
+def priority_metrics(
+    traces: Traces,
+    *,
+    blend_time: float,
+    contact_threshold: float | None = None,
+    required_modes: tuple[int, ...] = (),
+) -> list[Metric]:
+    """Fig. 1's switching, from the ``mode``, ``d_min``, ``w``, ``p_tau`` and ``tau`` traces.
+
+    - modes visited, with the time spent in each, and whether ``required_modes`` all appear;
+    - in every interval of mode 1 (3, 2) that lasts at least ``blend_time`` (so
+      its ordering is fully active), d_min (w) grows and p_tau falls from the
+      interval's start to its end;
+    - the largest torque step Δτ in the [switch, switch + blend_time] windows,
+      against twice the 99th percentile of Δτ over the other rows, first contact
+      ± (−0.01, 0.3) s excluded.
+    """
+    t = traces["t"]
+    mode = traces["mode"].astype(int)
+    h = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    metrics = []
+    visited = sorted({int(m) for m in mode})
+    if required_modes:
+        missing = sorted(set(required_modes) - set(visited))
+        metrics.append(
+            Metric(
+                "modes_visited",
+                float(len(visited)),
+                "modes",
+                f"includes {list(required_modes)} (visited {visited}, missing {missing})",
+                not missing,
+            )
+        )
+    else:
+        metrics.append(Metric("modes_visited", float(len(visited)), "modes", f"visited {visited}", None))
+    criteria = {1: ("d_min", +1, "d_min grows"), 2: ("p_tau", -1, "p_tau falls"), 3: ("w", +1, "w grows")}
+    for m, (column, sign, words) in criteria.items():
+        spans = _intervals(mode == m)
+        active = float(sum((t[b] - t[a] + h) for a, b in spans))
+        metrics.append(Metric(f"mode{m}_time", active, "s", "", None))
+        judged = [(a, b) for a, b in spans if t[b] - t[a] >= blend_time]
+        if not judged:
+            continue
+        changes = [sign * (traces[column][b] - traces[column][a]) for a, b in judged]
+        worst = float(min(changes))
+        metrics.append(
+            Metric(
+                f"mode{m}_{column}_change_min",
+                worst,
+                {"d_min": "m", "p_tau": "N^2 m^2", "w": "m^2"}[column],
+                f"> 0 in each of the {len(judged)} mode-{m} interval(s) of >= {blend_time:g} s ({words})",
+                worst > 0,
+            )
+        )
+    steps = torque_steps(traces)
+    switches = np.flatnonzero(np.diff(mode) != 0) + 1  # rows where a new mode starts
+    at_switch = np.zeros(len(steps), dtype=bool)
+    for k in switches:
+        at_switch[(t[:-1] >= t[k] - h / 2) & (t[:-1] <= t[k] + blend_time)] = True
+    elsewhere = ~at_switch
+    if contact_threshold is not None:
+        k0 = first_contact_index(traces, contact_threshold)
+        if k0 is not None:
+            lo, hi = CONTACT_ONSET_EXCLUDED
+            elsewhere &= ~((t[:-1] >= t[k0] + lo) & (t[:-1] <= t[k0] + hi))
+    metrics.append(Metric("mode_switches", float(len(switches)), "switches", "", None))
+    if len(switches) and elsewhere.any():
+        largest = float(steps[at_switch].max())
+        p99 = float(np.percentile(steps[elsewhere], 99))
+        metrics.append(Metric("torque_step_p99_elsewhere", p99, "N m", "", None))
+        metrics.append(
+            Metric(
+                "torque_step_at_switch_max",
+                largest,
+                "N m",
+                f"<= {TORQUE_STEP_RATIO_BOUND:g} x p99 elsewhere = {TORQUE_STEP_RATIO_BOUND * p99:.4g} N m",
+                largest <= TORQUE_STEP_RATIO_BOUND * p99,
+            )
         )
     return metrics
 

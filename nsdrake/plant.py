@@ -9,16 +9,18 @@ reaction force the force sensor reads.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from pydrake.geometry import Box, Cylinder, ProximityProperties, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import ModelInstanceIndex, WeldJoint
+from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia, WeldJoint
 from pydrake.systems.framework import DiagramBuilder
 
+from .criteria.obstacle import proximity_geometries
 from .dynamics import ArmModel
 from .models import resolve_model
 from .scenario import Scenario, ScenarioError, check_against_plant
@@ -43,6 +45,15 @@ class Station:
     tangent: np.ndarray
     q0: np.ndarray  # (n,) initial joint positions [rad]
     v0: np.ndarray  # (n,) initial joint velocities [rad/s]
+    # Bodies of the extra obstacles (welded to the world).
+    obstacle_bodies: list = field(default_factory=list)
+    # Proximity geometries of the arm's links (the tool's excepted) and of the obstacles (plate included).
+    link_geometries: list = field(default_factory=list)
+    obstacle_geometries: list = field(default_factory=list)
+
+    @property
+    def tool_body(self):
+        return self.arm_model.tool_frame.body()
 
 
 def gravity_vector(plane: str) -> np.ndarray:
@@ -82,6 +93,7 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     plate_body = plant.get_body(plate_bodies[0])
     X_WP = RigidTransform(RollPitchYaw(0.0, 0.0, scenario.plate.yaw), np.asarray(scenario.plate.position))
     sensor_joint = plant.AddJoint(WeldJoint(SENSOR_JOINT, plant.world_frame(), plate_body.body_frame(), X_WP))
+    obstacle_bodies = _add_obstacles(plant, scene_graph, scenario, plate_body)
     plant.mutable_gravity_field().set_gravity_vector(gravity_vector(scenario.plane))
     plant.Finalize()
 
@@ -111,6 +123,10 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     normal = normal / np.linalg.norm(normal)
     along_W = X_WP.rotation().matrix()[:, 0]
     tangent = along_W[arm_model.rows]
+    inspector = scene_graph.model_inspector()
+    tool = arm_model.tool_frame.body().index()
+    arm_bodies = [b for b in plant.GetBodyIndices(arm) if b != tool]
+    obstacle_indices = [plate_body.index(), *(b.index() for b in obstacle_bodies)]
     return Station(
         plant=plant,
         scene_graph=scene_graph,
@@ -122,4 +138,34 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
         tangent=tangent,
         q0=q0,
         v0=v0,
+        obstacle_bodies=obstacle_bodies,
+        link_geometries=proximity_geometries(inspector, plant, arm_bodies),
+        obstacle_geometries=proximity_geometries(inspector, plant, obstacle_indices),
     )
+
+
+def _add_obstacles(plant: MultibodyPlant, scene_graph, scenario: Scenario, plate_body) -> list:
+    """Welds each scenario obstacle to the world (joint obstacle_<name>), with the
+    plate's contact properties, so that a link that hits one is stopped physically."""
+    if not scenario.obstacles:
+        return []
+    instance = plant.AddModelInstance("obstacles")
+    inspector = scene_graph.model_inspector()
+    (plate_geometry,) = plant.GetCollisionGeometriesForBody(plate_body)
+    properties = inspector.GetProximityProperties(plate_geometry)
+    bodies = []
+    for ob in scenario.obstacles:
+        shape = {
+            "box": lambda s: Box(*s),
+            "sphere": lambda s: Sphere(s[0]),
+            "cylinder": lambda s: Cylinder(s[0], s[1]),
+        }[ob.shape](ob.size)
+        body = plant.AddRigidBody(ob.name, instance, SpatialInertia.SolidSphereWithMass(1.0, 0.05))
+        plant.RegisterCollisionGeometry(
+            body, RigidTransform(), shape, ob.name, ProximityProperties(properties)
+        )
+        plant.RegisterVisualGeometry(body, RigidTransform(), shape, ob.name, np.array([0.85, 0.55, 0.2, 0.9]))
+        X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, ob.yaw), np.asarray(ob.position, dtype=float))
+        plant.AddJoint(WeldJoint(f"obstacle_{ob.name}", plant.world_frame(), body.body_frame(), X_WO))
+        bodies.append(body)
+    return bodies

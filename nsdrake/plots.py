@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -12,6 +13,25 @@ import numpy as np  # noqa: E402
 
 from .traces import Traces  # noqa: E402
 
+MODE_NAMES = {0: "none", 1: "obstacle", 2: "joint torque", 3: "manipulability"}
+
+
+def _mode_panel(ax, traces: Traces, selector=None) -> None:
+    """Mode (step plot, left axis) with d_min and w (right axes) and their limits."""
+    t = traces["t"]
+    ax.step(t, traces["mode"], where="post", color="k", lw=1.2, label="mode")
+    ax.set_yticks(list(MODE_NAMES), [f"{k} {v}" for k, v in MODE_NAMES.items()], fontsize=7)
+    ax.set_ylim(-0.3, 3.3)
+    ax.set_ylabel("level-2 criterion")
+    right = ax.twinx()
+    right.plot(t, traces["d_min"], color="C1", label=r"$d_{min}$ [m]")
+    right.plot(t, traces["w"], color="C2", label="w [m$^2$]")
+    if selector is not None:
+        right.axhline(selector.d_lim, color="C1", ls=":", lw=0.8, label=r"$d_{lim}$")
+        right.axhline(selector.w_lim, color="C2", ls=":", lw=0.8, label=r"$w_{lim}$")
+    right.set_ylabel(r"$d_{min}$ [m], w [m$^2$]")
+    right.legend(loc="upper right", fontsize=7)
+
 
 def plot_fig3(
     traces: Traces,
@@ -21,15 +41,17 @@ def plot_fig3(
     title: str = "",
     baseline: Traces | None = None,
     contact_time: float | None = None,
+    selector=None,
 ) -> None:
     """Writes the Fig. 3 panels (force; each task coordinate against its reference),
-    the null-space velocity error and the joint-torque criterion to ``path``.
+    the null-space velocity error, the mode with d_min and w, and the
+    joint-torque criterion to ``path``.
 
     ``baseline`` (the same run with q̇_dⁿ = 0), when given, is overlaid on the
-    criterion panel.
+    criterion panel; ``selector`` (the scenario's limits) draws d_lim and w_lim.
     """
     t = traces["t"]
-    rows = 2 + len(task_axes) + 1
+    rows = 2 + len(task_axes) + 2
     fig, axes = plt.subplots(rows, 1, figsize=(9, 2.3 * rows), sharex=True, constrained_layout=True)
     ax = axes[0]
     ax.plot(t, traces["f_n"], label="measured $f_n$", color="C0")
@@ -50,6 +72,7 @@ def plot_fig3(
     ax.set_yscale("symlog", linthresh=1e-4)
     ax.set_ylabel("null-space velocity [rad/s]")
     ax.legend(loc="best")
+    _mode_panel(axes[2 + len(task_axes)], traces, selector)
     ax = axes[-1]
     ax.plot(t, traces["p_tau"], label=r"$\|J^T F_d\|^2$ with null-space task", color="C0")
     if baseline is not None:
@@ -61,6 +84,54 @@ def plot_fig3(
         for ax in axes:
             ax.axvline(contact_time, color="k", lw=0.6, alpha=0.4)
     if title:
-        fig.suptitle(title)
+        fig.suptitle(textwrap.fill(title, 90), fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_priority(traces: Traces, path: Path, *, title: str = "", selector=None) -> None:
+    """The mode timeline and each criterion over time (d_min, w, p_tau), with the
+    limits of Fig. 1's tree, and the largest torque step per control period."""
+    t = traces["t"]
+    fig, axes = plt.subplots(5, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
+    mode = traces["mode"]
+    ax = axes[0]
+    ax.step(t, mode, where="post", color="k")
+    ax.set_yticks(list(MODE_NAMES), [f"{k} {v}" for k, v in MODE_NAMES.items()], fontsize=8)
+    ax.set_ylim(-0.3, 3.3)
+    ax.set_ylabel("level-2 criterion")
+    colors = {1: "C1", 2: "C0", 3: "C2"}
+    panels = [
+        ("d_min", 1, r"$d_{min}$ [m]"),
+        ("w", 3, "manipulability w [m$^2$]"),
+        ("p_tau", 2, r"$p_\tau$ [N$^2$m$^2$]"),
+    ]
+    for ax, (column, m, label) in zip(axes[1:4], panels, strict=True):
+        ax.plot(t, traces[column], color="0.4", lw=1)
+        shown = np.where(mode == m, traces[column], np.nan)
+        ax.plot(t, shown, color=colors[m], lw=2.2, label=f"while mode {m} ({MODE_NAMES[m]}) is active")
+        ax.set_ylabel(label)
+        ax.legend(loc="best", fontsize=8)
+    if selector is not None:
+        axes[1].axhline(selector.d_lim, color="C1", ls=":", label=r"$d_{lim}$")
+        axes[1].axhline(
+            selector.d_lim + selector.d_band, color="C1", ls="--", lw=0.7, label=r"$d_{lim}+d_{band}$"
+        )
+        axes[2].axhline(selector.w_lim, color="C2", ls=":", label=r"$w_{lim}$")
+        axes[2].axhline(
+            selector.w_lim + selector.w_band, color="C2", ls="--", lw=0.7, label=r"$w_{lim}+w_{band}$"
+        )
+        axes[1].legend(loc="best", fontsize=8)
+        axes[2].legend(loc="best", fontsize=8)
+    ax = axes[4]
+    steps = np.max(np.abs(np.diff(traces.block("tau"), axis=0)), axis=1)
+    ax.semilogy(t[1:], np.maximum(steps, 1e-9), color="C3", lw=0.8)
+    for k in np.flatnonzero(np.diff(mode) != 0) + 1:
+        for a in axes:
+            a.axvline(t[k], color="k", lw=0.5, alpha=0.3)
+    ax.set_ylabel(r"max$_i |\Delta\tau_i|$ per period [N m]")
+    ax.set_xlabel("time [s]")
+    if title:
+        fig.suptitle(textwrap.fill(title, 90), fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)

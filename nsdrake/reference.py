@@ -5,7 +5,8 @@ hits the wall", then the desired force is tracked. :class:`SlideAndPress`
 gives, at time t and for a contact time t_c (∞ before contact):
 
 - along the plate (unit tangent t): a constant-velocity ramp that reaches its
-  speed v_t from rest with constant acceleration over ``blend_time``;
+  speed v_t from rest over ``blend_time``, the speed following a smoothstep so
+  that the acceleration starts and ends at zero (no torque step);
 - normal to the plate (unit normal n): the same profile at the approach speed
   v_a, frozen where contact was detected;
 - the desired normal force f_d: 0 before contact, then a smoothstep from 0 to
@@ -21,13 +22,19 @@ import numpy as np
 
 
 def ramp_profile(t: float, speed: float, blend_time: float) -> tuple[float, float, float]:
-    """(s, ṡ, s̈) of a ramp that starts at rest, accelerates uniformly for
-    ``blend_time`` and then moves at ``speed``. s(0) = 0."""
+    """(s, ṡ, s̈) of a ramp that starts at rest and moves at ``speed`` after
+    ``blend_time``, with ṡ = speed · smoothstep(t / blend_time) in between (so s̈ is
+    continuous and zero at both ends). s(0) = 0."""
     if t <= 0.0:
         return 0.0, 0.0, 0.0
     if blend_time > 0.0 and t < blend_time:
-        a = speed / blend_time
-        return 0.5 * a * t * t, a * t, a
+        u = t / blend_time
+        # ∫ smoothstep = u³ − u⁴/2; smoothstep' = 6u(1 − u)
+        return (
+            speed * blend_time * (u**3 - 0.5 * u**4),
+            speed * u * u * (3.0 - 2.0 * u),
+            speed * 6.0 * u * (1.0 - u) / blend_time,
+        )
     return speed * (t - 0.5 * blend_time), speed, 0.0
 
 

@@ -8,9 +8,16 @@ from pathlib import Path
 
 import yaml
 
-from .diagram import build_diagram
-from .metrics import Metric, fig3_metrics, first_contact_index, write_metrics
-from .plots import plot_fig3
+from .diagram import build_diagram, speed_limit_vector
+from .metrics import (
+    Metric,
+    fig3_metrics,
+    first_contact_index,
+    joint_speed_metric,
+    priority_metrics,
+    write_metrics,
+)
+from .plots import plot_fig3, plot_priority
 from .scenario import Scenario
 from .simulate import run
 from .traces import Traces
@@ -72,7 +79,8 @@ def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
     - traces_without_null_space_task.csv: the same run with q̇_dⁿ = 0, if the
       scenario asks for the comparison;
     - metrics.json: the acceptance figures, computed from the CSV files;
-    - fig3.png: the Fig. 3-style plots;
+    - fig3.png: the Fig. 3-style plots (with the fig3 check);
+    - priority.png: mode timeline and criteria (with the priority check);
     - scenario.yaml: the scenario as run.
     """
     out = Path(out)
@@ -88,23 +96,52 @@ def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
         baseline_traces.write_csv(out / "traces_without_null_space_task.csv")
         baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
     traces = Traces.read_csv(out / "traces.csv")
-    station = built.station
-    threshold = scenario.reference.contact_threshold
-    metrics = fig3_metrics(
-        traces,
-        tangent=station.tangent,
-        task_axes=station.arm_model.task_axes,
-        contact_threshold=threshold,
-        p_tau_without_null_space_task=float(baseline["p_tau"][-1]) if baseline is not None else None,
-    )
+    metrics = compute_metrics(scenario, built, traces, baseline)
     write_metrics(out / "metrics.json", metrics, {"scenario": scenario.source, "duration": scenario.duration})
-    k0 = first_contact_index(traces, threshold)
-    plot_fig3(
-        traces,
-        out / "fig3.png",
-        task_axes=station.arm_model.task_axes,
-        title=scenario.description,
-        baseline=baseline,
-        contact_time=float(traces["t"][k0]) if k0 is not None else None,
-    )
+    k0 = first_contact_index(traces, scenario.reference.contact_threshold)
+    contact_time = float(traces["t"][k0]) if k0 is not None else None
+    task_axes = built.station.arm_model.task_axes
+    if "fig3" in scenario.report.checks:
+        plot_fig3(
+            traces,
+            out / "fig3.png",
+            task_axes=task_axes,
+            title=scenario.description,
+            baseline=baseline,
+            contact_time=contact_time,
+            selector=scenario.desired_null_space.selector,
+        )
+    if "priority" in scenario.report.checks:
+        plot_priority(
+            traces,
+            out / "priority.png",
+            title=scenario.description,
+            selector=scenario.desired_null_space.selector,
+        )
     return RunResult(out=out, metrics=metrics)
+
+
+def compute_metrics(scenario: Scenario, built, traces: Traces, baseline: Traces | None) -> list[Metric]:
+    """The figures the scenario's ``report.checks`` ask for, from the traces."""
+    station = built.station
+    selector = scenario.desired_null_space.selector
+    threshold = scenario.reference.contact_threshold
+    metrics: list[Metric] = []
+    if "fig3" in scenario.report.checks:
+        metrics += fig3_metrics(
+            traces,
+            tangent=station.tangent,
+            task_axes=station.arm_model.task_axes,
+            contact_threshold=threshold,
+            p_tau_without_null_space_task=float(baseline["p_tau"][-1]) if baseline is not None else None,
+            d_lim=selector.d_lim,
+        )
+    if "priority" in scenario.report.checks:
+        metrics += priority_metrics(
+            traces,
+            blend_time=selector.blend_time,
+            contact_threshold=threshold,
+            required_modes=tuple(scenario.report.required_modes),
+        )
+    metrics.append(joint_speed_metric(traces, speed_limit_vector(scenario, station.arm_model.joint_names)))
+    return metrics

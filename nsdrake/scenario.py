@@ -74,7 +74,8 @@ class ReferenceConfig:
 
     # Speed of the constant-velocity ramp along the plate [m/s].
     tangent_speed: float = 0.05
-    # Speed of the approach toward the plate, held until contact is detected [m/s].
+    # Speed of the approach toward the plate, held until contact is detected; 0 holds the
+    # distance (a run without contact) [m/s].
     approach_speed: float = 0.03
     # Time over which both speeds rise from rest (constant acceleration) [s].
     blend_time: float = 0.2
@@ -123,30 +124,105 @@ class NullSpaceConfig:
 
 
 @dataclass
+class ObstacleCriterionConfig:
+    """Obstacle avoidance, Eq. 31 (nsdrake/criteria/obstacle.py): p = −⅓ Σ max(0, d_∞ − d)³."""
+
+    # Step gain K of Eq. 30; >= 0, a positive gain pushes the links away [rad/s per m³/(kg m²)].
+    gain: float = 0.0
+    # Influence distance d_∞: links farther than this from every obstacle feel nothing [m].
+    influence_distance: float = 0.1
+
+
+@dataclass
 class JointTorqueCriterionConfig:
     """Joint torque due to the desired end-effector force, Eqs. 32–33: p = ‖Jᵀ F_d‖²."""
 
-    # Step gain K of Eq. 30; negative minimises p [rad/s per N² m² · kg m²].
-    gain: float = -0.02
+    # Step gain K of Eq. 30; <= 0, a negative gain minimises p [rad/s per N² m²/(kg m²)].
+    gain: float = 0.0
+
+
+@dataclass
+class ManipulabilityCriterionConfig:
+    """Manipulability (Yoshikawa): w = √det(J Jᵀ)."""
+
+    # Step gain K of Eq. 30; >= 0, a positive gain maximises w [rad/s per m²/(kg m²)].
+    gain: float = 0.0
+
+
+@dataclass
+class CriteriaConfig:
+    """The criteria of Section 3.5. A zero gain keeps a criterion in the hierarchy with no effect."""
+
+    obstacle: ObstacleCriterionConfig = field(default_factory=ObstacleCriterionConfig)
+    joint_torque: JointTorqueCriterionConfig = field(default_factory=JointTorqueCriterionConfig)
+    manipulability: ManipulabilityCriterionConfig = field(default_factory=ManipulabilityCriterionConfig)
+
+
+@dataclass
+class SelectorConfig:
+    """Fig. 1's decision tree (nsdrake/priority.py)."""
+
+    # A link closer than this to an obstacle puts obstacle avoidance on level 2 [m].
+    d_lim: float = 0.05
+    # Hysteresis: obstacle avoidance leaves level 2 only beyond d_lim + d_band [m].
+    d_band: float = 0.01
+    # Manipulability below this puts its maximisation on level 2 (above: joint torque) [m²].
+    w_lim: float = 0.01
+    # Hysteresis: manipulability leaves level 2 only above w_lim + w_band [m²].
+    w_band: float = 0.005
+    # After a switch, q̇_dⁿ blends from the old ordering to the new over this time [s].
+    blend_time: float = 0.2
 
 
 @dataclass
 class DesiredNullSpaceConfig:
-    """The desired null-space velocity q̇_dⁿ by gradient projection (Eqs. 28–30)."""
+    """The desired null-space velocity q̇_dⁿ by gradient projection (Eqs. 28–30), prioritised."""
 
-    # Rotate the gradient by H⁻¹ before projecting (Eq. 30); false gives Eq. 28's form [-].
+    # Rotate each gradient by H⁻¹ before projecting (Eq. 30); false gives Eq. 28's form [-].
     rotate_gradient: bool = True
-    # Joint-torque criterion of Eqs. 32–33.
-    joint_torque: JointTorqueCriterionConfig = field(default_factory=JointTorqueCriterionConfig)
-    # Largest joint speed of q̇_dⁿ, keyed by joint name; q̇_dⁿ is scaled, keeping its direction,
-    # so no joint exceeds its limit. Missing joints are unlimited [rad/s].
+    criteria: CriteriaConfig = field(default_factory=CriteriaConfig)
+    selector: SelectorConfig = field(default_factory=SelectorConfig)
+    # Largest joint speed, keyed by joint name: q̇_dⁿ is scaled, keeping its direction, so
+    # that no joint's commanded speed (task part plus q̇_dⁿ) exceeds it. Missing joints are
+    # unlimited [rad/s].
     joint_speed_limits: dict[str, float] = field(default_factory=dict)
+    # Fraction of each speed limit kept free for the null-space tracking error: commands
+    # stay within (1 − headroom) × limit, so the measured speeds stay within the limit [-].
+    speed_headroom: float = 0.05
+
+
+OBSTACLE_SHAPES = {"box": 3, "sphere": 1, "cylinder": 2}  # number of size entries
+
+
+@dataclass
+class ObstacleConfig:
+    """An extra obstacle welded to the world (the plate is always one)."""
+
+    # Unique name; its weld joint is called obstacle_<name> [-].
+    name: str = ""
+    # box, sphere or cylinder (axis along z) [-].
+    shape: str = ""
+    # box: [lx, ly, lz]; sphere: [radius]; cylinder: [radius, length] [m].
+    size: list[float] = field(default_factory=list)
+    # Position of its centre in the world [m].
+    position: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # Rotation about the world z axis [rad].
+    yaw: float = 0.0
+
+
+REPORT_CHECKS = ("fig3", "priority")
 
 
 @dataclass
 class ReportConfig:
     # Also run the scenario with q̇_dⁿ = 0 and report its final joint-torque criterion [-].
     compare_without_null_space_task: bool = True
+    # Acceptance figures to compute: fig3 (contact, force and position tracking, the
+    # null space follows its command) and/or priority (modes, criteria, torque steps) [-].
+    checks: list[str] = field(default_factory=lambda: ["fig3"])
+    # With the priority check: the modes the run must visit (1 obstacle avoidance,
+    # 2 joint torque, 3 manipulability) [-].
+    required_modes: list[int] = field(default_factory=list)
 
 
 @dataclass
@@ -167,6 +243,8 @@ class Scenario:
     impedance: ImpedanceConfig = field(default_factory=ImpedanceConfig)
     null_space: NullSpaceConfig = field(default_factory=NullSpaceConfig)
     desired_null_space: DesiredNullSpaceConfig = field(default_factory=DesiredNullSpaceConfig)
+    # Obstacles besides the plate.
+    obstacles: list[ObstacleConfig] = field(default_factory=list)
     report: ReportConfig = field(default_factory=ReportConfig)
     # Where the scenario was read from (set by the loader; not a YAML field).
     source: str = field(default="", metadata={"yaml": False})
@@ -356,6 +434,11 @@ def validate(s: Scenario) -> None:
     for i, value in enumerate(s.plate.position):
         check_finite(src, f"plate.position[{i}]", value)
     check_finite(src, "plate.yaw", s.plate.yaw)
+    for i, check in enumerate(s.report.checks):
+        check_choice(src, f"report.checks[{i}]", check, REPORT_CHECKS)
+    for i, m in enumerate(s.report.required_modes):
+        if m not in (0, 1, 2, 3):
+            _fail(src, f"report.required_modes[{i}]", f"must be a mode 0-3, got {m!r}")
     check_choice(src, "contact.approximation", s.contact.approximation, CONTACT_APPROXIMATIONS)
     check_choice(src, "contact.model", s.contact.model, CONTACT_MODELS)
     axes = s.task.axes
@@ -366,7 +449,7 @@ def validate(s: Scenario) -> None:
     r = s.reference
     for name in ("tangent_speed", "approach_speed"):
         check_finite(src, f"reference.{name}", getattr(r, name))
-    check_positive(src, "reference.approach_speed", r.approach_speed)
+    check_non_negative(src, "reference.approach_speed", r.approach_speed)
     for name in ("blend_time", "force_ramp_time"):
         check_non_negative(src, f"reference.{name}", getattr(r, name))
     check_positive(src, "reference.force", r.force)
@@ -390,9 +473,60 @@ def validate(s: Scenario) -> None:
     except ValueError as e:
         _fail(src, "null_space.damping", _one_line(e))
     d = s.desired_null_space
-    check_finite(src, "desired_null_space.joint_torque.gain", d.joint_torque.gain)
+    crit = "desired_null_space.criteria"
+    check_non_negative(src, f"{crit}.obstacle.gain", d.criteria.obstacle.gain)
+    check_positive(src, f"{crit}.obstacle.influence_distance", d.criteria.obstacle.influence_distance)
+    check_finite(src, f"{crit}.joint_torque.gain", d.criteria.joint_torque.gain)
+    if d.criteria.joint_torque.gain > 0:
+        _fail(
+            src,
+            f"{crit}.joint_torque.gain",
+            f"must be <= 0 (a negative gain minimises the torque), got {d.criteria.joint_torque.gain}",
+        )
+    check_non_negative(src, f"{crit}.manipulability.gain", d.criteria.manipulability.gain)
+    sel = d.selector
+    for name in ("d_lim", "w_lim", "d_band", "w_band", "blend_time"):
+        check_non_negative(src, f"desired_null_space.selector.{name}", getattr(sel, name))
+    if d.criteria.obstacle.influence_distance < sel.d_lim + sel.d_band:
+        _fail(
+            src,
+            f"{crit}.obstacle.influence_distance",
+            f"{d.criteria.obstacle.influence_distance} m must be >= selector.d_lim + d_band = "
+            f"{sel.d_lim + sel.d_band} m, or obstacle avoidance would have no gradient when it takes level 2",
+        )
     for name, value in d.joint_speed_limits.items():
         check_positive(src, f"desired_null_space.joint_speed_limits.{name}", value)
+    check_non_negative(src, "desired_null_space.speed_headroom", d.speed_headroom)
+    if d.speed_headroom >= 1.0:
+        _fail(src, "desired_null_space.speed_headroom", f"must be below 1, got {d.speed_headroom}")
+    names = set()
+    for i, ob in enumerate(s.obstacles):
+        where = f"obstacles[{i}]"
+        if not ob.name:
+            _fail(src, f"{where}.name", "every obstacle needs a name")
+        if ob.name in names:
+            _fail(src, f"{where}.name", f"duplicate obstacle name '{ob.name}'")
+        names.add(ob.name)
+        if not ob.shape:
+            _fail(
+                src,
+                where,
+                f"obstacle '{ob.name}' has no geometry: give shape ({', '.join(OBSTACLE_SHAPES)}) and size",
+            )
+        check_choice(src, f"{where}.shape", ob.shape, tuple(OBSTACLE_SHAPES))
+        if len(ob.size) != OBSTACLE_SHAPES[ob.shape]:
+            _fail(
+                src,
+                f"{where}.size",
+                f"a {ob.shape} needs {OBSTACLE_SHAPES[ob.shape]} size entries, got {ob.size!r}",
+            )
+        for k, value in enumerate(ob.size):
+            check_positive(src, f"{where}.size[{k}]", value)
+        if len(ob.position) != 3:
+            _fail(src, f"{where}.position", f"must be [x, y, z], got {ob.position!r}")
+        for k, value in enumerate(ob.position):
+            check_finite(src, f"{where}.position[{k}]", value)
+        check_finite(src, f"{where}.yaw", ob.yaw)
 
 
 def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:

@@ -67,7 +67,12 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
     add("qns", logs["qns"].data(), joints)
     add("en", logs["en"].data(), joints)
     columns["nu"] = logs["nu"].data()[0]
+    columns["mode"] = logs["mode"].data()[0]
+    columns["w"] = logs["w"].data()[0]
+    columns["d_min"] = logs["d_min"].data()[0]
     columns["p_tau"] = logs["p_tau"].data()[0]
+    columns["p_obstacle"] = logs["p_obstacle"].data()[0]
+    columns["speed_scale"] = logs["speed_scale"].data()[0]
     columns["forbidden_contacts"] = logs["forbidden_contacts"].data()[0]
     return Traces(columns)
 

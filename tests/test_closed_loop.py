@@ -15,7 +15,8 @@ duration: {duration}
 control_period: 0.001
 plate: {{position: [0.0, 5.0, 0.0]}}
 reference: {{tangent_speed: 0.0, approach_speed: 1.0e-9}}
-desired_null_space: {{joint_torque: {{gain: 0.0}}}}
+desired_null_space:
+  criteria: {{obstacle: {{gain: 0.0}}, joint_torque: {{gain: 0.0}}, manipulability: {{gain: 0.0}}}}
 report: {{compare_without_null_space_task: false}}
 null_space: {{K_n: {K_n}, coriolis_compensation: {coriolis}, task_velocity_compensation: {tvc}}}
 arm:

@@ -3,6 +3,7 @@ properties of the whole diagram: determinism, actuator order, other arm sizes.""
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
@@ -10,7 +11,6 @@ import pytest
 from conftest import fig3_with
 from models import serial_arm_urdf
 
-from nsdrake.metrics import fig3_metrics
 from nsdrake.models import models_dir
 from nsdrake.runner import run_to_folder
 from nsdrake.simulate import run
@@ -50,17 +50,20 @@ def test_fig3_acceptance_figures(fig3_run):
 
 
 def test_metrics_recompute_from_the_written_traces(fig3_run):
+    """metrics.json's figures come from the CSV files alone: recomputing them from the
+    written files and the scenario (no simulation) gives the same numbers."""
     out, result = fig3_run
+    from nsdrake.diagram import build_diagram
+    from nsdrake.runner import compute_metrics
+    from nsdrake.scenario import load_scenario_file
+
+    scenario = load_scenario_file(out / "scenario.yaml")
     traces = Traces.read_csv(out / "traces.csv")
     baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
-    again = fig3_metrics(
-        traces,
-        tangent=np.array([1.0, 0.0]),
-        task_axes=("x", "y"),
-        contact_threshold=0.5,
-        p_tau_without_null_space_task=float(baseline["p_tau"][-1]),
-    )
+    again = compute_metrics(scenario, build_diagram(scenario), traces, baseline)
     assert [(m.name, m.value) for m in again] == [(m.name, m.value) for m in result.metrics]
+    stored = json.loads((out / "metrics.json").read_text())["metrics"]
+    assert {name: m["value"] for name, m in stored.items()} == {m.name: m.value for m in again}
 
 
 def test_two_runs_give_identical_traces(tmp_path):
@@ -97,11 +100,16 @@ def test_a_five_joint_arm_runs_through_the_same_diagram(tmp_path):
     urdf = tmp_path / "arm5.urdf"
     urdf.write_text(serial_arm_urdf(["z"] * 5, [0.2] * 5, [0.5, 0.45, 0.4, 0.35, 0.3]))
     positions = ", ".join(f"joint{i + 1}: {q}" for i, q in enumerate([0.3, 0.5, 0.4, 0.3, 0.2]))
-    text = f"arm: {{urdf: {urdf}, initial_positions: {{{positions}}}}}\n"
+    text = (
+        f"arm: {{urdf: {urdf}, initial_positions: {{{positions}}}}}\n"
+        "desired_null_space: {criteria: {obstacle: {gain: 0.0}}}\n"  # the test arm has no collision geometry
+    )
     traces, built = run(fig3_with(tmp_path, text, duration=0.3))
     assert built.station.arm_model.n == 5
     for prefix in ("q", "v", "tau", "qns", "en"):
         assert traces.block(prefix).shape == (len(traces), 5)
-    assert np.all(np.isfinite(traces.data))
+    others = [k for k, name in enumerate(traces.names) if name != "d_min"]
+    assert np.all(np.isfinite(traces.data[:, others]))
+    assert np.all(np.isinf(traces["d_min"]))  # no link geometry, so no obstacle distance
     # The tool follows its reference in free motion (approach phase), to a fraction of a millimetre.
     assert np.max(np.abs(traces["x"] - traces["x_d"])) < 1e-3

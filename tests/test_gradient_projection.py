@@ -7,7 +7,8 @@ import pytest
 from conftest import terms_at
 from models import random_states
 
-from nsdrake.gradient_projection import gradient_step, scale_to_speed_limits
+from nsdrake.gradient_projection import gradient_step
+from nsdrake.priority import joint_speed_scale
 from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 DC = GeneralizedInverse(PseudoInverseKind.dynamically_consistent)
@@ -49,20 +50,41 @@ def test_eq28_moore_penrose_step_is_always_an_ascent(arm4):
         assert Phi @ gradient_step(MP.at(T).N, T.H_inv, Phi, +1.0, rotate=False) >= -1e-12
 
 
-def test_speed_scaling_keeps_direction_and_limits():
+def test_speed_scaling_keeps_the_total_speed_within_limits_and_is_smooth():
+    """joint_speed_scale: |a + s b| ≤ L for every joint; s never exceeds the hard bound
+    min(1, b_i) and stays within (1 + n)^(-1/p) of it; s is 1 far from every limit."""
     rng = np.random.default_rng(44)
-    for _ in range(200):
-        qdot = 3 * rng.standard_normal(5)
-        limits = rng.uniform(0.2, 2.0, 5)
-        scaled, s = scale_to_speed_limits(qdot, limits)
-        assert 0 < s <= 1
-        assert np.all(np.abs(scaled) <= limits * (1 + 1e-12))
-        assert np.allclose(scaled, s * qdot)
-        if s < 1:  # the binding joint sits exactly at its limit
-            assert np.isclose(np.max(np.abs(scaled) / limits), 1.0)
-    unlimited = np.full(3, np.inf)
-    qdot = np.array([1.0, -2.0, 3.0])
-    assert scale_to_speed_limits(qdot, unlimited)[1] == 1.0
+    n, p = 5, 8
+    for _ in range(300):
+        limits = rng.uniform(0.4, 2.0, n)
+        a = limits * rng.uniform(-0.9, 0.9, n)  # the task part alone within the limits
+        b = 3 * rng.standard_normal(n)
+        s = joint_speed_scale(a, b, limits)
+        assert 0.0 <= s <= 1.0
+        assert np.all(np.abs(a + s * b) <= limits * (1 + 1e-12))
+        hard = min(
+            [1.0]
+            + [((L - ai) if bi > 0 else (L + ai)) / abs(bi) for ai, bi, L in zip(a, b, limits, strict=True)]
+        )
+        assert s <= hard + 1e-12
+        assert s >= hard * (1 + n) ** (-1 / p) - 1e-12
+    assert joint_speed_scale(np.zeros(3), np.array([1.0, -2.0, 3.0]), np.full(3, np.inf)) == 1.0
+    assert joint_speed_scale(np.zeros(3), np.array([1e-4, 0, 0]), np.ones(3)) > 1 - 1e-12
+    assert (
+        joint_speed_scale(np.array([2.0]), np.array([1.0]), np.array([1.0])) == 0.0
+    )  # the task alone is too fast
+
+
+def test_speed_scale_has_no_kink_where_a_limit_engages():
+    """Along a command that grows through a limit, s(t) q̇ⁿ(t) has a continuous
+    derivative: its second differences stay O(Δt²)-small, unlike the hard min."""
+    ts = np.linspace(0.0, 2.0, 2001)
+    command = np.outer(ts, [1.0, 0.3])  # joint 1 reaches its 1 rad/s limit at t = 1
+    limits = np.array([1.0, 1.0])
+    smooth = np.array([joint_speed_scale(np.zeros(2), c, limits) * c for c in command])
+    hard = np.array([min(1.0, 1.0 / c[0]) * c if c[0] > 0 else c for c in command])
+    jump = lambda x: np.max(np.abs(np.diff(x[:, 0], 2)))  # noqa: E731
+    assert jump(hard) > 100 * jump(smooth)
 
 
 @pytest.mark.parametrize("rotate", [True, False])

@@ -33,6 +33,40 @@ BAD = [
     ("- 1", "the file: must be a mapping"),
     ("desired_null_space: {joint_speed_limits: {joint1: -1}}", "joint_speed_limits.joint1: must be > 0"),
     ("control_period: 10", "control_period: 10.0 s is longer than the duration 5.0 s"),
+    # criteria and selector (issue 3)
+    ("desired_null_space: {selector: {d_lim: -0.01}}", "desired_null_space.selector.d_lim: must be >= 0"),
+    ("desired_null_space: {selector: {w_lim: -1}}", "desired_null_space.selector.w_lim: must be >= 0"),
+    (
+        "desired_null_space: {selector: {blend_time: -0.2}}",
+        "desired_null_space.selector.blend_time: must be >= 0",
+    ),
+    (
+        "desired_null_space: {criteria: {singularity: {gain: 1}}}",
+        "desired_null_space.criteria.singularity: unknown field",
+    ),
+    ("desired_null_space: {criteria: {obstacle: {gain: -1}}}", "criteria.obstacle.gain: must be >= 0"),
+    (
+        "desired_null_space: {criteria: {joint_torque: {gain: 0.1}}}",
+        "criteria.joint_torque.gain: must be <= 0",
+    ),
+    (
+        "desired_null_space: {criteria: {obstacle: {influence_distance: 0.01}}}",
+        "must be >= selector.d_lim + d_band",
+    ),
+    ("desired_null_space: {speed_headroom: 1.5}", "desired_null_space.speed_headroom: must be below 1"),
+    ("obstacles: [{name: post, position: [0.3, 0.2, 0]}]", "obstacles[0]: obstacle 'post' has no geometry"),
+    (
+        "obstacles: [{name: post, shape: cone, size: [1]}]",
+        "obstacles[0].shape: must be one of box, sphere, cylinder",
+    ),
+    ("obstacles: [{name: post, shape: box, size: [0.1]}]", "obstacles[0].size: a box needs 3 size entries"),
+    ("obstacles: [{name: post, shape: sphere, size: [-0.1]}]", "obstacles[0].size[0]: must be > 0"),
+    ("obstacles: [{shape: sphere, size: [0.1]}]", "obstacles[0].name: every obstacle needs a name"),
+    (
+        "obstacles: [{name: a, shape: sphere, size: [0.1]}, {name: a, shape: sphere, size: [0.1]}]",
+        "obstacles[1].name: duplicate obstacle name 'a'",
+    ),
+    ("report: {checks: [fig4]}", "report.checks[0]: must be one of fig3, priority"),
 ]
 
 

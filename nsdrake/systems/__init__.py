@@ -1,21 +1,23 @@
 """Drake LeafSystems: thin shells that read ports, call nsdrake's math, write outputs."""
 
 from .contact_monitor import ContactMonitor
-from .criteria import JointTorqueCriterionSystem
-from .desired_null_space_velocity import GradientProjectionSystem
+from .criteria import JointTorqueCriterionSystem, ManipulabilityCriterionSystem, ObstacleCriterionSystem
 from .force_sensor import ForceSensor
 from .impedance_controller import ImpedanceController
 from .null_space_controller import NullSpaceController
+from .priority_selector import PrioritySelector
 from .reference import SlideAndPressReference
 from .robot_terms import RobotTermsSystem
 
 __all__ = [
     "ContactMonitor",
     "ForceSensor",
-    "GradientProjectionSystem",
     "ImpedanceController",
     "JointTorqueCriterionSystem",
+    "ManipulabilityCriterionSystem",
     "NullSpaceController",
+    "ObstacleCriterionSystem",
+    "PrioritySelector",
     "RobotTermsSystem",
     "SlideAndPressReference",
 ]

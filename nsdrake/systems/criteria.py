@@ -4,14 +4,52 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
+from pydrake.geometry import QueryObject
+from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from ..criteria.joint_torque import joint_torque_criterion
+from ..criteria.manipulability import manipulability
+from ..criteria.obstacle import ObstacleDistances, activation, obstacle_potential
 from ..dynamics import RobotTerms
 from ._util import python_value_producer
 
 
-class JointTorqueCriterionSystem(LeafSystem):
+class _CriterionSystem(LeafSystem):
+    """A system with a ``robot_terms`` input and ``value``/``gradient`` outputs computed
+    once per evaluation by ``self._compute(context) -> (p, Φ, *extra)``. Subclasses
+    call ``_declare_ports`` after setting their own attributes."""
+
+    def _declare_ports(self, model_terms: RobotTerms, extra_abstract_inputs=()):
+        """Declares ``robot_terms``, then each (name, model value) abstract input, then the outputs."""
+        self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
+        self._extra = [
+            self.DeclareAbstractInputPort(name, AbstractValue.Make(v)) for name, v in extra_abstract_inputs
+        ]
+        inputs = [self._terms, *self._extra]
+        self._deps = {self.input_port_ticket(p.get_index()) for p in inputs}
+        self._result = self.DeclareCacheEntry(
+            description="criterion",
+            value_producer=python_value_producer(self._compute),
+            prerequisites_of_calc=self._deps,
+        )
+        self.DeclareVectorOutputPort(
+            "value",
+            1,
+            lambda c, o: o.SetAtIndex(0, self._result.Eval(c)[0]),
+            prerequisites_of_calc=self._deps,
+        )
+        self.DeclareVectorOutputPort(
+            "gradient",
+            model_terms.n,
+            lambda c, o: o.SetFromVector(self._result.Eval(c)[1]),
+            prerequisites_of_calc=self._deps,
+        )
+
+    def _compute(self, context):
+        raise NotImplementedError
+
+
+class JointTorqueCriterionSystem(_CriterionSystem):
     """p = ‖Jᵀ F_d‖² and Φ = ∂p/∂q (Eqs. 32–33) for a fixed desired force F_d.
 
     .. pydrake_system::
@@ -29,23 +67,95 @@ class JointTorqueCriterionSystem(LeafSystem):
     def __init__(self, *, F_d: np.ndarray, model_terms: RobotTerms):
         super().__init__()
         self._F_d = np.asarray(F_d, dtype=float)
-        self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
-        deps = {self.input_port_ticket(self._terms.get_index())}
-        self._result = self.DeclareCacheEntry(
-            description="joint-torque criterion",
-            value_producer=python_value_producer(lambda c: joint_torque_criterion(*self._inputs(c))),
-            prerequisites_of_calc=deps,
+        self._declare_ports(model_terms)
+
+    def _compute(self, context):
+        terms = self._terms.Eval(context)
+        return joint_torque_criterion(terms.J, terms.dJ_dq, self._F_d)
+
+
+class ManipulabilityCriterionSystem(_CriterionSystem):
+    """w = √det(J Jᵀ) and its gradient (:mod:`nsdrake.criteria.manipulability`).
+
+    .. pydrake_system::
+
+        name: ManipulabilityCriterionSystem
+        input_ports:
+        - robot_terms
+        output_ports:
+        - value
+        - gradient
+
+    ``value`` is w (1); ``gradient`` is ∂w/∂q (n).
+    """
+
+    def __init__(self, *, model_terms: RobotTerms):
+        super().__init__()
+        self._declare_ports(model_terms)
+
+    def _compute(self, context):
+        terms = self._terms.Eval(context)
+        return manipulability(terms.J, terms.dJ_dq)
+
+
+class ObstacleCriterionSystem(_CriterionSystem):
+    """The obstacle potential p = −⅓ Σ max(0, d_∞ − d)³ over link–obstacle pairs and its
+    gradient (Eq. 31, :mod:`nsdrake.criteria.obstacle`), from the scene graph's
+    signed-distance queries; also d_min, the smallest link–obstacle distance (the
+    tool's geometry is not a link).
+
+    .. pydrake_system::
+
+        name: ObstacleCriterionSystem
+        input_ports:
+        - robot_terms
+        - geometry_query
+        output_ports:
+        - value
+        - gradient
+        - d_min
+        - activation
+
+    ``geometry_query`` is the SceneGraph's query port; ``value`` (1) [m³];
+    ``gradient`` (n) [m³/rad]; ``d_min`` (1) [m]; ``activation`` (1) ∈ [0, 1], the
+    weight of this level in the priority stack (:func:`nsdrake.criteria.obstacle.activation`).
+
+    The point Jacobians need the plant at the same q as the query; the plant
+    context written for them is per-context scratch memory.
+    """
+
+    def __init__(self, *, distances: ObstacleDistances, influence_distance: float, model_terms: RobotTerms):
+        super().__init__()
+        self._distances = distances
+        self._influence = float(influence_distance)
+        plant = distances.plant
+        self._declare_ports(model_terms, extra_abstract_inputs=(("geometry_query", QueryObject()),))
+        self._query = self._extra[0]
+        self._scratch = self.DeclareCacheEntry(
+            description="scratch plant context",
+            value_producer=ValueProducer(
+                allocate=lambda: AbstractValue.Make(plant.CreateDefaultContext()),
+                calc=lambda context, value: None,
+            ),
+            prerequisites_of_calc={self.nothing_ticket()},
         )
         self.DeclareVectorOutputPort(
-            "value", 1, lambda c, o: o.SetAtIndex(0, self._result.Eval(c)[0]), prerequisites_of_calc=deps
+            "d_min",
+            1,
+            lambda c, o: o.SetAtIndex(0, self._result.Eval(c)[2]),
+            prerequisites_of_calc=self._deps,
         )
         self.DeclareVectorOutputPort(
-            "gradient",
-            model_terms.n,
-            lambda c, o: o.SetFromVector(self._result.Eval(c)[1]),
-            prerequisites_of_calc=deps,
+            "activation",
+            1,
+            lambda c, o: o.SetAtIndex(0, activation(self._result.Eval(c)[2], self._influence)),
+            prerequisites_of_calc=self._deps,
         )
 
-    def _inputs(self, context):
+    def _compute(self, context):
         terms = self._terms.Eval(context)
-        return terms.J, terms.dJ_dq, self._F_d
+        plant_context = self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
+        self._distances.plant.SetPositions(plant_context, terms.q)
+        pairs = self._distances.pairs(self._query.Eval(context), plant_context, self._influence)
+        p, Phi = obstacle_potential(pairs, self._influence, terms.n)
+        return p, Phi, min((pair.distance for pair in pairs), default=np.inf)

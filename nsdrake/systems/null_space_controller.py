@@ -61,7 +61,10 @@ class NullSpaceController(LeafSystem):
         self._qdot_ns_d = self.DeclareVectorInputPort("desired_null_space_velocity", n)
         # [previous q̇_dⁿ (n), 1 if that sample exists]
         self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._store)
+        # An unrestricted update, so that it runs alongside the discrete plant's own
+        # step (Drake advances a discrete MultibodyPlant in an unrestricted update,
+        # before any discrete update) and stores the q̇_dⁿ the torque was computed from.
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._store)
         deps = {self.input_port_ticket(p.get_index()) for p in (self._terms, self._qdot_ns_d)}
         deps.add(self.discrete_state_ticket(self._previous))
         self._result = self.DeclareCacheEntry(
@@ -103,6 +106,6 @@ class NullSpaceController(LeafSystem):
             self._cc,
         )
 
-    def _store(self, context, discrete_state):
+    def _store(self, context, state):
         sample = np.append(self._qdot_ns_d.Eval(context), 1.0)
-        discrete_state.get_mutable_vector(self._previous).SetFromVector(sample)
+        state.get_mutable_discrete_state(self._previous).SetFromVector(sample)

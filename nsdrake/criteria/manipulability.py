@@ -1,0 +1,32 @@
+"""Manipulability (Yoshikawa): w = √det(J Jᵀ) and its analytic gradient.
+
+    ∂w/∂q_j = ½ w tr((J Jᵀ)⁻¹ ∂(J Jᵀ)/∂q_j) = w tr(J⁺ ∂J/∂q_j),   J⁺ = Jᵀ (J Jᵀ)⁻¹,
+
+so Φ_j = w ⟨J⁺ᵀ, ∂J/∂q_j⟩ (Frobenius product). At a singular pose w = 0 and its
+gradient is not defined; near one (w > 0) the formula holds. Maximising w (K > 0
+in Eq. 30) keeps the arm away from singular poses (Section 3.5).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import inv
+
+
+def manipulability(J: np.ndarray, dJ_dq: np.ndarray) -> tuple[float, np.ndarray]:
+    """(w, Φ) for w = √det(J Jᵀ).
+
+    Args:
+        J: (m, n) task Jacobian [m/rad].
+        dJ_dq: (n, m, n) with dJ_dq[j] = ∂J/∂q_j [m/rad²].
+
+    Returns:
+        w [mᵐ/radᵐ… for a planar task, m²] and Φ (n,) [w/rad].
+    """
+    A = J @ J.T
+    w = float(np.sqrt(max(np.linalg.det(A), 0.0)))
+    if w == 0.0:
+        return 0.0, np.zeros(J.shape[1])
+    J_pinv_T = inv(A) @ J  # (J⁺)ᵀ, (m, n)
+    n, m = dJ_dq.shape[0], J.shape[0]
+    return w, w * (dJ_dq.reshape(n, m * J.shape[1]) @ J_pinv_T.ravel())
