@@ -1,6 +1,7 @@
 """The ``nsdrake`` command line.
 
     nsdrake run SCENARIO [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--overwrite]
+    nsdrake compare FAMILY [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--jobs N] [--overwrite]
     nsdrake list
 
 Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
@@ -11,10 +12,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
 
+from .compare import load_family, run_family, shipped_families, variant_scenario
 from .runner import (
     OutputFolderError,
     check_scenario,
@@ -51,8 +54,31 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, help="output folder (default: runs/SCENARIO, never overwritten)")
     run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
     run.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out folder")
-    sub.add_parser("list", help="list the shipped scenarios")
+    compare = sub.add_parser("compare", help="run a family of variants and tabulate the paper's claims")
+    compare.add_argument("family", help=f"a shipped family: {', '.join(shipped_families())}")
+    compare.add_argument(
+        "--config", type=Path, help="YAML file applied to every variant (before its own switch)"
+    )
+    compare.add_argument(
+        "--out", type=Path, help="output folder (default: runs/compare-FAMILY, never overwritten)"
+    )
+    compare.add_argument("--duration", type=_duration, help="simulated time of every variant [s]")
+    compare.add_argument("--jobs", type=_jobs, default=min(2, os.cpu_count() or 1), help="parallel processes")
+    compare.add_argument(
+        "--overwrite", action="store_true", help="allow writing into a non-empty --out folder"
+    )
+    sub.add_parser("list", help="list the shipped scenarios and families")
     return parser
+
+
+def _jobs(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--jobs must be a whole number, got '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--jobs must be >= 1, got '{text}'")
+    return value
 
 
 class _Progress:
@@ -93,13 +119,35 @@ def _run(args) -> int:
     return 0 if result.passed else 1
 
 
+def _compare(args) -> int:
+    family = load_family(args.family)
+    for i in range(len(family.variants)):  # every input error before any folder or simulation
+        variant_scenario(family, i, args.config, args.duration)
+    out = args.out if args.out is not None else default_output_folder(f"compare-{args.family}")
+    out = prepare_output_folder(out, overwrite=args.overwrite)
+    print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
+    run_family(
+        family,
+        out,
+        config=args.config,
+        duration=args.duration,
+        jobs=args.jobs,
+        progress=_Progress(args.family),
+    )
+    print((out / "table.md").read_text())
+    print(f"nsdrake: wrote {out}/: table.md, table.csv, compare.png, variants/*/traces.csv")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "list":
-            for name in shipped_scenarios():
-                print(name)
+            print("scenarios (nsdrake run):  " + ", ".join(shipped_scenarios()))
+            print("families (nsdrake compare): " + ", ".join(shipped_families()))
             return 0
+        if args.command == "compare":
+            return _compare(args)
         return _run(args)
     except (ScenarioError, OutputFolderError) as e:
         print(f"nsdrake: error: {e}", file=sys.stderr)

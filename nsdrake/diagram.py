@@ -18,6 +18,7 @@ logged once per control period by a ``VectorLogSink``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,7 @@ from .systems import (
     ObstacleCriterionSystem,
     PrioritySelector,
     RobotTermsSystem,
+    SelfMotionSweep,
     SlideAndPressReference,
 )
 
@@ -72,8 +74,11 @@ def speed_limit_vector(scenario: Scenario, joint_names: tuple[str, ...]) -> np.n
 def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> ControlledStation:
     """The Fig. 3 diagram for ``scenario``.
 
-    ``null_space_task`` False sets every criterion gain to zero (q̇_dⁿ = 0): the
-    null-space controller then only damps self-motion.
+    q̇_dⁿ comes from the priority selector, or from a prescribed self-motion sweep
+    when the scenario says ``desired_null_space.source: sweep`` (the selector and
+    criteria still run, for their traces). ``null_space_task`` False sets every
+    criterion gain and the sweep to zero (q̇_dⁿ = 0): the null-space controller
+    then only damps self-motion.
     """
     builder = DiagramBuilder()
     station = add_station(builder, scenario)
@@ -109,6 +114,8 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
                 blend_time=r.blend_time,
                 force=r.force,
                 force_ramp_time=r.force_ramp_time,
+                step_time=r.step_time if r.step_time > 0 else math.inf,
+                step_force=r.step_force,
             ),
             task_rows=arm.rows,
             contact_threshold=r.contact_threshold,
@@ -205,10 +212,24 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
         ),
     )
     builder.Connect(robot_terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
-    builder.Connect(
-        selector.GetOutputPort("desired_null_space_velocity"),
-        null_space.GetInputPort("desired_null_space_velocity"),
-    )
+    command = selector.GetOutputPort("desired_null_space_velocity")
+    if d.source == "sweep":
+        sw = d.sweep
+        sweep = builder.AddNamedSystem(
+            "self_motion_sweep",
+            SelfMotionSweep(
+                inverse=inverse,
+                direction=np.array([sw.direction.get(j, 0.0) for j in arm.joint_names]),
+                amplitude=sw.amplitude if null_space_task else 0.0,
+                frequency=sw.frequency,
+                start_time=sw.start_time,
+                ramp_time=sw.ramp_time,
+                model_terms=model_terms,
+            ),
+        )
+        builder.Connect(terms_port, sweep.get_input_port())
+        command = sweep.get_output_port()
+    builder.Connect(command, null_space.GetInputPort("desired_null_space_velocity"))
 
     torque_sum = builder.AddNamedSystem("torque_sum", Adder(2, n))
     builder.Connect(impedance.get_output_port(), torque_sum.get_input_port(0))
@@ -235,7 +256,7 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
         "f_d": reference.GetOutputPort("f_d"),
         "state": plant.get_state_output_port(),
         "tau": torque_sum.get_output_port(),
-        "qns": selector.GetOutputPort("desired_null_space_velocity"),
+        "qns": command,
         "mode": selector.GetOutputPort("mode"),
         "speed_scale": selector.GetOutputPort("speed_scale"),
         "w": manipulability.GetOutputPort("value"),

@@ -10,7 +10,8 @@ gives, at time t and for a contact time t_c (∞ before contact):
 - normal to the plate (unit normal n): the same profile at the approach speed
   v_a, frozen where contact was detected;
 - the desired normal force f_d: 0 before contact, then a smoothstep from 0 to
-  ``force`` over ``force_ramp_time``.
+  ``force`` over ``force_ramp_time``; optionally a step to ``step_force`` at
+  ``step_time`` after contact (the Eq. 26 experiment).
 """
 
 from __future__ import annotations
@@ -59,6 +60,8 @@ class SlideAndPress:
     blend_time: float  # [s]
     force: float  # [N]
     force_ramp_time: float  # [s]
+    step_time: float = math.inf  # [s] after contact; ∞: no step
+    step_force: float = 0.0  # [N] desired force after the step
 
     def at(self, t: float, t_contact: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact)."""
@@ -69,7 +72,9 @@ class SlideAndPress:
         else:
             r = ramp_profile(t_contact, self.approach_speed, self.blend_time)[0]
             rd = rdd = 0.0
-            if self.force_ramp_time > 0.0:
+            if t - t_contact >= self.step_time:
+                f_d = self.step_force
+            elif self.force_ramp_time > 0.0:
                 f_d = self.force * smoothstep((t - t_contact) / self.force_ramp_time)
             else:
                 f_d = self.force

@@ -96,7 +96,7 @@ def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
         baseline_traces.write_csv(out / "traces_without_null_space_task.csv")
         baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
     traces = Traces.read_csv(out / "traces.csv")
-    metrics = compute_metrics(scenario, built, traces, baseline)
+    metrics = compute_metrics(scenario, built.station, traces, baseline)
     write_metrics(out / "metrics.json", metrics, {"scenario": scenario.source, "duration": scenario.duration})
     k0 = first_contact_index(traces, scenario.reference.contact_threshold)
     contact_time = float(traces["t"][k0]) if k0 is not None else None
@@ -121,9 +121,9 @@ def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
     return RunResult(out=out, metrics=metrics)
 
 
-def compute_metrics(scenario: Scenario, built, traces: Traces, baseline: Traces | None) -> list[Metric]:
-    """The figures the scenario's ``report.checks`` ask for, from the traces."""
-    station = built.station
+def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Traces | None) -> list[Metric]:
+    """The figures the scenario's ``report.checks`` ask for, from the traces (and the
+    station's plate directions and arm model)."""
     selector = scenario.desired_null_space.selector
     threshold = scenario.reference.contact_threshold
     metrics: list[Metric] = []

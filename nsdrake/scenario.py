@@ -85,6 +85,10 @@ class ReferenceConfig:
     force_ramp_time: float = 0.2
     # Measured normal force above which the tool counts as touching [N].
     contact_threshold: float = 0.5
+    # A step of the desired force, this long after contact; 0 (or less) means no step [s].
+    step_time: float = 0.0
+    # The desired normal force after that step [N].
+    step_force: float = 0.0
 
 
 @dataclass
@@ -175,9 +179,32 @@ class SelectorConfig:
 
 
 @dataclass
+class SweepConfig:
+    """A prescribed self-motion: q̇_dⁿ = a(t) N d / ‖N d‖, d a fixed joint-space direction."""
+
+    # Direction d, keyed by joint name (missing joints 0) [-].
+    direction: dict[str, float] = field(default_factory=dict)
+    # Amplitude of the commanded null-space speed ‖q̇_dⁿ‖ [rad/s].
+    amplitude: float = 0.5
+    # Frequency of a(t) = amplitude sin(2π f (t − start)); 0 holds a constant speed [Hz].
+    frequency: float = 1.0
+    # Time the sweep starts [s].
+    start_time: float = 0.0
+    # a(t) rises from 0 with a smoothstep over this time [s].
+    ramp_time: float = 0.2
+
+
+NULL_SPACE_SOURCES = ("criteria", "sweep")
+
+
+@dataclass
 class DesiredNullSpaceConfig:
     """The desired null-space velocity q̇_dⁿ by gradient projection (Eqs. 28–30), prioritised."""
 
+    # Where q̇_dⁿ comes from: criteria (Fig. 1's priority selector) or sweep (a prescribed
+    # self-motion, for the experiments of nsdrake compare) [-].
+    source: str = "criteria"
+    sweep: SweepConfig = field(default_factory=SweepConfig)
     # Rotate each gradient by H⁻¹ before projecting (Eq. 30); false gives Eq. 28's form [-].
     rotate_gradient: bool = True
     criteria: CriteriaConfig = field(default_factory=CriteriaConfig)
@@ -454,6 +481,9 @@ def validate(s: Scenario) -> None:
         check_non_negative(src, f"reference.{name}", getattr(r, name))
     check_positive(src, "reference.force", r.force)
     check_positive(src, "reference.contact_threshold", r.contact_threshold)
+    check_finite(src, "reference.step_time", r.step_time)
+    if r.step_time > 0:
+        check_positive(src, "reference.step_force", r.step_force)
     if r.contact_threshold >= r.force:
         _fail(
             src,
@@ -473,6 +503,15 @@ def validate(s: Scenario) -> None:
     except ValueError as e:
         _fail(src, "null_space.damping", _one_line(e))
     d = s.desired_null_space
+    check_choice(src, "desired_null_space.source", d.source, NULL_SPACE_SOURCES)
+    for name, value in d.sweep.direction.items():
+        check_finite(src, f"desired_null_space.sweep.direction.{name}", value)
+    check_non_negative(src, "desired_null_space.sweep.amplitude", d.sweep.amplitude)
+    check_non_negative(src, "desired_null_space.sweep.frequency", d.sweep.frequency)
+    check_non_negative(src, "desired_null_space.sweep.start_time", d.sweep.start_time)
+    check_non_negative(src, "desired_null_space.sweep.ramp_time", d.sweep.ramp_time)
+    if d.source == "sweep" and not any(d.sweep.direction.values()):
+        _fail(src, "desired_null_space.sweep.direction", "a sweep needs a non-zero direction")
     crit = "desired_null_space.criteria"
     check_non_negative(src, f"{crit}.obstacle.gain", d.criteria.obstacle.gain)
     check_positive(src, f"{crit}.obstacle.influence_distance", d.criteria.obstacle.influence_distance)
@@ -537,6 +576,7 @@ def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:
         "arm.initial_positions": s.arm.initial_positions,
         "arm.initial_velocities": s.arm.initial_velocities,
         "desired_null_space.joint_speed_limits": s.desired_null_space.joint_speed_limits,
+        "desired_null_space.sweep.direction": s.desired_null_space.sweep.direction,
     }
     for where, table in tables.items():
         for name in table:

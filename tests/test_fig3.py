@@ -60,7 +60,7 @@ def test_metrics_recompute_from_the_written_traces(fig3_run):
     scenario = load_scenario_file(out / "scenario.yaml")
     traces = Traces.read_csv(out / "traces.csv")
     baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
-    again = compute_metrics(scenario, build_diagram(scenario), traces, baseline)
+    again = compute_metrics(scenario, build_diagram(scenario).station, traces, baseline)
     assert [(m.name, m.value) for m in again] == [(m.name, m.value) for m in result.metrics]
     stored = json.loads((out / "metrics.json").read_text())["metrics"]
     assert {name: m["value"] for name, m in stored.items()} == {m.name: m.value for m in again}

@@ -8,6 +8,7 @@ from .null_space_controller import NullSpaceController
 from .priority_selector import PrioritySelector
 from .reference import SlideAndPressReference
 from .robot_terms import RobotTermsSystem
+from .self_motion import SelfMotionSweep
 
 __all__ = [
     "ContactMonitor",
@@ -19,5 +20,6 @@ __all__ = [
     "ObstacleCriterionSystem",
     "PrioritySelector",
     "RobotTermsSystem",
+    "SelfMotionSweep",
     "SlideAndPressReference",
 ]

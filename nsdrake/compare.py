@@ -1,0 +1,397 @@
+"""Families of runs that put the paper's claims side by side (``nsdrake compare``).
+
+A family (``nsdrake/families/NAME.yaml``) names a shipped base scenario, a measure
+and a list of variants, each a set of scenario overrides::
+
+    description: "…"
+    scenario: force_step          # the base scenario
+    measure: contact_force_into_null_space
+    variants:
+      - name: dynamically consistent
+        overrides: {null_space: {pseudo_inverse: dynamically_consistent}}
+
+Each variant's scenario is the base, then the user's ``--config`` file, then the
+variant's overrides (the variant's defining switch always wins). Every variant
+is simulated, its traces written to ``variants/NN-slug/traces.csv``, and the
+measure computes one table row from those traces alone. The table is written as
+``table.md`` and ``table.csv``, and ``compare.png`` overlays the variants.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import multiprocessing
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .dynamics import ArmModel
+from .metrics import first_contact_index, torque_steps
+from .scenario import Scenario, ScenarioError, _check_shape, _one_line, _StrictLoader, load_scenario
+from .traces import Traces
+
+FAMILY_DIR = Path(__file__).resolve().parent / "families"
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    overrides: dict
+
+
+@dataclass(frozen=True)
+class Family:
+    name: str
+    description: str
+    scenario: str
+    measure: str
+    variants: tuple[Variant, ...]
+    source: str
+
+
+def shipped_families() -> list[str]:
+    return sorted(p.stem for p in FAMILY_DIR.glob("*.yaml"))
+
+
+def load_family(name: str) -> Family:
+    """A shipped family, checked: base scenario, measure, variant names and overrides."""
+    known = shipped_families()
+    if name not in known:
+        raise ScenarioError(f"unknown family '{name}'; the shipped families are {', '.join(known)}")
+    path = FAMILY_DIR / f"{name}.yaml"
+    try:
+        data = yaml.load(path.read_text(), Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+    except yaml.YAMLError as e:
+        raise ScenarioError(f"{path}: malformed YAML: {_one_line(e)}") from None
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{path}: must be a mapping with description, scenario, measure, variants")
+    unknown = set(data) - {"description", "scenario", "measure", "variants"}
+    if unknown:
+        raise ScenarioError(f"{path}: {sorted(unknown)[0]}: unknown field")
+    if data.get("measure") not in MEASURES:
+        raise ScenarioError(
+            f"{path}: measure: must be one of {', '.join(MEASURES)}, got {data.get('measure')!r}"
+        )
+    variants = []
+    for i, v in enumerate(data.get("variants") or []):
+        if (
+            not isinstance(v, dict)
+            or not isinstance(v.get("name"), str)
+            or not isinstance(v.get("overrides", {}), dict)
+        ):
+            raise ScenarioError(f"{path}: variants[{i}]: needs a name and a mapping of overrides")
+        problem = _check_shape(v.get("overrides", {}), Scenario, "")
+        if problem:
+            raise ScenarioError(f"{path}: variants[{i}].overrides.{problem}")
+        variants.append(Variant(v["name"], v.get("overrides", {})))
+    if not variants:
+        raise ScenarioError(f"{path}: variants: a family needs at least one variant")
+    names = [v.name for v in variants]
+    if len(set(names)) != len(names):
+        raise ScenarioError(f"{path}: variants: names must be distinct")
+    return Family(
+        name=name,
+        description=str(data.get("description", "")),
+        scenario=str(data.get("scenario", "")),
+        measure=data["measure"],
+        variants=tuple(variants),
+        source=str(path),
+    )
+
+
+def variant_scenario(family: Family, index: int, config: Path | None, duration: float | None) -> Scenario:
+    """The base scenario, then ``config``, then the variant's overrides; validated."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    from .scenario import validate
+
+    base = load_scenario(family.scenario, config=config, duration=duration)
+    variant = family.variants[index]
+    try:
+        scenario = yaml_load_typed(schema=Scenario, data=yaml.safe_dump(variant.overrides), defaults=base)
+    except Exception as e:
+        raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_one_line(e)}") from None
+    if duration is not None:
+        scenario = dataclasses.replace(scenario, duration=duration)
+    scenario.source = f"{family.source} [{variant.name}]"
+    scenario.base_dir = base.base_dir
+    validate(scenario)
+    return scenario
+
+
+def slug(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")
+
+
+# --- measures: one table row from one variant's traces --------------------------------
+
+
+@dataclass(frozen=True)
+class Context:
+    """What a measure may know besides the traces: the scenario and the station."""
+
+    scenario: Scenario
+    station: object  # nsdrake.plant.Station
+
+    @property
+    def arm(self) -> ArmModel:
+        return self.station.arm_model
+
+    @property
+    def tangent(self) -> np.ndarray:
+        return self.station.tangent
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.station.normal
+
+
+def _rms(x) -> float:
+    x = np.asarray(x)
+    return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
+
+
+def _norms(traces: Traces, prefix: str) -> np.ndarray:
+    return np.linalg.norm(traces.block(prefix), axis=1)
+
+
+def dc_null_space_speed(traces: Traces, arm: ArmModel) -> np.ndarray:
+    """‖(I − J̄ J) q̇‖ per row, with the dynamically consistent projector, recomputed
+    from the logged q and q̇ (the same measure whichever inverse the run used)."""
+    from .pseudo_inverse import GeneralizedInverse
+
+    context = arm.plant.CreateDefaultContext()
+    dc = GeneralizedInverse()
+    q, v = traces.block("q"), traces.block("v")
+    out = np.empty(len(traces))
+    for k in range(len(traces)):
+        terms = arm.terms(context, q[k], v[k], coriolis=False)
+        out[k] = np.linalg.norm(dc.at(terms).N @ v[k])
+    return out
+
+
+def measure_contact_force_into_null_space(traces: Traces, ctx: Context) -> dict:
+    """Eq. 26. Null-space velocity after the desired-force step (1 s window) and before it
+    (0.5 s of steady pressing: the floor of the contact model's own transient)."""
+    s = ctx.scenario
+    t = traces["t"]
+    k0 = first_contact_index(traces, s.reference.contact_threshold)
+    if k0 is None:
+        return {"contact": False}
+    t_step = t[k0] + s.reference.step_time
+    after = (t >= t_step) & (t < t_step + 1.0)
+    before = (t >= t_step - 0.5) & (t < t_step)
+    en = _norms(traces, "en")
+    dc = dc_null_space_speed(traces, ctx.arm)
+    f_err = traces["f_n"] - traces["f_d"]
+    return {
+        "pseudo_inverse": s.null_space.pseudo_inverse,
+        "control_period": s.control_period,
+        "en_peak_after_step": float(en[after].max()),
+        "en_rms_after_step": _rms(en[after]),
+        "en_peak_before_step": float(en[before].max()),
+        "dc_null_space_speed_peak_after_step": float(dc[after].max()),
+        "dc_null_space_speed_peak_before_step": float(dc[before].max()),
+        "force_error_rms_after_step": _rms(f_err[after]),
+    }
+
+
+def measure_null_space_motion_into_task(traces: Traces, ctx: Context) -> dict:
+    """Eq. 11. Disturbance of force and position while the self-motion sweep runs
+    (from the end of its ramp to the end of the run), against the 0.5 s before it."""
+    s = ctx.scenario
+    t = traces["t"]
+    sw = s.desired_null_space.sweep
+    during = t >= sw.start_time + sw.ramp_time
+    before = (t >= sw.start_time - 0.5) & (t < sw.start_time)
+    f_err = traces["f_n"] - traces["f_d"]
+    axes = ctx.arm.task_axes
+    pos_err = np.column_stack([traces[a] - traces[f"{a}_d"] for a in axes])
+    tangential = pos_err @ ctx.tangent
+    normal = pos_err @ ctx.normal
+    return {
+        "null_space_speed_rms": _rms(_norms(traces, "qns")[during]),
+        "en_rms": _rms(_norms(traces, "en")[during]),
+        "force_error_peak": float(np.abs(f_err[during]).max()),
+        "force_error_rms": _rms(f_err[during]),
+        "force_error_rms_before": _rms(f_err[before]),
+        "tangential_error_peak": float(np.abs(tangential[during]).max()),
+        "tangential_error_rms": _rms(tangential[during]),
+        "normal_deviation_peak": float(np.abs(normal[during] - normal[before].mean()).max())
+        if before.any()
+        else math.nan,
+    }
+
+
+def measure_lyapunov(traces: Traces, ctx: Context) -> dict:
+    """Eqs. 23–24. The largest increase of ν between consecutive control periods."""
+    nu = traces["nu"]
+    dnu = np.diff(nu)
+    return {
+        "nu_initial": float(nu[1]) if len(nu) > 1 else math.nan,
+        "nu_final": float(nu[-1]),
+        "nu_increase_max": float(dnu.max()),
+        "nu_increase_max_relative": float(dnu.max() / max(nu.max(), 1e-300)),
+        "periods_with_nu_increase": int(np.sum(dnu > 1e-12 * max(nu.max(), 1e-300))),
+        "en_final": float(_norms(traces, "en")[-1]),
+    }
+
+
+def measure_fig3(traces: Traces, ctx: Context) -> dict:
+    """The fig3 acceptance figures (primary task and null space), and the largest torque step."""
+    from .runner import compute_metrics
+
+    s = dataclasses.replace(ctx.scenario, report=dataclasses.replace(ctx.scenario.report, checks=["fig3"]))
+    metrics = compute_metrics(s, ctx.station, traces, None)
+    row = {
+        m.name: m.value
+        for m in metrics
+        if m.name not in ("window_start", "window_rows", "p_tau_end_without_null_space_task")
+    }
+    row["all_bounds_met"] = all(m.passed for m in metrics if m.passed is not None)
+    row["torque_step_max"] = float(torque_steps(traces).max())
+    return row
+
+
+MEASURES: dict[str, Callable[[Traces, Context], dict]] = {
+    "contact_force_into_null_space": measure_contact_force_into_null_space,
+    "null_space_motion_into_task": measure_null_space_motion_into_task,
+    "lyapunov": measure_lyapunov,
+    "fig3": measure_fig3,
+}
+
+
+# --- running ------------------------------------------------------------------------
+
+
+def _run_variant(args) -> tuple[int, dict]:
+    """Worker: simulate one variant, write its traces, measure them (from the file)."""
+    family_name, index, config, duration, folder = args
+    from .simulate import run
+
+    family = load_family(family_name)
+    scenario = variant_scenario(family, index, config, duration)
+    traces, built = run(scenario)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    traces.write_csv(folder / "traces.csv")
+    traces = Traces.read_csv(folder / "traces.csv")
+    return index, MEASURES[family.measure](traces, Context(scenario=scenario, station=built.station))
+
+
+@dataclass
+class FamilyResult:
+    family: Family
+    rows: list[dict]  # one per variant, in the family's order, with "variant" first
+    out: Path
+
+
+def run_family(
+    family: Family,
+    out: Path,
+    *,
+    config: Path | None = None,
+    duration: float | None = None,
+    jobs: int = 1,
+    progress: Callable[[float], None] | None = None,
+) -> FamilyResult:
+    """Runs every variant (``jobs`` processes), writes the table and the overlay plot."""
+    for i in range(len(family.variants)):
+        variant_scenario(family, i, config, duration)  # every input error before any simulation
+    folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
+    tasks = [(family.name, i, config, duration, str(folders[i])) for i in range(len(family.variants))]
+    rows: dict[int, dict] = {}
+    if jobs > 1 and len(tasks) > 1:
+        with multiprocessing.get_context("spawn").Pool(min(jobs, len(tasks))) as pool:
+            for done, (i, row) in enumerate(pool.imap_unordered(_run_variant, tasks), start=1):
+                rows[i] = row
+                if progress:
+                    progress(done / len(tasks))
+    else:
+        for done, task in enumerate(tasks, start=1):
+            i, row = _run_variant(task)
+            rows[i] = row
+            if progress:
+                progress(done / len(tasks))
+    table = [{"variant": family.variants[i].name, **rows[i]} for i in range(len(tasks))]
+    _add_ratios(family, table)
+    write_table(out, family, table)
+    plot_family(out / "compare.png", family, [Traces.read_csv(f / "traces.csv") for f in folders])
+    return FamilyResult(family=family, rows=table, out=out)
+
+
+def _add_ratios(family: Family, table: list[dict]) -> None:
+    """For the Eq. 26 family: each row's null-space peak over that of the dynamically
+    consistent row with the same control period, the ratio the paper's claim is about."""
+    if family.measure != "contact_force_into_null_space":
+        return
+    reference = {
+        row["control_period"]: row
+        for row in table
+        if row.get("pseudo_inverse") == "dynamically_consistent" and "en_peak_after_step" in row
+    }
+    for row in table:
+        ref = reference.get(row.get("control_period"))
+        if ref is None or "en_peak_after_step" not in row:
+            continue
+        for key in ("en_peak_after_step", "dc_null_space_speed_peak_after_step"):
+            row[f"{key}_vs_dc"] = row[key] / ref[key] if ref[key] > 0 else math.inf
+
+
+def _format(value) -> str:
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def write_table(out: Path, family: Family, table: list[dict]) -> None:
+    """table.csv (full precision) and table.md (4 significant digits)."""
+    columns = list(dict.fromkeys(key for row in table for key in row))
+    with (out / "table.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, columns)
+        writer.writeheader()
+        for row in table:
+            writer.writerow({k: row.get(k, "") for k in columns})
+    lines = [f"# {family.name}", "", family.description, ""]
+    lines.append("| " + " | ".join(columns) + " |")
+    lines.append("|" + "---|" * len(columns))
+    for row in table:
+        lines.append("| " + " | ".join(_format(row.get(k, "")) for k in columns) + " |")
+    (out / "table.md").write_text("\n".join(lines) + "\n")
+
+
+def plot_family(path: Path, family: Family, traces: list[Traces]) -> None:
+    """Overlays the variants: normal force, position error, ‖eⁿ‖ and ν over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(4, 1, figsize=(9, 10), sharex=True, constrained_layout=True)
+    for variant, tr in zip(family.variants, traces, strict=True):
+        t = tr["t"]
+        axes[0].plot(t, tr["f_n"], label=variant.name, lw=1)
+        error = np.sqrt(sum((tr[a] - tr[f"{a}_d"]) ** 2 for a in ("x", "y") if a in tr))
+        axes[1].semilogy(t, np.maximum(error, 1e-9), lw=1)
+        axes[2].semilogy(t, np.maximum(_norms(tr, "en"), 1e-9), lw=1)
+        axes[3].semilogy(t, np.maximum(tr["nu"], 1e-15), lw=1)
+    axes[0].plot(traces[0]["t"], traces[0]["f_d"], "k--", lw=0.8, label="desired $f_d$")
+    axes[0].set_ylabel("normal force [N]")
+    axes[0].legend(fontsize=7, loc="best")
+    axes[1].set_ylabel(r"$\|x - x_d\|$ [m]")
+    axes[2].set_ylabel(r"$\|e^n\|$ [rad/s]")
+    axes[3].set_ylabel(r"$\nu$ [J]")
+    axes[3].set_xlabel("time [s]")
+    fig.suptitle(f"{family.name}: {family.description}", fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

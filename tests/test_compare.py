@@ -1,0 +1,143 @@
+"""``nsdrake compare``: families of runs that measure the paper's claims, from traces.
+
+Durations are shortened for CI (the shipped families run longer); each assertion is a
+claim of the paper with the figure the table reports.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+
+import pytest
+
+from nsdrake.cli import main
+from nsdrake.compare import load_family, run_family, shipped_families, variant_scenario
+from nsdrake.scenario import ScenarioError
+
+
+def subset(name: str, *indices: int):
+    family = load_family(name)
+    return dataclasses.replace(family, variants=tuple(family.variants[i] for i in indices))
+
+
+def rows_by_variant(result):
+    return {row["variant"]: row for row in result.rows}
+
+
+def test_every_shipped_family_loads_and_its_variants_validate():
+    assert set(shipped_families()) >= {
+        "contact_force_into_null_space",
+        "null_space_motion_into_task",
+        "lyapunov",
+        "ablation",
+        "gravity",
+    }
+    for name in shipped_families():
+        family = load_family(name)
+        for i in range(len(family.variants)):
+            variant_scenario(family, i, None, None)
+
+
+def test_eq26_contact_force_excites_the_null_space_only_without_the_dc_inverse(tmp_path):
+    """A 10 → 20 N step of the desired force, q̇_dⁿ = 0: the Moore–Penrose inverse shows
+    several times the null-space velocity of the dynamically consistent one."""
+    family = subset("contact_force_into_null_space", 0, 1)
+    result = run_family(family, tmp_path, duration=2.8)
+    dc, mp = result.rows
+    assert dc["pseudo_inverse"] == "dynamically_consistent" and mp["pseudo_inverse"] == "moore_penrose"
+    assert mp["en_peak_after_step_vs_dc"] > 3.0
+    assert mp["dc_null_space_speed_peak_after_step_vs_dc"] > 2.0
+    assert dc["en_peak_after_step_vs_dc"] == 1.0
+    for name in ("table.md", "table.csv", "compare.png"):
+        assert (tmp_path / name).is_file()
+    with (tmp_path / "table.csv").open() as f:
+        assert [row["variant"] for row in csv.DictReader(f)] == [v.name for v in family.variants]
+
+
+def test_eq24_nu_never_increases_with_full_compensation_and_does_without_coriolis(tmp_path):
+    result = run_family(load_family("lyapunov"), tmp_path, jobs=2)
+    rows = rows_by_variant(result)
+    full, no_coriolis = rows["full law"], rows["no Coriolis compensation"]
+    assert full["periods_with_nu_increase"] == 0 and full["nu_increase_max"] <= 0.0
+    assert no_coriolis["periods_with_nu_increase"] > 10
+    assert no_coriolis["nu_increase_max_relative"] > 1e-5
+
+
+def test_gravity_vertical_fig3_meets_the_primary_task_bounds(tmp_path):
+    """The vertical plane, gravity compensated: every fig3 bound met; without the g of
+    Eq. 7 the tool sags and the bounds are not."""
+    result = run_family(load_family("gravity"), tmp_path, duration=2.6, jobs=2)
+    rows = rows_by_variant(result)
+    assert rows["horizontal"]["all_bounds_met"]
+    assert rows["vertical, gravity compensated"]["all_bounds_met"]
+    assert not rows["vertical, no gravity compensation"]["all_bounds_met"]
+
+
+def test_ablation_reproduces_section_4_omitting_both_terms(tmp_path):
+    """Section 4: the compensation terms "can be omitted without serious performance
+    degradation". At K_n = 100 the law without either term still meets every fig3
+    bound; the rows carry the primary-task and null-space figures."""
+    family = subset("ablation", 0, 3)
+    result = run_family(family, tmp_path, duration=2.6, jobs=2)
+    full, neither = result.rows
+    for row in (full, neither):
+        for key in ("force_error_rms", "tangential_position_error_rms", "null_space_error_rms", "p_tau_end"):
+            assert key in row
+        assert row["all_bounds_met"], row
+
+
+def test_compare_command_line(tmp_path, capsys):
+    out = tmp_path / "lyap"
+    assert main(["compare", "lyapunov", "--duration", "0.3", "--out", str(out), "--jobs", "1"]) == 0
+    assert "| full law |" in capsys.readouterr().out
+    assert len(list((out / "variants").iterdir())) == 3
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["compare", "nothing"], "unknown family 'nothing'"),
+        (["compare", "lyapunov", "--jobs", "0"], "--jobs must be >= 1"),
+        (["compare", "lyapunov", "--duration", "-1"], "--duration must be > 0"),
+        (["compare", "lyapunov", "--config", "absent.yaml"], "absent.yaml: no such scenario file"),
+    ],
+)
+def test_compare_input_errors(tmp_path, monkeypatch, capsys, args, message):
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = main(args)
+    except SystemExit as e:
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "runs").exists()
+
+
+def test_malformed_family_files_are_refused(tmp_path, monkeypatch):
+    import nsdrake.compare as compare
+
+    monkeypatch.setattr(compare, "FAMILY_DIR", tmp_path)
+    cases = {
+        "bad_measure": ("scenario: fig3\nmeasure: speed\nvariants: [{name: a}]", "measure: must be one of"),
+        "bad_field": (
+            "scenario: fig3\nmeasure: fig3\nvariants: [{name: a, overrides: {K_n: 3}}]",
+            "variants[0].overrides.K_n: unknown field",
+        ),
+        "no_variants": ("scenario: fig3\nmeasure: fig3\nvariants: []", "a family needs at least one variant"),
+        "extra": (
+            "scenario: fig3\nmeasure: fig3\ncolour: red\nvariants: [{name: a}]",
+            "colour: unknown field",
+        ),
+        "twins": (
+            "scenario: fig3\nmeasure: fig3\nvariants: [{name: a}, {name: a}]",
+            "names must be distinct",
+        ),
+    }
+    for name, (text, _) in cases.items():
+        (tmp_path / f"{name}.yaml").write_text(text)
+    for name, (_, message) in cases.items():
+        with pytest.raises(ScenarioError) as info:
+            load_family(name)
+        assert message in str(info.value) and "\n" not in str(info.value)
