@@ -34,7 +34,8 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: now
 .banner.pass { background: #dff3e4; }
 .banner.fail { background: #fadcdc; }
 .figure img { max-width: 100%; height: auto; }
-.diagram { overflow: auto; max-height: 40em; border: 1px solid #eee; padding: 0.5em; }
+.diagram { overflow-x: auto; border: 1px solid #eee; padding: 0.5em; }
+.diagram svg { width: 2400px; max-width: none; height: auto; }
 pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto; font-size: 0.85em; }
 .muted { color: #666; font-size: 0.9em; }
 """
@@ -157,7 +158,8 @@ def render_report(
     if diagram is not None and diagram.svg is not None:
         parts.append(
             '<p class="muted">Every system of the Drake diagram, named after its role, and the signals '
-            f'between them; scroll, or open <a href="{_e(diagram.svg.name)}">{_e(diagram.svg.name)}</a> '
+            "between them, from the plant's outputs (left) to its inputs (right); scroll, or open "
+            f'<a href="{_e(diagram.svg.name)}">{_e(diagram.svg.name)}</a> '
             f'(source: <a href="{_e(diagram.dot.name)}">{_e(diagram.dot.name)}</a>).</p>'
         )
         parts.append(f'<div class="diagram">{_inline_svg(diagram.svg.read_text(encoding="utf-8"))}</div>')

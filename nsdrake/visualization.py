@@ -28,6 +28,7 @@ from pathlib import Path
 
 from pydrake.geometry import Meshcat, MeshcatParams, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
 from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from .plant import Station
@@ -114,6 +115,19 @@ def add_visualizers(
     return Visualizers(meshcat=meshcat, visualizer=visualizer, contact_visualizer=contact)
 
 
+def visual_body_paths(station: Station, prefix: str = "visualizer") -> list[str]:
+    """The Meshcat path of every body with illustration geometry (the arm's links,
+    the plate, obstacles), as the visualizer names them: /drake/PREFIX/MODEL/BODY."""
+    plant = station.plant
+    paths = []
+    for k in range(plant.num_bodies()):
+        body = plant.get_body(BodyIndex(k))
+        if plant.GetVisualGeometriesForBody(body):
+            model = plant.GetModelInstanceName(body.model_instance())
+            paths.append(f"/drake/{prefix}/{model}/{body.name()}")
+    return paths
+
+
 def write_replay(meshcat: Meshcat, path: Path) -> Path:
     """Saves the scene and its published recording as one self-contained HTML file."""
     path = Path(path)
@@ -135,11 +149,14 @@ def write_diagram_picture(diagram: Diagram, out: Path, *, stem: str = "diagram")
     """Writes ``stem.dot`` and, if Graphviz's ``dot`` is on the PATH, ``stem.svg``.
 
     Every system appears under its name (``set_name``); one level deep, so a
-    nested diagram is one box.
+    nested diagram is one box. The plant is split into its inputs and its outputs
+    (Drake's ``"split": "I/O"`` option), so the signals flow left to right from
+    the plant's outputs, through the controllers, back to its actuation.
     """
     out = Path(out)
     dot_path = out / f"{stem}.dot"
-    dot_path.write_text(diagram.GetGraphvizString(max_depth=1), encoding="utf-8")
+    text = diagram.GetGraphvizString(max_depth=1, options={"plant/split": "I/O"})
+    dot_path.write_text(text, encoding="utf-8")
     svg_path = out / f"{stem}.svg"
     hint = RENDER_HINT.format(dot=dot_path, svg=svg_path)
     dot = shutil.which("dot")
