@@ -7,8 +7,9 @@ each page is saved next to it and into the artefact folder (NSDRAKE_TEST_ARTIFAC
 default test-artifacts/ in the repository).
 
 Needs Debian's chromium and chromium-driver (.ci/run installs them) and selenium
-(the test extra); skipped with the reason when either is missing. The driver is
-given explicitly, so selenium never downloads one.
+(the test extra); skipped with the reason when either is missing, except under
+NSDRAKE_REQUIRE_BROWSER=1 (set by .ci/run), where that is a failure. The driver
+and the browser are given explicitly, so selenium never downloads either.
 """
 
 from __future__ import annotations
@@ -47,15 +48,26 @@ FLAGS = [
 ]
 ALLOWED_SCHEMES = ("file:", "data:", "blob:")
 
-webdriver = pytest.importorskip(
-    "selenium.webdriver", reason="selenium is not installed: pip install -e '.[test]'"
-)
-if not (os.access(CHROMIUM, os.X_OK) and os.access(CHROMEDRIVER, os.X_OK)):
-    pytest.skip(
-        f"no headless browser: {CHROMIUM} or {CHROMEDRIVER} is missing "
-        "(Debian: apt-get install chromium chromium-driver; .ci/run installs them)",
-        allow_module_level=True,
-    )
+
+def _missing() -> str:
+    """Why the browser test cannot run here, or ""."""
+    try:
+        import selenium.webdriver  # noqa: F401
+    except ImportError:
+        return "selenium is not installed: pip install -e '.[test]'"
+    if not (os.access(CHROMIUM, os.X_OK) and os.access(CHROMEDRIVER, os.X_OK)):
+        return (
+            f"no headless browser: {CHROMIUM} or {CHROMEDRIVER} is missing "
+            "(Debian: apt-get install chromium chromium-driver; .ci/run installs them)"
+        )
+    return ""
+
+
+if _missing():
+    if os.environ.get("NSDRAKE_REQUIRE_BROWSER"):  # .ci/run: the test must run, not skip
+        pytest.fail(f"NSDRAKE_REQUIRE_BROWSER is set but {_missing()}", pytrace=False)
+    pytest.skip(_missing(), allow_module_level=True)
+from selenium import webdriver  # noqa: E402
 from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
 
