@@ -88,7 +88,11 @@ def _run(args) -> int:
     check_scenario(scenario)  # model files, joint names: fail before anything is written
     out = args.out if args.out is not None else default_output_folder(args.scenario)
     out = prepare_output_folder(out, overwrite=args.overwrite)
-    meshcat = _live_meshcat() if args.meshcat else None
+    try:
+        meshcat = _live_meshcat() if args.meshcat else None
+    except RuntimeError as e:  # e.g. no free port in Meshcat's range
+        print(f"nsdrake: error: cannot start Meshcat: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
     print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
     result = run_to_folder(
         scenario, out, progress=_Progress(args.scenario), replay=not args.no_replay, meshcat=meshcat
