@@ -90,6 +90,7 @@ def test_replay_animates_every_body_and_the_contact_force(short_run):
     assert all(not key["value"] for key in visible if key["time"] / fps < t_contact - 2 / fps)
 
 
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # pydot's parser uses old pyparsing names
 def test_diagram_dot_names_every_system_after_its_role(short_run, tmp_path):
     out, _ = short_run
     built = build_diagram(fig3_with(tmp_path, duration=SHORT_RUN_DURATION), meshcat=start_meshcat(live=False))
