@@ -1,6 +1,7 @@
 """The ``nsdrake`` command line.
 
     nsdrake run SCENARIO [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--overwrite]
+                          [--meshcat] [--no-replay]
     nsdrake compare FAMILY [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--jobs N] [--overwrite]
     nsdrake list
 
@@ -26,6 +27,7 @@ from .runner import (
     run_to_folder,
 )
 from .scenario import ScenarioError, load_scenario, shipped_scenarios
+from .visualization import start_meshcat
 
 
 class _Parser(argparse.ArgumentParser):
@@ -54,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, help="output folder (default: runs/SCENARIO, never overwritten)")
     run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
     run.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out folder")
+    run.add_argument(
+        "--meshcat", action="store_true", help="show the run live in Meshcat on localhost (prints the URL)"
+    )
+    run.add_argument("--no-replay", action="store_true", help="do not record replay.html")
     compare = sub.add_parser("compare", help="run a family of variants and tabulate the paper's claims")
     compare.add_argument("family", help=f"a shipped family: {', '.join(shipped_families())}")
     compare.add_argument(
@@ -108,14 +114,26 @@ def _run(args) -> int:
     check_scenario(scenario)  # model files, joint names: fail before anything is written
     out = args.out if args.out is not None else default_output_folder(args.scenario)
     out = prepare_output_folder(out, overwrite=args.overwrite)
+    try:
+        meshcat = _live_meshcat() if args.meshcat else None
+    except RuntimeError as e:  # e.g. no free port in Meshcat's range
+        print(f"nsdrake: error: cannot start Meshcat: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
     print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
-    result = run_to_folder(scenario, out, progress=_Progress(args.scenario))
+    result = run_to_folder(
+        scenario, out, progress=_Progress(args.scenario), replay=not args.no_replay, meshcat=meshcat
+    )
     for m in result.metrics:
         mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
         bound = f"  (bound: {m.bound})" if m.bound else ""
         print(f"  {m.name:38s} {m.value:12.6g} {m.unit:9s}{mark}{bound}")
+    for note in result.notes:
+        print(f"nsdrake: {note}")
     files = ", ".join(sorted(p.name for p in out.iterdir()))
     print(f"nsdrake: wrote {out}/: {files}")
+    print(f"nsdrake: report: open {out / 'report.html'} in a browser (works offline)")
+    if meshcat is not None and sys.stdin.isatty():
+        input(f"nsdrake: the replay stays in Meshcat at {meshcat.web_url()}; press Enter to quit ")
     return 0 if result.passed else 1
 
 
@@ -137,6 +155,23 @@ def _compare(args) -> int:
     print((out / "table.md").read_text())
     print(f"nsdrake: wrote {out}/: table.md, table.csv, compare.png, variants/*/traces.csv")
     return 0
+
+
+BROWSER_WAIT = 60.0  # [s] how long --meshcat waits for a browser on a terminal
+
+
+def _live_meshcat():
+    """Starts Meshcat on localhost and prints its URL; on a terminal, waits (up to
+    BROWSER_WAIT) for a browser to connect so that the run is seen from its start."""
+    meshcat = start_meshcat(live=True)
+    url = meshcat.web_url()
+    print(f"nsdrake: Meshcat is at {url}")
+    if sys.stdin.isatty():
+        print(f"nsdrake: waiting for a browser at {url} (up to {BROWSER_WAIT:g} s) ...", flush=True)
+        deadline = time.monotonic() + BROWSER_WAIT
+        while meshcat.GetNumActiveConnections() == 0 and time.monotonic() < deadline:
+            time.sleep(0.1)
+    return meshcat
 
 
 def main(argv: list[str] | None = None) -> int:

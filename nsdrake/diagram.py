@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain, VectorLogSink
 
@@ -44,6 +45,7 @@ from .systems import (
     SelfMotionSweep,
     SlideAndPressReference,
 )
+from .visualization import Visualizers, add_visualizers, visualizer_period
 
 
 @dataclass
@@ -54,6 +56,7 @@ class ControlledStation:
     station: Station
     loggers: dict[str, VectorLogSink]
     scenario: Scenario
+    visualizers: Visualizers | None = None  # when built with a Meshcat
 
     def system(self, name: str):
         return self.diagram.GetSubsystemByName(name)
@@ -71,14 +74,17 @@ def speed_limit_vector(scenario: Scenario, joint_names: tuple[str, ...]) -> np.n
     return np.array([limits.get(name, np.inf) for name in joint_names])
 
 
-def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> ControlledStation:
+def build_diagram(
+    scenario: Scenario, *, null_space_task: bool = True, meshcat: Meshcat | None = None
+) -> ControlledStation:
     """The Fig. 3 diagram for ``scenario``.
 
     q̇_dⁿ comes from the priority selector, or from a prescribed self-motion sweep
     when the scenario says ``desired_null_space.source: sweep`` (the selector and
     criteria still run, for their traces). ``null_space_task`` False sets every
     criterion gain and the sweep to zero (q̇_dⁿ = 0): the null-space controller
-    then only damps self-motion.
+    then only damps self-motion. With a ``meshcat``, the diagram also has the
+    Meshcat visualizers (nsdrake/visualization.py).
     """
     builder = DiagramBuilder()
     station = add_station(builder, scenario)
@@ -272,6 +278,11 @@ def build_diagram(scenario: Scenario, *, null_space_task: bool = True) -> Contro
         logger = LogVectorOutput(port, builder, publish_period=T)
         logger.set_name(f"log_{name}")
         loggers[name] = logger
+    visualizers = None
+    if meshcat is not None:
+        visualizers = add_visualizers(builder, station, meshcat, period=visualizer_period(T))
     diagram = builder.Build()
     diagram.set_name("nsdrake")
-    return ControlledStation(diagram=diagram, station=station, loggers=loggers, scenario=scenario)
+    return ControlledStation(
+        diagram=diagram, station=station, loggers=loggers, scenario=scenario, visualizers=visualizers
+    )

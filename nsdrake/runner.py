@@ -1,12 +1,14 @@
-"""One run of a scenario into an output folder: traces, metrics, plots."""
+"""One run of a scenario into an output folder: traces, metrics, plots, the
+diagram's picture, the 3D replay and the HTML report."""
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+from pydrake.geometry import Meshcat
 
 from .diagram import build_diagram, speed_limit_vector
 from .metrics import (
@@ -18,9 +20,11 @@ from .metrics import (
     write_metrics,
 )
 from .plots import plot_fig3, plot_priority
+from .report import write_report
 from .scenario import Scenario
 from .simulate import run
 from .traces import Traces
+from .visualization import start_meshcat, write_diagram_picture, write_replay
 
 
 class OutputFolderError(ValueError):
@@ -66,13 +70,21 @@ def scenario_yaml(scenario: Scenario) -> str:
 class RunResult:
     out: Path
     metrics: list[Metric]
+    notes: list[str] = field(default_factory=list)  # one line each, for the user (e.g. no Graphviz)
 
     @property
     def passed(self) -> bool:
         return all(m.passed for m in self.metrics if m.passed is not None)
 
 
-def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
+def run_to_folder(
+    scenario: Scenario,
+    out: Path,
+    *,
+    progress=None,
+    replay: bool = True,
+    meshcat: Meshcat | None = None,
+) -> RunResult:
     """Simulates ``scenario`` and writes into ``out`` (which must be ready):
 
     - traces.csv: one row per control period (see README for the columns);
@@ -81,15 +93,26 @@ def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
     - metrics.json: the acceptance figures, computed from the CSV files;
     - fig3.png: the Fig. 3-style plots (with the fig3 check);
     - priority.png: mode timeline and criteria (with the priority check);
-    - scenario.yaml: the scenario as run.
+    - scenario.yaml: the scenario as run;
+    - diagram.dot and diagram.svg (if Graphviz's dot is found): the Drake diagram;
+    - replay.html: the main run in Meshcat, self-contained (unless not ``replay``);
+    - report.html: all of the above on one page.
+
+    With a ``meshcat`` (a live viewer), the main run is shown in it as it runs,
+    at real time; the comparison run is never shown nor recorded.
     """
     out = Path(out)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
     compare = scenario.report.compare_without_null_space_task
     stages = 2 if compare else 1
     report = (lambda k: lambda f: progress((k + f) / stages)) if progress else (lambda k: None)
-    traces, built = run(scenario, progress=report(0))
+    live = meshcat is not None
+    if meshcat is None and replay:
+        meshcat = start_meshcat(live=False)
+    traces, built = run(scenario, progress=report(0), meshcat=meshcat, live=live)
     traces.write_csv(out / "traces.csv")
+    replay_path = write_replay(meshcat, out / "replay.html") if replay else None
+    picture = write_diagram_picture(built.diagram, out)
     baseline = None
     if compare:
         baseline_traces, _ = run(scenario, null_space_task=False, progress=report(1))
@@ -101,7 +124,9 @@ def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
     k0 = first_contact_index(traces, scenario.reference.contact_threshold)
     contact_time = float(traces["t"][k0]) if k0 is not None else None
     task_axes = built.station.arm_model.task_axes
+    plots = []
     if "fig3" in scenario.report.checks:
+        plots.append(out / "fig3.png")
         plot_fig3(
             traces,
             out / "fig3.png",
@@ -112,13 +137,26 @@ def run_to_folder(scenario: Scenario, out: Path, *, progress=None) -> RunResult:
             selector=scenario.desired_null_space.selector,
         )
     if "priority" in scenario.report.checks:
+        plots.append(out / "priority.png")
         plot_priority(
             traces,
             out / "priority.png",
             title=scenario.description,
             selector=scenario.desired_null_space.selector,
         )
-    return RunResult(out=out, metrics=metrics)
+    notes = [picture.note] if picture.note else []
+    write_report(
+        out,
+        title=f"nsdrake run {out.resolve().name}",
+        description=f"{scenario.description} (scenario: {scenario.source or 'built in code'})",
+        parameters=yaml.safe_load(scenario_yaml(scenario)),
+        metrics=metrics,
+        plots=plots,
+        diagram=picture,
+        replay=replay_path.name if replay_path else None,
+        notes=notes,
+    )
+    return RunResult(out=out, metrics=metrics, notes=notes)
 
 
 def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Traces | None) -> list[Metric]:

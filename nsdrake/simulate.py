@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import Simulator
 
 from .diagram import ControlledStation, build_diagram
@@ -17,18 +18,27 @@ def run(
     *,
     null_space_task: bool = True,
     progress: Callable[[float], None] | None = None,
+    meshcat: Meshcat | None = None,
+    live: bool = False,
 ) -> tuple[Traces, ControlledStation]:
     """Simulates ``scenario`` for its duration; returns the traces and the diagram handles.
 
     ``progress`` is called with the fraction done, about a hundred times per run.
+    With a ``meshcat``, the run is recorded and the recording published to it
+    (``visualization.write_replay`` saves it); ``live`` also sends every frame to
+    the browsers watching and paces the run at real time. Neither changes the traces.
     """
-    built = build_diagram(scenario, null_space_task=null_space_task)
+    built = build_diagram(scenario, null_space_task=null_space_task, meshcat=meshcat)
     station = built.station
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     plant_context = station.plant.GetMyMutableContextFromRoot(context)
     station.plant.SetPositions(plant_context, station.q0)
     station.plant.SetVelocities(plant_context, station.v0)
+    if built.visualizers is not None:
+        built.visualizers.start_recording(live=live)
+    if live:
+        simulator.set_target_realtime_rate(1.0)
     simulator.Initialize()
     if progress is None:
         simulator.AdvanceTo(scenario.duration)
@@ -37,6 +47,8 @@ def run(
         for k in range(1, chunks + 1):
             simulator.AdvanceTo(scenario.duration * k / chunks)
             progress(k / chunks)
+    if built.visualizers is not None:
+        built.visualizers.publish_recording()
     return collect_traces(built, context), built
 
 

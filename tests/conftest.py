@@ -83,3 +83,19 @@ def simulate_to(scenario, t_end: float):
     simulator.Initialize()
     simulator.AdvanceTo(t_end)
     return built, context
+
+
+# A short fig3 run into a folder, shared by the visualization, report and browser tests:
+# contact comes at ≈ 1.27 s, so at 2 s the tool presses on the plate.
+SHORT_RUN_DURATION = 2.0
+
+
+@pytest.fixture(scope="session")
+def short_run(tmp_path_factory):
+    """(out folder, RunResult, ControlledStation-free facts) of ``run_to_folder`` on fig3 for 2 s."""
+    from nsdrake.runner import run_to_folder
+    from nsdrake.scenario import load_scenario
+
+    out = tmp_path_factory.mktemp("fig3_short")
+    result = run_to_folder(load_scenario("fig3", duration=SHORT_RUN_DURATION), out)
+    return out, result

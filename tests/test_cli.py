@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
 import pytest
 
-from nsdrake.cli import main
+from nsdrake.cli import _Progress, main
 from nsdrake.traces import Traces
 
 REQUIRED_COLUMNS = (
@@ -21,14 +22,47 @@ def test_run_writes_traces_plot_and_metrics(tmp_path, capsys):
     out = tmp_path / "run"
     code = main(["run", "fig3", "--duration", "0.3", "--out", str(out)])
     assert code in (0, 1)  # 0.3 s ends before contact: the contact figures fail honestly
-    for name in ("traces.csv", "fig3.png", "metrics.json", "scenario.yaml"):
+    for name in ("traces.csv", "fig3.png", "metrics.json", "scenario.yaml", "diagram.dot", "replay.html"):
         assert (out / name).is_file(), name
+    assert (out / "report.html").is_file()
     traces = Traces.read_csv(out / "traces.csv")
     assert [c for c in REQUIRED_COLUMNS if c not in traces] == []
     assert len(traces) == 151  # t = 0, 0.002, …, 0.3
     metrics = json.loads((out / "metrics.json").read_text())
     assert "first_contact_time" in metrics["metrics"]
-    assert str(out) in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert str(out) in printed
+    assert f"open {out / 'report.html'} in a browser" in printed
+
+
+def test_no_replay_writes_everything_but_the_replay(tmp_path):
+    out = tmp_path / "run"
+    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--no-replay"]) in (0, 1)
+    assert not (out / "replay.html").exists()
+    assert (out / "report.html").is_file() and (out / "diagram.dot").is_file()
+    assert "replay.html" not in (out / "report.html").read_text()
+
+
+def test_meshcat_flag_prints_a_localhost_url(tmp_path, capsys):
+    """Not on a terminal (as here): no waiting for a browser, no prompt at the end."""
+    out = tmp_path / "run"
+    assert main(["run", "fig3", "--duration", "0.2", "--out", str(out), "--meshcat"]) in (0, 1)
+    printed = capsys.readouterr().out
+    assert re.search(r"Meshcat is at http://localhost:\d+", printed), printed
+    assert (out / "replay.html").is_file()
+
+
+@pytest.mark.parametrize("tty", [False, True])
+def test_progress_bar_only_on_a_terminal(monkeypatch, capsys, tty):
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: tty, raising=False)
+    progress = _Progress("fig3")
+    for k in range(5):
+        progress(k / 4)
+    err = capsys.readouterr().err
+    if tty:
+        assert err.count("\r") == 5 and "100%" in err and err.endswith("\n")
+    else:
+        assert err == ""
 
 
 def test_written_scenario_reloads_to_the_same_run(tmp_path):
