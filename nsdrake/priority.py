@@ -127,16 +127,17 @@ def prioritized_velocity(
     (module docstring). N is the task's projector N_1 (n, n), W the inverse's
     metric (H for the dynamically consistent inverse, I otherwise) and W_inv its inverse."""
     qdot = np.zeros(N.shape[0])
+    metric_scale = float(np.max(np.abs(W_inv)))
+    last = len(levels) - 1
     for k, level in enumerate(levels):
         Phi = level.gradient
+        v = N @ (W_inv @ Phi)  # Eq. 30's direction, and the row this level removes
         if level.gain:
-            qdot = qdot + gradient_step(N, W_inv, Phi, level.gain, rotate)
-        if k == len(levels) - 1:
-            break
-        v = N @ (W_inv @ Phi)
-        damping = rank_damping * float(Phi @ Phi) * float(np.max(np.abs(W_inv)))
-        denom = float(Phi @ v) + damping
-        if denom > 0.0 and level.activation > 0.0:
+            qdot = qdot + (level.gain * v if rotate else gradient_step(N, W_inv, Phi, level.gain, rotate))
+        if k == last or level.activation <= 0.0:
+            continue
+        denom = float(Phi @ v) + rank_damping * float(Phi @ Phi) * metric_scale
+        if denom > 0.0:
             N = N - (level.activation / denom) * np.outer(v, v @ W)
     return qdot
 

@@ -126,15 +126,18 @@ class PrioritySelector(LeafSystem):
         new = select_mode(self._d_min.Eval(context)[0], self._w.Eval(context)[0], state.mode, self._limits)
         return update_switch_state(state, t, new)
 
-    def _ordering_velocity(self, mode: Mode, context, N, W, W_inv) -> np.ndarray:
+    def _levels(self, context) -> dict:
+        """Each criterion's Level (gradient, gain, activation), read from the ports once."""
         activation = {c: 1.0 for c in Criterion}
-        activation[Criterion.obstacle] = self._obstacle_activation.Eval(context)[0]
-        levels = [
-            Level(self._gradients[c].Eval(context), self._gains[c], activation[c] if self._gains[c] else 0.0)
-            for c in ORDERINGS[mode]
-            if c in self._gains
-        ]
-        return prioritized_velocity(N, W, W_inv, levels, self._rotate)
+        activation[Criterion.obstacle] = float(self._obstacle_activation.Eval(context)[0])
+        return {
+            c: Level(self._gradients[c].Eval(context), gain, activation[c] if gain else 0.0)
+            for c, gain in self._gains.items()
+        }
+
+    def _ordering_velocity(self, mode: Mode, levels: dict, N, W, W_inv) -> np.ndarray:
+        ordered = [levels[c] for c in ORDERINGS[mode] if c in levels]
+        return prioritized_velocity(N, W, W_inv, ordered, self._rotate)
 
     def _compute(self, context):
         terms = self._terms.Eval(context)
@@ -144,10 +147,11 @@ class PrioritySelector(LeafSystem):
             return np.zeros(n), state, 1.0
         inv = self._inverse.at(terms)
         W, W_inv = (terms.H, terms.H_inv) if self._inverse.inertia_weighted else (np.eye(n), np.eye(n))
-        qdot = self._ordering_velocity(state.mode, context, inv.N, W, W_inv)
+        levels = self._levels(context)
+        qdot = self._ordering_velocity(state.mode, levels, inv.N, W, W_inv)
         sigma = blend_weight(state, context.get_time(), self._blend_time)
         if sigma < 1.0:
-            old = self._ordering_velocity(state.previous, context, inv.N, W, W_inv)
+            old = self._ordering_velocity(state.previous, levels, inv.N, W, W_inv)
             qdot = sigma * qdot + (1.0 - sigma) * old
         task_part = inv.J_pinv @ terms.xdot
         scale = joint_speed_scale(task_part, qdot, self._command_limits)
