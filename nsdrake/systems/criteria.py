@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import QueryObject
-from pydrake.systems.framework import LeafSystem, ValueProducer
+from pydrake.systems.framework import LeafSystem
 
 from ..criteria.joint_torque import joint_torque_criterion
 from ..criteria.manipulability import manipulability
 from ..criteria.obstacle import ObstacleDistances, activation, obstacle_potential
 from ..dynamics import RobotTerms
-from ._util import python_value_producer
+from ._util import declare_scratch_plant_context, python_value_producer
 
 
 class _CriterionSystem(LeafSystem):
@@ -131,14 +131,7 @@ class ObstacleCriterionSystem(_CriterionSystem):
         plant = distances.plant
         self._declare_ports(model_terms, extra_abstract_inputs=(("geometry_query", QueryObject()),))
         self._query = self._extra[0]
-        self._scratch = self.DeclareCacheEntry(
-            description="scratch plant context",
-            value_producer=ValueProducer(
-                allocate=lambda: AbstractValue.Make(plant.CreateDefaultContext()),
-                calc=lambda context, value: None,
-            ),
-            prerequisites_of_calc={self.nothing_ticket()},
-        )
+        self._scratch = declare_scratch_plant_context(self, plant)
         self.DeclareVectorOutputPort(
             "d_min",
             1,

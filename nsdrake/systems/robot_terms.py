@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem, ValueProducer
+from pydrake.systems.framework import LeafSystem
 
 from ..dynamics import ArmModel
+from ._util import declare_scratch_plant_context
 
 
 class RobotTermsSystem(LeafSystem):
@@ -39,14 +40,7 @@ class RobotTermsSystem(LeafSystem):
         self._n = n
         plant = arm_model.plant
         self._state = self.DeclareVectorInputPort("estimated_state", 2 * n)
-        self._scratch = self.DeclareCacheEntry(
-            description="scratch plant context",
-            value_producer=ValueProducer(
-                allocate=lambda: AbstractValue.Make(plant.CreateDefaultContext()),
-                calc=lambda context, value: None,
-            ),
-            prerequisites_of_calc={self.nothing_ticket()},
-        )
+        self._scratch = declare_scratch_plant_context(self, plant)
         on_state = {self.input_port_ticket(self._state.get_index())}
         zero = np.zeros(n)
         plant_context = plant.CreateDefaultContext()
