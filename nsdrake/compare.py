@@ -33,7 +33,7 @@ import yaml
 
 from .dynamics import ArmModel
 from .metrics import first_contact_index, torque_steps
-from .scenario import Scenario, ScenarioError, _check_shape, _one_line, _StrictLoader, load_scenario
+from .scenario import Scenario, ScenarioError, _one_line, check_shape, load_scenario, read_yaml
 from .traces import Traces
 
 FAMILY_DIR = Path(__file__).resolve().parent / "families"
@@ -65,10 +65,7 @@ def load_family(name: str) -> Family:
     if name not in known:
         raise ScenarioError(f"unknown family '{name}'; the shipped families are {', '.join(known)}")
     path = FAMILY_DIR / f"{name}.yaml"
-    try:
-        data = yaml.load(path.read_text(), Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
-    except yaml.YAMLError as e:
-        raise ScenarioError(f"{path}: malformed YAML: {_one_line(e)}") from None
+    _, data = read_yaml(path, "family")
     if not isinstance(data, dict):
         raise ScenarioError(f"{path}: must be a mapping with description, scenario, measure, variants")
     unknown = set(data) - {"description", "scenario", "measure", "variants"}
@@ -86,7 +83,7 @@ def load_family(name: str) -> Family:
             or not isinstance(v.get("overrides", {}), dict)
         ):
             raise ScenarioError(f"{path}: variants[{i}]: needs a name and a mapping of overrides")
-        problem = _check_shape(v.get("overrides", {}), Scenario, "")
+        problem = check_shape(v.get("overrides", {}), Scenario, "")
         if problem:
             raise ScenarioError(f"{path}: variants[{i}].overrides.{problem}")
         variants.append(Variant(v["name"], v.get("overrides", {})))

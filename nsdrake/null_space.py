@@ -91,7 +91,7 @@ def null_space_torque(
     H, v = terms.H, terms.v
     inv = inverse.at(terms)
     N = inv.N
-    e_n = qdot_ns_d - N @ v
+    e_n = null_space_velocity_error(qdot_ns_d, N, v)
     a = qddot_ns_d + K_n * e_n
     if task_velocity_comp:
         a = a + task_velocity_compensation_at(terms, inv, inverse.inertia_weighted)
@@ -100,4 +100,4 @@ def null_space_torque(
             raise ValueError("the Coriolis compensation needs C in the robot terms")
         a = a + terms.H_inv @ (terms.C @ e_n)
     tau0 = H @ (N @ a)
-    return NullSpaceResult(tau0=tau0, e_n=e_n, nu=0.5 * float(e_n @ H @ e_n), N=N)
+    return NullSpaceResult(tau0=tau0, e_n=e_n, nu=lyapunov(H, e_n), N=N)

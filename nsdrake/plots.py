@@ -11,18 +11,24 @@ matplotlib.use("Agg")  # files only; never needs a display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .metrics import torque_steps  # noqa: E402
 from .traces import Traces  # noqa: E402
 
 MODE_NAMES = {0: "none", 1: "obstacle", 2: "joint torque", 3: "manipulability"}
 
 
+def _mode_axis(ax, traces: Traces, fontsize: int) -> None:
+    """The mode over time as a step plot, its ticks named after Fig. 1's branches."""
+    ax.step(traces["t"], traces["mode"], where="post", color="k", lw=1.2, label="mode")
+    ax.set_yticks(list(MODE_NAMES), [f"{k} {v}" for k, v in MODE_NAMES.items()], fontsize=fontsize)
+    ax.set_ylim(-0.3, 3.3)
+    ax.set_ylabel("level-2 criterion")
+
+
 def _mode_panel(ax, traces: Traces, selector=None) -> None:
     """Mode (step plot, left axis) with d_min and w (right axes) and their limits."""
     t = traces["t"]
-    ax.step(t, traces["mode"], where="post", color="k", lw=1.2, label="mode")
-    ax.set_yticks(list(MODE_NAMES), [f"{k} {v}" for k, v in MODE_NAMES.items()], fontsize=7)
-    ax.set_ylim(-0.3, 3.3)
-    ax.set_ylabel("level-2 criterion")
+    _mode_axis(ax, traces, fontsize=7)
     right = ax.twinx()
     right.plot(t, traces["d_min"], color="C1", label=r"$d_{min}$ [m]")
     right.plot(t, traces["w"], color="C2", label="w [m$^2$]")
@@ -95,11 +101,7 @@ def plot_priority(traces: Traces, path: Path, *, title: str = "", selector=None)
     t = traces["t"]
     fig, axes = plt.subplots(5, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
     mode = traces["mode"]
-    ax = axes[0]
-    ax.step(t, mode, where="post", color="k")
-    ax.set_yticks(list(MODE_NAMES), [f"{k} {v}" for k, v in MODE_NAMES.items()], fontsize=8)
-    ax.set_ylim(-0.3, 3.3)
-    ax.set_ylabel("level-2 criterion")
+    _mode_axis(axes[0], traces, fontsize=8)
     colors = {1: "C1", 2: "C0", 3: "C2"}
     panels = [
         ("d_min", 1, r"$d_{min}$ [m]"),
@@ -124,7 +126,7 @@ def plot_priority(traces: Traces, path: Path, *, title: str = "", selector=None)
         axes[1].legend(loc="best", fontsize=8)
         axes[2].legend(loc="best", fontsize=8)
     ax = axes[4]
-    steps = np.max(np.abs(np.diff(traces.block("tau"), axis=0)), axis=1)
+    steps = torque_steps(traces)
     ax.semilogy(t[1:], np.maximum(steps, 1e-9), color="C3", lw=0.8)
     for k in np.flatnonzero(np.diff(mode) != 0) + 1:
         for a in axes:

@@ -35,11 +35,6 @@ class PseudoInverseKind(str, enum.Enum):
     damped_least_squares = "damped_least_squares"
 
 
-def operational_space_inertia(J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
-    """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1). (m, m) [kg]."""
-    return np.linalg.inv(J @ H_inv @ J.T)
-
-
 def weighted_inverse(J: np.ndarray, W_inv: np.ndarray, damping: float = 0.0) -> np.ndarray:
     """J^# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ + λ² I)⁻¹ for a symmetric positive-definite W."""
     A = J @ W_inv @ J.T

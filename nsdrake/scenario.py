@@ -320,7 +320,7 @@ def _kind(t) -> str:
     return {float: "a number", int: "an integer", bool: "true or false", str: "a string"}.get(t, str(t))
 
 
-def _check_shape(data, schema, where: str) -> str | None:
+def check_shape(data, schema, where: str) -> str | None:
     """The first place where ``data`` (parsed YAML) does not fit ``schema``, as "path: problem"."""
     if dataclasses.is_dataclass(schema):
         if not isinstance(data, dict):
@@ -331,7 +331,7 @@ def _check_shape(data, schema, where: str) -> str | None:
             path = f"{where}.{key}" if where else str(key)
             if key not in fields:
                 return f"{path}: unknown field; valid fields here are {', '.join(fields)}"
-            problem = _check_shape(value, hints[key], path)
+            problem = check_shape(value, hints[key], path)
             if problem:
                 return problem
         return None
@@ -340,7 +340,7 @@ def _check_shape(data, schema, where: str) -> str | None:
         if not isinstance(data, dict):
             return f"{where}: must be {_kind(schema)}, got {data!r}"
         for key, value in data.items():
-            problem = _check_shape(value, args[1], f"{where}.{key}")
+            problem = check_shape(value, args[1], f"{where}.{key}")
             if problem:
                 return problem
         return None
@@ -348,7 +348,7 @@ def _check_shape(data, schema, where: str) -> str | None:
         if not isinstance(data, list):
             return f"{where}: must be {_kind(schema)}, got {data!r}"
         for i, value in enumerate(data):
-            problem = _check_shape(value, args[0], f"{where}[{i}]")
+            problem = check_shape(value, args[0], f"{where}[{i}]")
             if problem:
                 return problem
         return None
@@ -363,9 +363,11 @@ def _check_shape(data, schema, where: str) -> str | None:
     return None
 
 
-def _read(path: Path, defaults: Scenario | None) -> Scenario:
+def read_yaml(path: Path, kind: str = "scenario") -> tuple[str, object]:
+    """(text, parsed data) of a YAML file, with duplicate keys refused; every problem
+    (missing, unreadable, malformed, empty) is a one-line ScenarioError naming the file."""
     if not path.is_file():
-        raise ScenarioError(f"{path}: no such scenario file")
+        raise ScenarioError(f"{path}: no such {kind} file")
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as e:
@@ -376,7 +378,12 @@ def _read(path: Path, defaults: Scenario | None) -> Scenario:
         raise ScenarioError(f"{path}: malformed YAML: {_one_line(e)}") from None
     if data is None:
         raise ScenarioError(f"{path}: the file is empty")
-    problem = _check_shape(data, Scenario, "")
+    return text, data
+
+
+def _read(path: Path, defaults: Scenario | None) -> Scenario:
+    text, data = read_yaml(path)
+    problem = check_shape(data, Scenario, "")
     if problem:
         raise ScenarioError(f"{path}: {problem}")
     try:

@@ -47,6 +47,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import Context
 
+from ..reference import smoothstep
+
 
 @dataclass(frozen=True)
 class DistancePair:
@@ -62,8 +64,6 @@ def activation(d_min: float, influence: float) -> float:
     """How much the obstacle level counts in the projection of the levels below it
     (:mod:`nsdrake.priority`): 0 while every link is beyond the influence distance
     d_∞, rising with a smoothstep to 1 once a link is at d_∞/2 or closer."""
-    from ..reference import smoothstep
-
     return smoothstep(2.0 * (influence - d_min) / influence)
 
 
