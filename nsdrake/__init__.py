@@ -5,3 +5,9 @@ consistent pseudo-inverse", Robotica 18, 513–518.
 """
 
 __version__ = "0.1.0"
+
+from .config import ControllerConfig
+from .controller import NullSpaceImpedanceController
+from .controller_model import ControllerModel, Obstacle
+
+__all__ = ["ControllerConfig", "ControllerModel", "NullSpaceImpedanceController", "Obstacle"]

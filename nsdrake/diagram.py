@@ -1,19 +1,20 @@
-"""Wiring: the station and the controller stack in one Drake diagram.
+"""Wiring: the station, the reference, the controller and the loggers in one diagram.
 
 ::
 
-    plant.state ─► robot_terms ─┬──────────────────────────────► impedance_controller ─┐
-                                ├─► obstacle_criterion ───────┐                       │
-    scene_graph.query ──────────┘   joint_torque_criterion ───┼─► priority_selector   │
-                                    manipulability_criterion ─┘         │             │
-                                                                        ▼             ▼
-                                                        null_space_controller ─► torque_sum
-    plant.reaction_forces ─► force_sensor ─┬─► reference ─► impedance_controller      │
-                                           └─► impedance_controller                   ▼
-                                                          plant.actuation ◄─ actuation_map
+    ┌──────────────── station ────────────────┐
+    │ plant ──state────────────────────────────┼──► controller.estimated_state
+    │   ▲  └─reaction_forces─► force_sensor ───┼──► controller.measured_wrench
+    │   │                          └── force ──┼──► reference.measured_force
+    │   └── actuation ◄─ actuation_map ◄───────┼─── controller.generalized_force
+    └─────────────────────────────────────────┘
+    reference ─► controller.desired_position / _velocity / _acceleration / _force
 
-Every system is named after its role, and every signal the traces need is
-logged once per control period by a ``VectorLogSink``.
+The controller (:class:`nsdrake.NullSpaceImpedanceController`) is a diagram of its
+own — robot_terms, impedance_controller, the criteria, priority_selector,
+null_space_controller — built on its own model of the arm and of the obstacles,
+never on the simulated plant. Every signal the traces need is logged once per
+control period by a ``VectorLogSink``.
 """
 
 from __future__ import annotations
@@ -24,27 +25,15 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain, VectorLogSink
+from pydrake.systems.primitives import LogVectorOutput, MatrixGain, VectorLogSink
 
-from .criteria.obstacle import ObstacleDistances
-from .impedance import ImpedanceGains
-from .plant import Station, add_station
-from .priority import Criterion, SelectorLimits
+from .config import ControllerConfig
+from .controller import ControllerConfigError, NullSpaceImpedanceController, without_null_space_task
+from .controller_model import ControllerModel
+from .plant import Station, add_station, station_obstacles
 from .reference import SlideAndPress
 from .scenario import Scenario, ScenarioError
-from .systems import (
-    ContactMonitor,
-    ForceSensor,
-    ImpedanceController,
-    JointTorqueCriterionSystem,
-    ManipulabilityCriterionSystem,
-    NullSpaceController,
-    ObstacleCriterionSystem,
-    PrioritySelector,
-    RobotTermsSystem,
-    SelfMotionSweep,
-    SlideAndPressReference,
-)
+from .systems import ContactMonitor, ForceSensor, SlideAndPressReference
 from .visualization import Visualizers, add_visualizers, visualizer_period
 
 
@@ -54,12 +43,16 @@ class ControlledStation:
 
     diagram: Diagram
     station: Station
+    controller: NullSpaceImpedanceController
     loggers: dict[str, VectorLogSink]
     scenario: Scenario
     visualizers: Visualizers | None = None  # when built with a Meshcat
 
     def system(self, name: str):
-        return self.diagram.GetSubsystemByName(name)
+        """The subsystem called ``name``, in the diagram or inside the controller."""
+        if self.diagram.HasSubsystemNamed(name):
+            return self.diagram.GetSubsystemByName(name)
+        return self.controller.GetSubsystemByName(name)
 
 
 def initial_task_position(station: Station) -> np.ndarray:
@@ -74,39 +67,33 @@ def speed_limit_vector(scenario: Scenario, joint_names: tuple[str, ...]) -> np.n
     return np.array([limits.get(name, np.inf) for name in joint_names])
 
 
-def build_diagram(
-    scenario: Scenario, *, null_space_task: bool = True, meshcat: Meshcat | None = None
-) -> ControlledStation:
-    """The Fig. 3 diagram for ``scenario``.
-
-    q̇_dⁿ comes from the priority selector, or from a prescribed self-motion sweep
-    when the scenario says ``desired_null_space.source: sweep`` (the selector and
-    criteria still run, for their traces). ``null_space_task`` False sets every
-    criterion gain and the sweep to zero (q̇_dⁿ = 0): the null-space controller
-    then only damps self-motion. With a ``meshcat``, the diagram also has the
-    Meshcat visualizers (nsdrake/visualization.py).
-    """
-    builder = DiagramBuilder()
-    station = add_station(builder, scenario)
-    plant, arm = station.plant, station.arm_model
-    n, T = arm.n, scenario.control_period
-    ns = scenario.null_space
-    inverse = scenario.generalized_inverse()
-
-    robot_terms = builder.AddNamedSystem(
-        "robot_terms",
-        RobotTermsSystem(
-            arm_model=arm, coriolis_matrix=ns.task_velocity_compensation or ns.coriolis_compensation
-        ),
+def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> ControllerConfig:
+    """The controller's part of the scenario."""
+    config = ControllerConfig(
+        period=scenario.control_period,
+        impedance=scenario.impedance,
+        null_space=scenario.null_space,
+        desired_null_space=scenario.desired_null_space,
+        nominal_force=scenario.reference.force,
     )
-    builder.Connect(plant.get_state_output_port(), robot_terms.get_input_port())
-    model_terms = arm.terms(plant.CreateDefaultContext(), station.q0, station.v0, True)
+    return config if null_space_task else without_null_space_task(config)
 
-    sensor = builder.AddNamedSystem(
-        "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
+
+def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
+    """The controller's own model: the arm's URDF, the gravity of the scenario, and the
+    plate and obstacles where the station put them."""
+    return ControllerModel.from_urdf(
+        station.arm_file,
+        tool_frame=scenario.arm.tool_frame,
+        task_axes=scenario.task.axes,
+        gravity=station.gravity,
+        obstacles=station_obstacles(station),
     )
-    builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
 
+
+def add_reference(
+    builder: DiagramBuilder, scenario: Scenario, station: Station, sensor
+) -> SlideAndPressReference:
     r = scenario.reference
     reference = builder.AddNamedSystem(
         "reference",
@@ -123,166 +110,117 @@ def build_diagram(
                 step_time=r.step_time if r.step_time > 0 else math.inf,
                 step_force=r.step_force,
             ),
-            task_rows=arm.rows,
+            task_rows=station.arm_model.rows,
             contact_threshold=r.contact_threshold,
-            period=T,
+            period=scenario.control_period,
         ),
     )
     builder.Connect(sensor.GetOutputPort("force"), reference.GetInputPort("measured_force"))
+    return reference
 
-    imp = scenario.impedance
-    impedance = builder.AddNamedSystem(
-        "impedance_controller",
-        ImpedanceController(
-            gains=ImpedanceGains.along_surface(
-                station.normal, imp.K_p_tangent, imp.K_p_normal, imp.K_v_tangent, imp.K_v_normal, imp.K_f
-            ),
-            task_rows=arm.rows,
-            p_WSo=sensor.p_WSo,
-            gravity_compensation=imp.gravity_compensation,
-            model_terms=model_terms,
-        ),
-    )
-    builder.Connect(robot_terms.GetOutputPort("robot_terms"), impedance.GetInputPort("robot_terms"))
-    for name in ("x_d", "xdot_d", "xddot_d", "f_d"):
-        builder.Connect(reference.GetOutputPort(name), impedance.GetInputPort(name))
-    builder.Connect(sensor.GetOutputPort("wrench"), impedance.GetInputPort("measured_wrench"))
 
-    d = scenario.desired_null_space
-    crit = d.criteria
-    if crit.obstacle.gain > 0 and not station.link_geometries:
-        raise ScenarioError(
-            f"{scenario.source or 'scenario'}: desired_null_space.criteria.obstacle.gain: the arm has no "
-            "link collision geometry to keep away from obstacles (set the gain to 0)"
-        )
-    terms_port = robot_terms.GetOutputPort("robot_terms")
-    joint_torque = builder.AddNamedSystem(
-        "joint_torque_criterion",
-        JointTorqueCriterionSystem(F_d=r.force * station.normal, model_terms=model_terms),
+def add_sensing(builder: DiagramBuilder, station: Station) -> tuple[ForceSensor, ContactMonitor]:
+    """The force sensor under the plate, and the monitor of contacts other than the tool's."""
+    plant = station.plant
+    sensor = builder.AddNamedSystem(
+        "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
     )
-    manipulability = builder.AddNamedSystem(
-        "manipulability_criterion", ManipulabilityCriterionSystem(model_terms=model_terms)
-    )
-    obstacle = builder.AddNamedSystem(
-        "obstacle_criterion",
-        ObstacleCriterionSystem(
-            distances=ObstacleDistances(
-                plant,
-                station.link_geometries,
-                station.obstacle_geometries,
-                station.scene_graph.model_inspector(),
-            ),
-            influence_distance=crit.obstacle.influence_distance,
-            model_terms=model_terms,
-        ),
-    )
-    builder.Connect(station.scene_graph.get_query_output_port(), obstacle.GetInputPort("geometry_query"))
-    criteria = {
-        Criterion.obstacle: (obstacle, crit.obstacle.gain),
-        Criterion.joint_torque: (joint_torque, crit.joint_torque.gain),
-        Criterion.manipulability: (manipulability, crit.manipulability.gain),
-    }
-    sel = d.selector
-    selector = builder.AddNamedSystem(
-        "priority_selector",
-        PrioritySelector(
-            inverse=inverse,
-            gains={c: (gain if null_space_task else 0.0) for c, (_, gain) in criteria.items()},
-            limits=SelectorLimits(d_lim=sel.d_lim, w_lim=sel.w_lim, d_band=sel.d_band, w_band=sel.w_band),
-            blend_time=sel.blend_time,
-            rotate_gradient=d.rotate_gradient,
-            speed_limits=speed_limit_vector(scenario, arm.joint_names),
-            speed_headroom=d.speed_headroom,
-            period=T,
-            model_terms=model_terms,
-        ),
-    )
-    builder.Connect(terms_port, selector.GetInputPort("robot_terms"))
-    for c, (system, _) in criteria.items():
-        builder.Connect(terms_port, system.GetInputPort("robot_terms"))
-        builder.Connect(system.GetOutputPort("gradient"), selector.GetInputPort(f"{c.value}_gradient"))
-    builder.Connect(obstacle.GetOutputPort("d_min"), selector.GetInputPort("d_min"))
-    builder.Connect(manipulability.GetOutputPort("value"), selector.GetInputPort("manipulability"))
-    builder.Connect(obstacle.GetOutputPort("activation"), selector.GetInputPort("obstacle_activation"))
-
-    null_space = builder.AddNamedSystem(
-        "null_space_controller",
-        NullSpaceController(
-            inverse=inverse,
-            K_n=ns.K_n,
-            period=T,
-            task_velocity_compensation=ns.task_velocity_compensation,
-            coriolis_compensation=ns.coriolis_compensation,
-            acceleration_feedforward=ns.acceleration_feedforward,
-            model_terms=model_terms,
-        ),
-    )
-    builder.Connect(robot_terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
-    command = selector.GetOutputPort("desired_null_space_velocity")
-    if d.source == "sweep":
-        sw = d.sweep
-        sweep = builder.AddNamedSystem(
-            "self_motion_sweep",
-            SelfMotionSweep(
-                inverse=inverse,
-                direction=np.array([sw.direction.get(j, 0.0) for j in arm.joint_names]),
-                amplitude=sw.amplitude if null_space_task else 0.0,
-                frequency=sw.frequency,
-                start_time=sw.start_time,
-                ramp_time=sw.ramp_time,
-                model_terms=model_terms,
-            ),
-        )
-        builder.Connect(terms_port, sweep.get_input_port())
-        command = sweep.get_output_port()
-    builder.Connect(command, null_space.GetInputPort("desired_null_space_velocity"))
-
-    torque_sum = builder.AddNamedSystem("torque_sum", Adder(2, n))
-    builder.Connect(impedance.get_output_port(), torque_sum.get_input_port(0))
-    builder.Connect(null_space.GetOutputPort("generalized_force"), torque_sum.get_input_port(1))
-    # τ = B u with B the plant's actuation matrix (a permutation here): u = Bᵀ τ.
-    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(plant.MakeActuationMatrix().T))
-    builder.Connect(torque_sum.get_output_port(), actuation.get_input_port())
-    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
-
-    tool_body = arm.tool_frame.body().index()
+    builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
     monitor = builder.AddNamedSystem(
         "contact_monitor",
         ContactMonitor(
             plant=plant,
             watched={*plant.GetBodyIndices(station.plate), *(b.index() for b in station.obstacle_bodies)},
-            allowed={tool_body},
+            allowed={station.tool_body.index()},
         ),
     )
     builder.Connect(plant.get_contact_results_output_port(), monitor.get_input_port())
+    return sensor, monitor
 
+
+def connect_controller(builder, station: Station, controller, sensor, reference) -> None:
+    plant = station.plant
+    builder.Connect(plant.get_state_output_port(), controller.GetInputPort("estimated_state"))
+    builder.Connect(sensor.GetOutputPort("wrench"), controller.GetInputPort("measured_wrench"))
+    for port, ref in (
+        ("desired_position", "x_d"),
+        ("desired_velocity", "xdot_d"),
+        ("desired_acceleration", "xddot_d"),
+        ("desired_force", "f_d"),
+    ):
+        builder.Connect(reference.GetOutputPort(ref), controller.GetInputPort(port))
+    # τ = B u with B the plant's actuation matrix (a permutation here): u = Bᵀ τ.
+    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(plant.MakeActuationMatrix().T))
+    builder.Connect(controller.GetOutputPort("generalized_force"), actuation.get_input_port())
+    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
+
+
+def add_loggers(builder, station, controller, sensor, reference, monitor, period) -> dict[str, VectorLogSink]:
     signals = {
         "x_d": reference.GetOutputPort("x_d"),
         "f": sensor.GetOutputPort("force"),
         "f_d": reference.GetOutputPort("f_d"),
-        "state": plant.get_state_output_port(),
-        "tau": torque_sum.get_output_port(),
-        "qns": command,
-        "mode": selector.GetOutputPort("mode"),
-        "speed_scale": selector.GetOutputPort("speed_scale"),
-        "w": manipulability.GetOutputPort("value"),
-        "d_min": obstacle.GetOutputPort("d_min"),
-        "p_obstacle": obstacle.GetOutputPort("value"),
-        "en": null_space.GetOutputPort("null_space_velocity_error"),
-        "nu": null_space.GetOutputPort("lyapunov"),
-        "p_tau": joint_torque.GetOutputPort("value"),
+        "state": station.plant.get_state_output_port(),
         "forbidden_contacts": monitor.get_output_port(),
     }
+    for name, port in {
+        "tau": "generalized_force",
+        "qns": "desired_null_space_velocity",
+        "mode": "mode",
+        "speed_scale": "speed_scale",
+        "w": "manipulability",
+        "d_min": "d_min",
+        "p_obstacle": "obstacle_potential",
+        "en": "null_space_velocity_error",
+        "nu": "lyapunov",
+        "p_tau": "joint_torque_criterion",
+    }.items():
+        signals[name] = controller.GetOutputPort(port)
     loggers = {}
     for name, port in signals.items():
-        logger = LogVectorOutput(port, builder, publish_period=T)
+        logger = LogVectorOutput(port, builder, publish_period=period)
         logger.set_name(f"log_{name}")
         loggers[name] = logger
+    return loggers
+
+
+def build_diagram(
+    scenario: Scenario, *, null_space_task: bool = True, meshcat: Meshcat | None = None
+) -> ControlledStation:
+    """The Fig. 3 diagram for ``scenario``: station, reference, controller, loggers.
+
+    ``null_space_task`` False sets every criterion gain and the sweep to zero
+    (q̇_dⁿ = 0): the null-space controller then only damps self-motion. With a
+    ``meshcat``, the diagram also has the Meshcat visualizers.
+    """
+    builder = DiagramBuilder()
+    station = add_station(builder, scenario)
+    sensor, monitor = add_sensing(builder, station)
+    reference = add_reference(builder, scenario, station, sensor)
+    try:
+        controller = NullSpaceImpedanceController(
+            controller_model=controller_model(scenario, station),
+            normal=station.normal,
+            config=controller_config(scenario, null_space_task=null_space_task),
+            wrench_point=sensor.p_WSo,
+        )
+    except ControllerConfigError as e:
+        raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
+    builder.AddSystem(controller)
+    connect_controller(builder, station, controller, sensor, reference)
+    loggers = add_loggers(builder, station, controller, sensor, reference, monitor, scenario.control_period)
     visualizers = None
     if meshcat is not None:
-        visualizers = add_visualizers(builder, station, meshcat, period=visualizer_period(T))
+        visualizers = add_visualizers(
+            builder, station, meshcat, period=visualizer_period(scenario.control_period)
+        )
     diagram = builder.Build()
     diagram.set_name("nsdrake")
     return ControlledStation(
-        diagram=diagram, station=station, loggers=loggers, scenario=scenario, visualizers=visualizers
+        diagram=diagram,
+        station=station,
+        controller=controller,
+        loggers=loggers,
+        scenario=scenario,
+        visualizers=visualizers,
     )

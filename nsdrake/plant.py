@@ -20,6 +20,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, Multibody
 from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia, WeldJoint
 from pydrake.systems.framework import DiagramBuilder
 
+from .controller_model import Obstacle
 from .criteria.obstacle import proximity_geometries
 from .dynamics import ArmModel
 from .models import resolve_model
@@ -45,6 +46,8 @@ class Station:
     tangent: np.ndarray
     q0: np.ndarray  # (n,) initial joint positions [rad]
     v0: np.ndarray  # (n,) initial joint velocities [rad/s]
+    arm_file: Path  # the arm's URDF
+    gravity: np.ndarray  # (3,) world gravity [m/s²]
     # Bodies of the extra obstacles (welded to the world).
     obstacle_bodies: list = field(default_factory=list)
     # Proximity geometries of the arm's links (the tool's excepted) and of the obstacles (plate included).
@@ -56,9 +59,29 @@ class Station:
         return self.arm_model.tool_frame.body()
 
 
-def gravity_vector(plane: str) -> np.ndarray:
-    """World gravity for the arm's plane: along −z (horizontal) or −y (vertical)."""
-    return np.array([0.0, 0.0, -GRAVITY]) if plane == "horizontal" else np.array([0.0, -GRAVITY, 0.0])
+def gravity_vector(scenario: Scenario) -> np.ndarray:
+    """World gravity: the scenario's ``gravity`` if given, else along −z for a
+    horizontal arm's plane and −y for a vertical one. (3,) [m/s²]."""
+    if scenario.gravity:
+        return np.asarray(scenario.gravity, dtype=float)
+    return (
+        np.array([0.0, 0.0, -GRAVITY]) if scenario.plane == "horizontal" else np.array([0.0, -GRAVITY, 0.0])
+    )
+
+
+def surface_directions(R_WP: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(normal, tangent) on the task axes ``rows`` for a plate of orientation R_WP:
+    the plate frame's +y axis points into the plate (the push), its +x along it. The
+    tangent is projected onto the task axes, made perpendicular to the normal and
+    re-normalised. Raises ValueError when the normal leaves the task axes."""
+    normal = R_WP[:, 1][rows]
+    if np.linalg.norm(normal) < 0.99:
+        raise ValueError("the plate's normal leaves the task axes")
+    normal = normal / np.linalg.norm(normal)
+    tangent = R_WP[:, 0][rows]
+    tangent = tangent - (tangent @ normal) * normal
+    size = np.linalg.norm(tangent)
+    return normal, (tangent / size if size > 1e-9 else np.zeros_like(tangent))
 
 
 def _model_file(scenario: Scenario, where: str, name: str) -> Path:
@@ -91,10 +114,12 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     if len(plate_bodies) != 1:
         raise ScenarioError(f"{src}: plate.urdf: the plate model must have exactly one body")
     plate_body = plant.get_body(plate_bodies[0])
-    X_WP = RigidTransform(RollPitchYaw(0.0, 0.0, scenario.plate.yaw), np.asarray(scenario.plate.position))
+    pl = scenario.plate
+    X_WP = RigidTransform(RollPitchYaw(pl.roll, pl.pitch, pl.yaw), np.asarray(pl.position))
     sensor_joint = plant.AddJoint(WeldJoint(SENSOR_JOINT, plant.world_frame(), plate_body.body_frame(), X_WP))
     obstacle_bodies = _add_obstacles(plant, scene_graph, scenario, plate_body)
-    plant.mutable_gravity_field().set_gravity_vector(gravity_vector(scenario.plane))
+    gravity = gravity_vector(scenario)
+    plant.mutable_gravity_field().set_gravity_vector(gravity)
     plant.Finalize()
 
     if not plant.HasFrameNamed(scenario.arm.tool_frame, arm):
@@ -115,14 +140,10 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     v0 = np.array([scenario.arm.initial_velocities.get(j, 0.0) for j in names])
     plant.SetDefaultPositions(q0)  # survives context resets (DRAKE_NOTES)
 
-    # The plate frame's +y axis points into the plate: the direction the tool pushes.
-    push_W = X_WP.rotation().matrix()[:, 1]
-    normal = push_W[arm_model.rows]
-    if np.linalg.norm(normal) < 0.99:
-        raise ScenarioError(f"{src}: plate.yaw: the plate's normal leaves the task axes {scenario.task.axes}")
-    normal = normal / np.linalg.norm(normal)
-    along_W = X_WP.rotation().matrix()[:, 0]
-    tangent = along_W[arm_model.rows]
+    try:
+        normal, tangent = surface_directions(X_WP.rotation().matrix(), arm_model.rows)
+    except ValueError as e:
+        raise ScenarioError(f"{src}: plate: {e} {scenario.task.axes}") from None
     inspector = scene_graph.model_inspector()
     tool = arm_model.tool_frame.body().index()
     arm_bodies = [b for b in plant.GetBodyIndices(arm) if b != tool]
@@ -138,6 +159,8 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
         tangent=tangent,
         q0=q0,
         v0=v0,
+        arm_file=arm_file,
+        gravity=gravity,
         obstacle_bodies=obstacle_bodies,
         link_geometries=proximity_geometries(inspector, plant, arm_bodies),
         obstacle_geometries=proximity_geometries(inspector, plant, obstacle_indices),
@@ -169,3 +192,16 @@ def _add_obstacles(plant: MultibodyPlant, scene_graph, scenario: Scenario, plate
         plant.AddJoint(WeldJoint(f"obstacle_{ob.name}", plant.world_frame(), body.body_frame(), X_WO))
         bodies.append(body)
     return bodies
+
+
+def station_obstacles(station: Station) -> list[Obstacle]:
+    """The plate and the obstacles as the controller should know them: each proximity
+    shape with its pose in the world."""
+    plant, inspector = station.plant, station.scene_graph.model_inspector()
+    context = plant.CreateDefaultContext()
+    out = []
+    for g in station.obstacle_geometries:
+        body = plant.GetBodyFromFrameId(inspector.GetFrameId(g))
+        X_WG = plant.EvalBodyPoseInWorld(context, body) @ inspector.GetPoseInFrame(g)
+        out.append(Obstacle(inspector.GetName(g), inspector.GetShape(g).Clone(), X_WG))
+    return out

@@ -148,14 +148,15 @@ class DiagramPicture:
 def write_diagram_picture(diagram: Diagram, out: Path, *, stem: str = "diagram") -> DiagramPicture:
     """Writes ``stem.dot`` and, if Graphviz's ``dot`` is on the PATH, ``stem.svg``.
 
-    Every system appears under its name (``set_name``); one level deep, so a
-    nested diagram is one box. The plant is split into its inputs and its outputs
-    (Drake's ``"split": "I/O"`` option), so the signals flow left to right from
+    Every system appears under its name (``set_name``), two levels deep, so the
+    controller's box shows the paper's structure inside it (robot terms,
+    impedance, criteria, priority selector, null-space controller). The plant is
+    split into its inputs and its outputs (Drake's ``"split": "I/O"`` option), so the signals flow left to right from
     the plant's outputs, through the controllers, back to its actuation.
     """
     out = Path(out)
     dot_path = out / f"{stem}.dot"
-    text = diagram.GetGraphvizString(max_depth=1, options={"plant/split": "I/O"})
+    text = diagram.GetGraphvizString(max_depth=2, options={"plant/split": "I/O"})
     dot_path.write_text(text, encoding="utf-8")
     svg_path = out / f"{stem}.svg"
     hint = RENDER_HINT.format(dot=dot_path, svg=svg_path)

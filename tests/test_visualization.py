@@ -99,9 +99,11 @@ def test_diagram_dot_names_every_system_after_its_role(short_run, tmp_path):
     out, _ = short_run
     built = build_diagram(fig3_with(tmp_path, duration=SHORT_RUN_DURATION), meshcat=start_meshcat(live=False))
     names = [s.get_name() for s in built.diagram.GetSystems()]
+    names += [s.get_name() for s in built.controller.GetSystems()]
     assert [n for n in names if not ROLE_NAME.match(n)] == []
     expected = {
         "plant",
+        "controller",
         "robot_terms",
         "force_sensor",
         "impedance_controller",

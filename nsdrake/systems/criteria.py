@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import QueryObject
 from pydrake.systems.framework import LeafSystem
 
+from ..controller_model import ControllerModel
 from ..criteria.joint_torque import joint_torque_criterion
 from ..criteria.manipulability import manipulability
 from ..criteria.obstacle import ObstacleDistances, activation, obstacle_potential
 from ..dynamics import RobotTerms
-from ._util import declare_scratch_plant_context, python_value_producer
+from ._util import declare_scratch, python_value_producer
 
 
 class _CriterionSystem(LeafSystem):
@@ -19,14 +19,10 @@ class _CriterionSystem(LeafSystem):
     once per evaluation by ``self._compute(context) -> (p, Φ, *extra)``. Subclasses
     call ``_declare_ports`` after setting their own attributes."""
 
-    def _declare_ports(self, model_terms: RobotTerms, extra_abstract_inputs=()):
-        """Declares ``robot_terms``, then each (name, model value) abstract input, then the outputs."""
+    def _declare_ports(self, model_terms: RobotTerms):
+        """Declares ``robot_terms``, then the outputs."""
         self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
-        self._extra = [
-            self.DeclareAbstractInputPort(name, AbstractValue.Make(v)) for name, v in extra_abstract_inputs
-        ]
-        inputs = [self._terms, *self._extra]
-        self._deps = {self.input_port_ticket(p.get_index()) for p in inputs}
+        self._deps = {self.input_port_ticket(self._terms.get_index())}
         self._result = self.DeclareCacheEntry(
             description="criterion",
             value_producer=python_value_producer(self._compute),
@@ -100,8 +96,9 @@ class ManipulabilityCriterionSystem(_CriterionSystem):
 
 class ObstacleCriterionSystem(_CriterionSystem):
     """The obstacle potential p = −⅓ Σ max(0, d_∞ − d)³ over link–obstacle pairs and its
-    gradient (Eq. 31, :mod:`nsdrake.criteria.obstacle`), from the scene graph's
-    signed-distance queries; also d_min, the smallest link–obstacle distance (the
+    gradient (Eq. 31, :mod:`nsdrake.criteria.obstacle`), from signed-distance queries
+    on the controller model's own scene graph (the arm's link geometry and the
+    obstacles it knows about); also d_min, the smallest link–obstacle distance (the
     tool's geometry is not a link).
 
     .. pydrake_system::
@@ -109,29 +106,29 @@ class ObstacleCriterionSystem(_CriterionSystem):
         name: ObstacleCriterionSystem
         input_ports:
         - robot_terms
-        - geometry_query
         output_ports:
         - value
         - gradient
         - d_min
         - activation
 
-    ``geometry_query`` is the SceneGraph's query port; ``value`` (1) [m³];
+    ``value`` (1) [m³];
     ``gradient`` (n) [m³/rad]; ``d_min`` (1) [m]; ``activation`` (1) ∈ [0, 1], the
     weight of this level in the priority stack (:func:`nsdrake.criteria.obstacle.activation`).
 
-    The point Jacobians need the plant at the same q as the query; the plant
+    The query and the point Jacobians need the model at the same q; the model
     context written for them is per-context scratch memory.
     """
 
-    def __init__(self, *, distances: ObstacleDistances, influence_distance: float, model_terms: RobotTerms):
+    def __init__(self, *, model: ControllerModel, influence_distance: float, model_terms: RobotTerms):
         super().__init__()
-        self._distances = distances
+        self._model = model
+        self._distances = ObstacleDistances(
+            model.plant, model.link_geometries, model.obstacle_geometries, model.scene_graph.model_inspector()
+        )
         self._influence = float(influence_distance)
-        plant = distances.plant
-        self._declare_ports(model_terms, extra_abstract_inputs=(("geometry_query", QueryObject()),))
-        self._query = self._extra[0]
-        self._scratch = declare_scratch_plant_context(self, plant)
+        self._declare_ports(model_terms)
+        self._scratch = declare_scratch(self, model.create_scratch)
         self.DeclareVectorOutputPort(
             "d_min",
             1,
@@ -147,8 +144,13 @@ class ObstacleCriterionSystem(_CriterionSystem):
 
     def _compute(self, context):
         terms = self._terms.Eval(context)
-        plant_context = self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
-        self._distances.plant.SetPositions(plant_context, terms.q)
-        pairs = self._distances.pairs(self._query.Eval(context), plant_context, self._influence)
+        scratch = self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
+        model = self._model
+        plant_context = model.plant_context(scratch)
+        model.plant.SetPositions(plant_context, terms.q)
+        query = model.scene_graph.get_query_output_port().Eval(
+            model.scene_graph.GetMyContextFromRoot(scratch)
+        )
+        pairs = self._distances.pairs(query, plant_context, self._influence)
         p, Phi = obstacle_potential(pairs, self._influence, terms.n)
         return p, Phi, min((pair.distance for pair in pairs), default=np.inf)

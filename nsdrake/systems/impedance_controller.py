@@ -31,7 +31,7 @@ class ImpedanceController(LeafSystem):
 
     Task-space inputs have m entries [m, m/s, m/s²]; f_d is the desired normal
     force [N]; ``measured_wrench`` is the sensor's [M_So; f] (6) [N m, N] about
-    its origin So (``p_WSo``), world; the task rows of f are F.
+    its origin So (``p_WSo``; None: about the tool point), world; the task rows of f are F.
     ``generalized_force`` (n) [N m] is in velocity order.
     """
 
@@ -40,14 +40,14 @@ class ImpedanceController(LeafSystem):
         *,
         gains: ImpedanceGains,
         task_rows: np.ndarray,
-        p_WSo: np.ndarray,
+        p_WSo: np.ndarray | None,
         gravity_compensation: bool,
         model_terms: RobotTerms,
     ):
         super().__init__()
         n = model_terms.n
         self._gains = gains
-        self._p_WSo = np.asarray(p_WSo, dtype=float)
+        self._p_WSo = None if p_WSo is None else np.asarray(p_WSo, dtype=float)
         self._rows = np.asarray(task_rows)
         self._gravity = gravity_compensation
         m = len(self._rows)
@@ -67,7 +67,8 @@ class ImpedanceController(LeafSystem):
 
     def _calc(self, context, output):
         terms = self._terms.Eval(context)
-        W_T = wrench_at_tool(self._wrench.Eval(context), self._p_WSo, terms.p_WT)
+        W = self._wrench.Eval(context)
+        W_T = W if self._p_WSo is None else wrench_at_tool(W, self._p_WSo, terms.p_WT)
         F = W_T[3:][self._rows]
         xddot_c = command_acceleration(
             terms.x,

@@ -158,7 +158,9 @@ class PrioritySelector(LeafSystem):
         return qdot * scale, state, scale
 
     def _update(self, context, discrete_state):
-        state = self._result.Eval(context)[1]
+        # Only the switch state: evaluating the whole result here, at the state the
+        # plant has just stepped to, would compute q̇_dⁿ a second time per period.
+        state = self._switch_state(context)
         discrete_state.get_mutable_vector(self._state).SetFromVector(
             [float(state.mode), float(state.previous), state.switch_time]
         )

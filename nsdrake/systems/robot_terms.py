@@ -6,8 +6,8 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from ..dynamics import ArmModel
-from ._util import declare_scratch_plant_context
+from ..controller_model import ControllerModel
+from ._util import declare_scratch
 
 
 class RobotTermsSystem(LeafSystem):
@@ -27,24 +27,23 @@ class RobotTermsSystem(LeafSystem):
     ``estimated_state`` is [q; q̇] (2n); ``robot_terms`` is an abstract
     RobotTerms; ``task_position`` is x (m) [m].
 
-    The plant context this system writes q and q̇ into is scratch memory owned by
-    each context (a cache entry with no prerequisites), never shared between
-    contexts.
+    The terms come from the controller's own model (:class:`nsdrake.ControllerModel`),
+    never from the simulated plant; the model context it writes q and q̇ into is
+    scratch memory owned by each context (a cache entry with no prerequisites),
+    never shared between contexts.
     """
 
-    def __init__(self, *, arm_model: ArmModel, coriolis_matrix: bool):
+    def __init__(self, *, model: ControllerModel, coriolis_matrix: bool):
         super().__init__()
-        self._arm = arm_model
+        self._model = model
         self._coriolis = coriolis_matrix
-        n = arm_model.n
+        n = model.n
         self._n = n
-        plant = arm_model.plant
         self._state = self.DeclareVectorInputPort("estimated_state", 2 * n)
-        self._scratch = declare_scratch_plant_context(self, plant)
+        self._scratch = declare_scratch(self, model.create_scratch)
         on_state = {self.input_port_ticket(self._state.get_index())}
         zero = np.zeros(n)
-        plant_context = plant.CreateDefaultContext()
-        model_value = arm_model.terms(plant_context, zero, zero, coriolis_matrix)
+        model_value = model.terms(model.create_scratch(), zero, zero, coriolis_matrix)
         self._terms = self.DeclareAbstractOutputPort(
             "robot_terms",
             alloc=lambda: AbstractValue.Make(model_value),
@@ -52,14 +51,14 @@ class RobotTermsSystem(LeafSystem):
             prerequisites_of_calc=on_state,
         )
         self.DeclareVectorOutputPort(
-            "task_position", arm_model.m, self._calc_task_position, prerequisites_of_calc=on_state
+            "task_position", model.m, self._calc_task_position, prerequisites_of_calc=on_state
         )
 
     def _calc_terms(self, context, output):
         state = self._state.Eval(context)
-        plant_context = self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
+        scratch = self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
         n = self._n
-        output.set_value(self._arm.terms(plant_context, state[:n], state[n:], self._coriolis))
+        output.set_value(self._model.terms(scratch, state[:n], state[n:], self._coriolis))
 
     def _calc_task_position(self, context, output):
         output.SetFromVector(self._terms.Eval(context).x)

@@ -1,0 +1,365 @@
+"""NullSpaceImpedanceController: the paper's whole controller as one Drake component."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import Adder, ConstantVectorSource
+
+from .config import ControllerConfig
+from .controller_model import ControllerModel
+from .impedance import ImpedanceGains
+from .priority import Criterion, SelectorLimits
+from .pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from .systems import (
+    ImpedanceController,
+    JointTorqueCriterionSystem,
+    ManipulabilityCriterionSystem,
+    NullSpaceController,
+    ObstacleCriterionSystem,
+    PrioritySelector,
+    RobotTermsSystem,
+    SelfMotionSweep,
+)
+
+
+class ControllerConfigError(ValueError):
+    """A configuration that does not fit the controller model; the message is one line."""
+
+
+def generalized_inverse(config: ControllerConfig) -> GeneralizedInverse:
+    ns = config.null_space
+    return GeneralizedInverse(PseudoInverseKind(ns.pseudo_inverse), ns.damping)
+
+
+def without_null_space_task(config: ControllerConfig) -> ControllerConfig:
+    """The same controller with q̇_dⁿ = 0: every criterion gain and the sweep set to zero,
+    so the null-space controller only damps self-motion."""
+    d = config.desired_null_space
+    c = d.criteria
+    criteria = dataclasses.replace(
+        c,
+        obstacle=dataclasses.replace(c.obstacle, gain=0.0),
+        joint_torque=dataclasses.replace(c.joint_torque, gain=0.0),
+        manipulability=dataclasses.replace(c.manipulability, gain=0.0),
+    )
+    sweep = dataclasses.replace(d.sweep, amplitude=0.0)
+    return dataclasses.replace(
+        config, desired_null_space=dataclasses.replace(d, criteria=criteria, sweep=sweep)
+    )
+
+
+class NullSpaceImpedanceController(Diagram):
+    """Task-space impedance control of position and force (Eqs. 6–8) with null-space
+    velocity control through the dynamically consistent pseudo-inverse (Eqs. 14, 21),
+    the desired null-space velocity from criterion gradients (Eqs. 29–33) ordered by
+    Fig. 1's priority selector. Nemec & Žlajpah, Robotica 18 (2000) 513–518.
+
+    The law, with the model terms H, C, g, J of the controller's own model at the
+    measured state (q, q̇), x = p(q) the tool point on the task axes, F the measured
+    contact force and n the unit task direction in which the tool pushes::
+
+        τ    = Jᵀ Λ (ẍ_c − J̇ q̇) + J_Tᵀ W_T + C q̇ + g + τ₀                 (Eqs. 6–7)
+        ẍ_c  = ẍ_d + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − nᵀF)      (Eq. 8 + force)
+        τ₀   = H N (q̈_dⁿ + (J̄̇ J + J̄ J̇) q̇ + K_n eⁿ + H⁻¹ C eⁿ)           (Eq. 21)
+        eⁿ   = q̇_dⁿ − N q̇,   N = I − J̄ J,   J̄ = H⁻¹ Jᵀ Λ,   Λ = (J H⁻¹ Jᵀ)⁻¹  (Eqs. 13, 14)
+        q̇_dⁿ = Σ_k K_k N_k H⁻¹ Φ_k  (Eq. 30 on each priority level; Fig. 1 orders them)
+
+    J_Tᵀ W_T is Eq. 6's Jᵀ F for the whole measured wrench moved to the tool point
+    (:mod:`nsdrake.impedance`); q̈_dⁿ is the backward difference of q̇_dⁿ over one
+    period. With an exact model the closed loop is
+
+        (ẍ_d − ẍ) + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − f_n) = 0    (Eq. 10)
+        ėⁿ = −K_n eⁿ + J̄ J (J̄̇ J + J̄ J̇) q̇ − N H⁻¹ C eⁿ                      (Eq. 22)
+
+    so τ₀ never accelerates the task (J H⁻¹ τ₀ = 0, Eq. 11), contact forces never
+    accelerate the null space (N H⁻¹ Jᵀ F = 0, Eq. 26), and ν = ½ eⁿᵀ H eⁿ decreases
+    as ν̇ = −K_n eⁿᵀ H eⁿ (Eq. 24). Switches in ``config`` drop each compensation term
+    or swap J̄ for the Moore–Penrose or damped inverse, to measure what they do.
+
+    .. pydrake_system::
+
+        name: NullSpaceImpedanceController
+        input_ports:
+        - estimated_state
+        - measured_wrench
+        - desired_position
+        - desired_velocity
+        - desired_acceleration
+        - desired_force
+        output_ports:
+        - generalized_force
+        - null_space_velocity_error
+        - lyapunov
+        - desired_null_space_velocity
+        - mode
+        - speed_scale
+        - manipulability
+        - d_min
+        - joint_torque_criterion
+        - obstacle_potential
+        - task_position
+
+    Inputs: ``estimated_state`` [q; q̇] (2n) [rad, rad/s] in the controller model's
+    velocity order; ``measured_wrench`` [M; f] (6) [N m, N], the wrench the tool
+    exerts on the environment, world frame, moment about ``wrench_point``;
+    ``desired_position``, ``desired_velocity``, ``desired_acceleration`` x_d, ẋ_d,
+    ẍ_d (m) [m, m/s, m/s²]; ``desired_force`` f_d (1) [N] along n.
+
+    Outputs: ``generalized_force`` τ (n) [N m], velocity order (map it to the
+    plant's actuation with Bᵀ); ``null_space_velocity_error`` eⁿ (n) [rad/s];
+    ``lyapunov`` ν (1) [J]; ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s];
+    ``mode`` (1): 0 none, 1 obstacle avoidance, 2 joint torque, 3 manipulability on
+    level 2; ``speed_scale`` (1) the joint-speed limits' factor on q̇_dⁿ;
+    ``manipulability`` w = √det(J Jᵀ) (1); ``d_min`` (1) [m] smallest link–obstacle
+    distance; ``joint_torque_criterion`` ‖Jᵀ F_d‖² (1) [N² m²];
+    ``obstacle_potential`` (1) [m³]; ``task_position`` x (m) [m].
+
+    Args:
+        controller_model: a :class:`nsdrake.ControllerModel`, a URDF path (the arm
+            alone, welded to the world by the file), or a finalized MultibodyPlant
+            of the arm that the controller may own — never the simulated plant.
+        tool_frame: the frame whose origin is the task point (URDF/plant input only).
+        task_axes: world axes of x, e.g. ("x", "y") (URDF/plant input only).
+        normal: (m,) task-space direction in which the tool pushes (normalised here).
+        config: gains, inverse, switches, criteria, selector and speed limits.
+        wrench_point: p_WSo (3,), the point the measured moment is about [m];
+            None: the tool point itself.
+
+    Preconditions: the controller model's joints are revolute or prismatic, one
+    actuator each; J has full row rank m along the way (redundancy n > m).
+    """
+
+    def __init__(
+        self,
+        *,
+        controller_model: ControllerModel | MultibodyPlant | str | Path,
+        normal: Sequence[float],
+        config: ControllerConfig,
+        tool_frame: str = "tool",
+        task_axes: Sequence[str] = ("x", "y"),
+        wrench_point: Sequence[float] | None = None,
+    ):
+        super().__init__()
+        model = as_controller_model(controller_model, tool_frame, task_axes)
+        self.model = model
+        self.config = config
+        normal = np.asarray(normal, dtype=float)
+        if normal.shape != (model.m,) or not np.linalg.norm(normal) > 0:
+            raise ControllerConfigError(
+                f"normal must be a non-zero vector on the {model.m} task axes, got {normal.tolist()}"
+            )
+        self.normal = normal / np.linalg.norm(normal)
+        check_config(config, model)
+        builder = DiagramBuilder()
+        terms = _add_robot_terms(builder, model, config)
+        model_terms = model.terms(model.create_scratch(), np.zeros(model.n), np.zeros(model.n), True)
+        impedance = _add_impedance(builder, terms, config, self.normal, wrench_point, model, model_terms)
+        qdot_ns, diagnostics = _add_desired_null_space(
+            builder, terms, config, self.normal, model, model_terms
+        )
+        null_space = _add_null_space(builder, terms, qdot_ns, config, model_terms)
+        torque = builder.AddNamedSystem("torque_sum", Adder(2, model.n))
+        builder.Connect(impedance.get_output_port(), torque.get_input_port(0))
+        builder.Connect(null_space.GetOutputPort("generalized_force"), torque.get_input_port(1))
+        builder.ExportInput(terms.GetInputPort("estimated_state"), "estimated_state")
+        builder.ExportInput(impedance.GetInputPort("measured_wrench"), "measured_wrench")
+        for name, port in (
+            ("desired_position", "x_d"),
+            ("desired_velocity", "xdot_d"),
+            ("desired_acceleration", "xddot_d"),
+            ("desired_force", "f_d"),
+        ):
+            builder.ExportInput(impedance.GetInputPort(port), name)
+        builder.ExportOutput(torque.get_output_port(), "generalized_force")
+        builder.ExportOutput(
+            null_space.GetOutputPort("null_space_velocity_error"), "null_space_velocity_error"
+        )
+        builder.ExportOutput(null_space.GetOutputPort("lyapunov"), "lyapunov")
+        builder.ExportOutput(qdot_ns, "desired_null_space_velocity")
+        for name, port in diagnostics.items():
+            builder.ExportOutput(port, name)
+        builder.ExportOutput(terms.GetOutputPort("task_position"), "task_position")
+        builder.BuildInto(self)
+        self.set_name("controller")
+
+
+def as_controller_model(source, tool_frame: str, task_axes: Sequence[str]) -> ControllerModel:
+    if isinstance(source, ControllerModel):
+        return source
+    if isinstance(source, MultibodyPlant):
+        return ControllerModel.from_plant(source, tool_frame=tool_frame, task_axes=task_axes)
+    return ControllerModel.from_urdf(source, tool_frame=tool_frame, task_axes=task_axes)
+
+
+def check_config(config: ControllerConfig, model: ControllerModel) -> None:
+    """Refuses, in one line, what the model cannot do: joint names it does not have,
+    obstacle avoidance without link and obstacle geometry, a sweep without direction."""
+    d = config.desired_null_space
+    for where, table in (
+        ("desired_null_space.joint_speed_limits", d.joint_speed_limits),
+        ("desired_null_space.sweep.direction", d.sweep.direction),
+    ):
+        for name in table:
+            if name not in model.joint_names:
+                raise ControllerConfigError(
+                    f"{where}.{name}: unknown joint; the arm's joints are {', '.join(model.joint_names)}"
+                )
+    if d.criteria.obstacle.gain > 0 and not model.has_geometry:
+        raise ControllerConfigError(
+            "desired_null_space.criteria.obstacle.gain: the controller model has no link collision geometry "
+            "or no obstacles to keep away from (set the gain to 0, or build the model with obstacles)"
+        )
+    if model.m >= model.n:
+        raise ControllerConfigError(
+            f"task axes {list(model.arm.task_axes)}: the arm has {model.n} joints, "
+            "no redundancy for a null space"
+        )
+
+
+def _add_robot_terms(builder, model: ControllerModel, config: ControllerConfig):
+    ns = config.null_space
+    return builder.AddNamedSystem(
+        "robot_terms",
+        RobotTermsSystem(
+            model=model, coriolis_matrix=ns.task_velocity_compensation or ns.coriolis_compensation
+        ),
+    )
+
+
+def _add_impedance(builder, terms, config, normal, wrench_point, model, model_terms):
+    imp = config.impedance
+    impedance = builder.AddNamedSystem(
+        "impedance_controller",
+        ImpedanceController(
+            gains=ImpedanceGains.along_surface(
+                normal, imp.K_p_tangent, imp.K_p_normal, imp.K_v_tangent, imp.K_v_normal, imp.K_f
+            ),
+            task_rows=model.arm.rows,
+            p_WSo=wrench_point,
+            gravity_compensation=imp.gravity_compensation,
+            model_terms=model_terms,
+        ),
+    )
+    builder.Connect(terms.GetOutputPort("robot_terms"), impedance.GetInputPort("robot_terms"))
+    return impedance
+
+
+def _add_criteria(builder, terms_port, config, normal, model, model_terms) -> dict:
+    crit = config.desired_null_space.criteria
+    systems = {
+        Criterion.joint_torque: JointTorqueCriterionSystem(
+            F_d=config.nominal_force * normal, model_terms=model_terms
+        ),
+        Criterion.manipulability: ManipulabilityCriterionSystem(model_terms=model_terms),
+    }
+    if model.has_geometry:
+        systems[Criterion.obstacle] = ObstacleCriterionSystem(
+            model=model, influence_distance=crit.obstacle.influence_distance, model_terms=model_terms
+        )
+    added = {}
+    for c in Criterion:
+        if c in systems:
+            added[c] = builder.AddNamedSystem(f"{c.value}_criterion", systems[c])
+            builder.Connect(terms_port, added[c].GetInputPort("robot_terms"))
+    return added
+
+
+def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
+    """Criteria → priority selector (or a prescribed sweep) → q̇_dⁿ; returns its port and
+    the diagnostic ports to export."""
+    d = config.desired_null_space
+    terms_port = terms.GetOutputPort("robot_terms")
+    criteria = _add_criteria(builder, terms_port, config, normal, model, model_terms)
+    gains = {
+        Criterion.obstacle: d.criteria.obstacle.gain,
+        Criterion.joint_torque: d.criteria.joint_torque.gain,
+        Criterion.manipulability: d.criteria.manipulability.gain,
+    }
+    limits = d.joint_speed_limits
+    sel = d.selector
+    selector = builder.AddNamedSystem(
+        "priority_selector",
+        PrioritySelector(
+            inverse=generalized_inverse(config),
+            gains=gains,
+            limits=SelectorLimits(d_lim=sel.d_lim, w_lim=sel.w_lim, d_band=sel.d_band, w_band=sel.w_band),
+            blend_time=sel.blend_time,
+            rotate_gradient=d.rotate_gradient,
+            speed_limits=np.array([limits.get(j, np.inf) for j in model.joint_names]),
+            speed_headroom=d.speed_headroom,
+            period=config.period,
+            model_terms=model_terms,
+        ),
+    )
+    builder.Connect(terms_port, selector.GetInputPort("robot_terms"))
+    for c in (Criterion.joint_torque, Criterion.manipulability):
+        builder.Connect(criteria[c].GetOutputPort("gradient"), selector.GetInputPort(f"{c.value}_gradient"))
+    manipulability = criteria[Criterion.manipulability]
+    builder.Connect(manipulability.GetOutputPort("value"), selector.GetInputPort("manipulability"))
+    diagnostics = {
+        "mode": selector.GetOutputPort("mode"),
+        "speed_scale": selector.GetOutputPort("speed_scale"),
+        "manipulability": manipulability.GetOutputPort("value"),
+        "joint_torque_criterion": criteria[Criterion.joint_torque].GetOutputPort("value"),
+    }
+    if Criterion.obstacle in criteria:
+        obstacle = criteria[Criterion.obstacle]
+        ports = {name: obstacle.GetOutputPort(name) for name in ("gradient", "d_min", "activation", "value")}
+    else:  # no geometry: no obstacle in reach, d_min = ∞
+        ports = {
+            name: builder.AddNamedSystem(f"no_obstacle_{name}", ConstantVectorSource(value)).get_output_port()
+            for name, value in (
+                ("gradient", np.zeros(model.n)),
+                ("d_min", [np.inf]),
+                ("activation", [0.0]),
+                ("value", [0.0]),
+            )
+        }
+    builder.Connect(ports["gradient"], selector.GetInputPort("obstacle_gradient"))
+    builder.Connect(ports["d_min"], selector.GetInputPort("d_min"))
+    builder.Connect(ports["activation"], selector.GetInputPort("obstacle_activation"))
+    diagnostics["d_min"] = ports["d_min"]
+    diagnostics["obstacle_potential"] = ports["value"]
+    command = selector.GetOutputPort("desired_null_space_velocity")
+    if d.source == "sweep":
+        sw = d.sweep
+        sweep = builder.AddNamedSystem(
+            "self_motion_sweep",
+            SelfMotionSweep(
+                inverse=generalized_inverse(config),
+                direction=np.array([sw.direction.get(j, 0.0) for j in model.joint_names]),
+                amplitude=sw.amplitude,
+                frequency=sw.frequency,
+                start_time=sw.start_time,
+                ramp_time=sw.ramp_time,
+                model_terms=model_terms,
+            ),
+        )
+        builder.Connect(terms_port, sweep.get_input_port())
+        command = sweep.get_output_port()
+    return command, diagnostics
+
+
+def _add_null_space(builder, terms, qdot_ns, config, model_terms):
+    ns = config.null_space
+    null_space = builder.AddNamedSystem(
+        "null_space_controller",
+        NullSpaceController(
+            inverse=generalized_inverse(config),
+            K_n=ns.K_n,
+            period=config.period,
+            task_velocity_compensation=ns.task_velocity_compensation,
+            coriolis_compensation=ns.coriolis_compensation,
+            acceleration_feedforward=ns.acceleration_feedforward,
+            model_terms=model_terms,
+        ),
+    )
+    builder.Connect(terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
+    builder.Connect(qdot_ns, null_space.GetInputPort("desired_null_space_velocity"))
+    return null_space
