@@ -151,8 +151,9 @@ def write_diagram_picture(diagram: Diagram, out: Path, *, stem: str = "diagram")
     Every system appears under its name (``set_name``), two levels deep, so the
     controller's box shows the paper's structure inside it (robot terms,
     impedance, criteria, priority selector, null-space controller). The plant is
-    split into its inputs and its outputs (Drake's ``"split": "I/O"`` option), so the signals flow left to right from
-    the plant's outputs, through the controllers, back to its actuation.
+    split into its inputs and its outputs (Drake's ``"split": "I/O"`` option), so
+    the signals flow left to right from the plant's outputs, through the
+    controllers, back to its actuation.
     """
     out = Path(out)
     dot_path = out / f"{stem}.dot"
