@@ -1,113 +1,78 @@
-"""Benchmark: cost of one control tick per LeafSystem and for the whole stack, and the
-fig3 run's wall time against Drake's C++ JointStiffnessController on the same plant,
-contact and sensor.
+"""Benchmark: CPU time per control tick inside real simulations, and the controller's
+cost per step on a 4-joint and a 7-joint arm.
 
-    python bench/bench_controller.py [--repeats N] [--ticks N]
+    python bench/bench_controller.py [--repeats N] [--steps N]
 
-Prints medians of several runs. The machines are noisy, so the run-time figure is a
-ratio to a baseline measured in the same process, interleaved with ours.
+- ``fig3_tick_us``: process CPU time of ``Simulator.AdvanceTo`` over the fig3 run
+  (5 s, 2500 control ticks; building the diagram excluded), divided by the ticks.
+- ``baseline_tick_us``: the same plant, contact and force sensor, the joints driven
+  by Drake's C++ JointStiffnessController along fig3's own joint trajectory (so
+  the tool presses and slides on the plate as in fig3), state and force logged.
+  Runs are interleaved with fig3's, so both see the same machine load; ``ratio``
+  is fig3 over baseline.
+- ``controller_step_us_4dof`` / ``_7dof``: the controller diagram's
+  ``generalized_force`` evaluated hot at fresh states (a new ``estimated_state``
+  each call, as a real-robot loop would), on fig3's arm and controller, and on
+  the Panda (urdf/panda.urdf) with a 3-D position task, joint-torque and
+  manipulability criteria.
+
+Every figure is a median over ``--repeats`` runs. The last line is one JSON object.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
 
 import numpy as np
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.controllers import JointStiffnessController
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from nsdrake.diagram import build_diagram
+from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
+from nsdrake.diagram import build_diagram, controller_config, controller_model
+from nsdrake.models import models_dir
 from nsdrake.plant import add_station
 from nsdrake.scenario import load_scenario
-from nsdrake.simulate import run
+from nsdrake.simulate import collect_traces
 from nsdrake.systems import ForceSensor
 
-# The controller stack in evaluation order: (system, output port).
-STACK = [
-    ("robot_terms", "robot_terms"),
-    ("force_sensor", "wrench"),
-    ("reference", "x_d"),
-    ("impedance_controller", "generalized_force"),
-    ("joint_torque_criterion", "gradient"),
-    ("manipulability_criterion", "gradient"),
-    ("obstacle_criterion", "gradient"),
-    ("priority_selector", "desired_null_space_velocity"),
-    ("null_space_controller", "generalized_force"),
-    ("torque_sum", "sum"),
-    ("actuation_map", "y0"),
-]
 
-
-def tick_costs(ticks: int, repeats: int) -> tuple[dict[str, float], float]:
-    """Median µs per tick for each system (its own cost, upstream already evaluated)
-    and for the whole stack (a fresh state, then the actuation)."""
-    scenario = load_scenario("fig3")
-    built = build_diagram(scenario)
-    context = built.diagram.CreateDefaultContext()
-    plant = built.station.plant
+def simulate_cpu(diagram, plant, q0, v0, duration: float) -> tuple[float, object]:
+    """CPU seconds of Initialize + AdvanceTo(duration); the diagram is built already."""
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
     plant_context = plant.GetMyMutableContextFromRoot(context)
-    context.SetTime(2.0)  # in contact phase of the reference (the state is what varies)
-    rng = np.random.default_rng(0)
-    states = np.hstack(
-        [built.station.q0 + 0.05 * rng.standard_normal((256, 4)), 0.2 * rng.standard_normal((256, 4))]
-    )
-    ports = []
-    for name, port in STACK:
-        system = built.system(name)
-        ports.append((name, system.GetOutputPort(port), system.GetMyContextFromRoot(context)))
-    per_system: dict[str, list[float]] = {name: [] for name, _, _ in ports}
-    clock = time.perf_counter
-    for i in range(ticks):
-        plant.SetPositionsAndVelocities(plant_context, states[i % 256])
-        for name, port, sub in ports:
-            t0 = clock()
-            port.Eval(sub)
-            per_system[name].append(clock() - t0)
-    actuation, actuation_context = ports[-1][1], ports[-1][2]
-    whole = []
-    for _ in range(repeats):
-        t0 = clock()
-        for i in range(ticks):
-            plant.SetPositionsAndVelocities(plant_context, states[i % 256])
-            actuation.Eval(actuation_context)
-        elapsed = clock() - t0
-        t0 = clock()
-        for i in range(ticks):
-            plant.SetPositionsAndVelocities(plant_context, states[i % 256])
-        whole.append((elapsed - (clock() - t0)) / ticks)
-    skip = ticks // 10  # warm-up
-    medians = {name: statistics.median(v[skip:]) * 1e6 for name, v in per_system.items()}
-    return medians, statistics.median(whole) * 1e6
+    plant.SetPositions(plant_context, q0)
+    plant.SetVelocities(plant_context, v0)
+    t0 = time.process_time()
+    simulator.Initialize()
+    simulator.AdvanceTo(duration)
+    return time.process_time() - t0, context
 
 
-def fig3_wall_time(scenario) -> tuple[float, object]:
-    t0 = time.perf_counter()
-    traces, _ = run(scenario)
-    return time.perf_counter() - t0, traces
+def fig3_run(scenario):
+    built = build_diagram(scenario)
+    st = built.station
+    cpu, context = simulate_cpu(built.diagram, st.plant, st.q0, st.v0, scenario.duration)
+    return cpu, collect_traces(built, context)
 
 
-def baseline_wall_time(scenario, traces) -> float:
-    """The same plant, contact and force sensor, the joints driven by Drake's C++
-    JointStiffnessController along the fig3 run's joint trajectory (so the tool
-    presses and slides on the plate as in fig3), with the state and force logged."""
-    t0 = time.perf_counter()
+def baseline_run(scenario, traces) -> float:
     builder = DiagramBuilder()
     station = add_station(builder, scenario)
-    plant: MultibodyPlant = station.plant
-    n = station.arm_model.n
+    plant, n = station.plant, station.arm_model.n
     sensor = builder.AddNamedSystem(
         "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
     )
     builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
-    q = traces.block("q").T
-    v = traces.block("v").T
-    trajectory = PiecewisePolynomial.FirstOrderHold(traces["t"], np.vstack([q, v]))
+    trajectory = PiecewisePolynomial.FirstOrderHold(
+        traces["t"], np.vstack([traces.block("q").T, traces.block("v").T])
+    )
     desired = builder.AddSystem(TrajectorySource(trajectory))
     controller = builder.AddSystem(JointStiffnessController(plant, np.full(n, 20.0), np.full(n, 0.5)))
     builder.Connect(plant.get_state_output_port(), controller.get_input_port_estimated_state())
@@ -115,40 +80,109 @@ def baseline_wall_time(scenario, traces) -> float:
     builder.Connect(controller.get_output_port_actuation(), plant.get_actuation_input_port())
     LogVectorOutput(plant.get_state_output_port(), builder, publish_period=scenario.control_period)
     LogVectorOutput(sensor.GetOutputPort("force"), builder, publish_period=scenario.control_period)
-    simulator = Simulator(builder.Build())
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()), station.q0)
-    simulator.Initialize()
-    simulator.AdvanceTo(scenario.duration)
-    return time.perf_counter() - t0
+    cpu, _ = simulate_cpu(builder.Build(), plant, station.q0, station.v0, scenario.duration)
+    return cpu
+
+
+def step_cost(controller: NullSpaceImpedanceController, q0: np.ndarray, steps: int, seed: int = 0) -> float:
+    """µs per ``generalized_force`` evaluation at a fresh state (median-free: one run)."""
+    context = controller.CreateDefaultContext()
+    n, m = controller.model.n, controller.model.m
+    x0 = controller.GetOutputPort("task_position")
+    controller.GetInputPort("estimated_state").FixValue(context, np.concatenate([q0, np.zeros(n)]))
+    x_d = x0.Eval(context).copy()
+    for name, value in (
+        ("measured_wrench", np.zeros(6)),
+        ("desired_position", x_d),
+        ("desired_velocity", np.zeros(m)),
+        ("desired_acceleration", np.zeros(m)),
+        ("desired_force", [5.0]),
+    ):
+        controller.GetInputPort(name).FixValue(context, value)
+    rng = np.random.default_rng(seed)
+    states = np.hstack([q0 + 0.05 * rng.standard_normal((256, n)), 0.2 * rng.standard_normal((256, n))])
+    state_port = controller.GetInputPort("estimated_state")
+    tau = controller.GetOutputPort("generalized_force")
+    for i in range(64):  # warm up
+        state_port.FixValue(context, states[i % 256])
+        tau.Eval(context)
+    t0 = time.process_time()
+    for i in range(steps):
+        state_port.FixValue(context, states[i % 256])
+        tau.Eval(context)
+    return (time.process_time() - t0) / steps * 1e6
+
+
+def fig3_controller():
+    scenario = load_scenario("fig3")
+    builder = DiagramBuilder()
+    station = add_station(builder, scenario)
+    sensor = ForceSensor(plant=station.plant, sensor_joint=station.sensor_joint)  # for its wrench point
+    controller = NullSpaceImpedanceController(
+        controller_model=controller_model(scenario, station),
+        normal=station.normal,
+        config=controller_config(scenario),
+        wrench_point=sensor.p_WSo,
+    )
+    return controller, station.q0
+
+
+PANDA_Q0 = np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.3, 0.8])  # elbow up, tool in front of the base
+
+
+def panda_controller():
+    model = ControllerModel.from_urdf(
+        models_dir() / "panda.urdf", tool_frame="tool", task_axes=("x", "y", "z")
+    )
+    config = ControllerConfig()
+    config.desired_null_space.criteria.joint_torque.gain = -0.01
+    config.desired_null_space.criteria.manipulability.gain = 0.5
+    return NullSpaceImpedanceController(
+        controller_model=model, normal=[0.0, 0.0, -1.0], config=config
+    ), PANDA_Q0
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=5, help="runs per figure (median)")
-    parser.add_argument("--ticks", type=int, default=2000, help="control ticks per tick-cost run")
+    parser.add_argument("--repeats", type=int, default=5, help="runs per figure (median), at least 5")
+    parser.add_argument("--steps", type=int, default=3000, help="controller evaluations per step-cost run")
     args = parser.parse_args()
 
-    medians, whole = tick_costs(args.ticks, args.repeats)
-    print("cost of one control tick, median [µs] (each system alone, upstream cached):")
-    for name, us in medians.items():
-        print(f"  {name:30s} {us:8.1f}")
-    print(f"  {'sum of the above':30s} {sum(medians.values()):8.1f}")
-    print(f"whole controller stack per tick (fresh state → actuation), median [µs]: {whole:.1f}")
-    print("  (target ≤ 150)")
-
     scenario = load_scenario("fig3")
+    ticks = round(scenario.duration / scenario.control_period)
     ours, base = [], []
-    traces = None
-    for _ in range(args.repeats):  # interleaved, so both see the same machine load
-        t, traces = fig3_wall_time(scenario)
-        ours.append(t)
-        base.append(baseline_wall_time(scenario, traces))
-    o, b = statistics.median(ours), statistics.median(base)
-    steps = round(scenario.duration / scenario.control_period)
-    print(f"fig3 run, {scenario.duration:g} s simulated ({steps} steps), median of {args.repeats} [s]:")
-    print(f"  nsdrake stack                          {o:7.3f}  ({o / steps * 1e6:6.0f} µs/step)")
-    print(f"  JointStiffnessController (C++)         {b:7.3f}  ({b / steps * 1e6:6.0f} µs/step)")
-    print(f"  ratio                                  {o / b:7.2f}   (target ≤ 4)")
+    for k in range(args.repeats):  # interleaved, so both see the same machine load
+        cpu, traces = fig3_run(scenario)
+        ours.append(cpu / ticks * 1e6)
+        base.append(baseline_run(scenario, traces) / ticks * 1e6)
+        print(f"  run {k + 1}: fig3 {ours[-1]:6.1f} µs/tick, baseline {base[-1]:6.1f} µs/tick", flush=True)
+    fig3_us, base_us = statistics.median(ours), statistics.median(base)
+    print(f"fig3, {scenario.duration:g} s simulated ({ticks} ticks), CPU per tick, median of {args.repeats}:")
+    print(f"  nsdrake (plant, sensor, reference, controller, loggers)  {fig3_us:7.1f} µs   (target ≤ 200)")
+    print(f"  JointStiffnessController (C++), same plant and sensor   {base_us:7.1f} µs")
+    print(f"  ratio {'':49} {fig3_us / base_us:7.2f}      (target ≤ 3)")
+
+    steps = {}
+    for label, make in (("4dof", fig3_controller), ("7dof", panda_controller)):
+        controller, q0 = make()
+        steps[label] = statistics.median(
+            step_cost(controller, q0, args.steps, seed=k) for k in range(args.repeats)
+        )
+        print(
+            f"controller step, {label} ({controller.model.dynamics} terms), fresh state → generalized_force: "
+            f"{steps[label]:6.1f} µs   (target ≤ {60 if label == '4dof' else 100})"
+        )
+    print(
+        json.dumps(
+            {
+                "fig3_tick_us": round(fig3_us, 1),
+                "baseline_tick_us": round(base_us, 1),
+                "ratio": round(fig3_us / base_us, 2),
+                "controller_step_us_4dof": round(steps["4dof"], 1),
+                "controller_step_us_7dof": round(steps["7dof"], 1),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":
