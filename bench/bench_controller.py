@@ -34,7 +34,7 @@ from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
-from nsdrake.diagram import build_diagram, controller_config, controller_model
+from nsdrake.diagram import build_controller, build_diagram
 from nsdrake.models import models_dir
 from nsdrake.plant import add_station
 from nsdrake.scenario import load_scenario
@@ -115,16 +115,9 @@ def step_cost(controller: NullSpaceImpedanceController, q0: np.ndarray, steps: i
 
 def fig3_controller():
     scenario = load_scenario("fig3")
-    builder = DiagramBuilder()
-    station = add_station(builder, scenario)
+    station = add_station(DiagramBuilder(), scenario)
     sensor = ForceSensor(plant=station.plant, sensor_joint=station.sensor_joint)  # for its wrench point
-    controller = NullSpaceImpedanceController(
-        controller_model=controller_model(scenario, station),
-        normal=station.normal,
-        config=controller_config(scenario),
-        wrench_point=sensor.p_WSo,
-    )
-    return controller, station.q0
+    return build_controller(scenario, station, sensor.p_WSo), station.q0
 
 
 PANDA_Q0 = np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.3, 0.8])  # elbow up, tool in front of the base

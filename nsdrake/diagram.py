@@ -91,6 +91,22 @@ def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
     )
 
 
+def build_controller(
+    scenario: Scenario, station: Station, wrench_point, *, null_space_task: bool = True
+) -> NullSpaceImpedanceController:
+    """The scenario's controller, on its own model of the station's arm and obstacles;
+    ``wrench_point`` is the point the measured moment is about (the sensor origin)."""
+    try:
+        return NullSpaceImpedanceController(
+            controller_model=controller_model(scenario, station),
+            normal=station.normal,
+            config=controller_config(scenario, null_space_task=null_space_task),
+            wrench_point=wrench_point,
+        )
+    except ControllerConfigError as e:
+        raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
+
+
 def add_reference(
     builder: DiagramBuilder, scenario: Scenario, station: Station, sensor
 ) -> SlideAndPressReference:
@@ -197,15 +213,7 @@ def build_diagram(
     station = add_station(builder, scenario)
     sensor, monitor = add_sensing(builder, station)
     reference = add_reference(builder, scenario, station, sensor)
-    try:
-        controller = NullSpaceImpedanceController(
-            controller_model=controller_model(scenario, station),
-            normal=station.normal,
-            config=controller_config(scenario, null_space_task=null_space_task),
-            wrench_point=sensor.p_WSo,
-        )
-    except ControllerConfigError as e:
-        raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
+    controller = build_controller(scenario, station, sensor.p_WSo, null_space_task=null_space_task)
     builder.AddSystem(controller)
     connect_controller(builder, station, controller, sensor, reference)
     loggers = add_loggers(builder, station, controller, sensor, reference, monitor, scenario.control_period)

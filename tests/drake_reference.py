@@ -83,3 +83,15 @@ def plant_terms(arm: ArmModel, q, v):
         "x": x[arm.rows],
         "p_WT": x,
     }
+
+
+def christoffel_C(arm, q, v):
+    """C_ij = Σ_k ½ (∂H_ij/∂q_k + ∂H_ik/∂q_j − ∂H_jk/∂q_i) v_k, with ∂H/∂q from AutoDiff."""
+    ad = AutoDiffArm(arm)
+    ad.plant.SetPositions(ad.context, InitializeAutoDiff(q))
+    M = ad.plant.CalcMassMatrix(ad.context)
+    n = len(q)
+    dH = ExtractGradient(M.reshape(-1)).reshape(n, n, n)  # dH[i, j, k] = ∂H_ij/∂q_k
+    # G[i, j, k] = ½(∂_k H_ij + ∂_j H_ik − ∂_i H_jk)
+    G = 0.5 * (dH + np.einsum("ikj->ijk", dH) - np.einsum("jki->ijk", dH))
+    return np.einsum("ijk,k->ij", G, v)

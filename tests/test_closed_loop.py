@@ -62,6 +62,16 @@ def test_null_space_error_decays_and_nu_never_increases(tmp_path):
     assert en[-1] < 0.02 * en[0]  # e^{-K_n t}: e^{-5} ≈ 0.007 after 0.5 s
 
 
+def test_nu_decreases_where_only_the_coriolis_compensation_keeps_it_down(tmp_path):
+    """At K_n = 0.2 with a fast self-motion, ½ eᵀḢe outweighs K_n eᵀHe (next test): only
+    the H⁻¹ C eⁿ term of Eq. 21 keeps ν̇ = −K_n eᵀHe < 0 (Eq. 24). With the full law ν
+    falls at every period; a controller that drops or mis-signs that term fails here."""
+    traces = free_motion(tmp_path, K_n=0.2, coriolis=True, speed=-3.0, duration=0.3)
+    nu = traces["nu"]
+    assert nu[0] > 1e-2
+    assert np.max(np.diff(nu)) < 0.0
+
+
 def test_without_coriolis_compensation_nu_can_increase(tmp_path):
     """The same run without H⁻¹ C eⁿ: then ν̇ = −K_n eᵀHe + ½ eᵀḢe, and at fig3's start
     pose with this self-motion ½ eᵀḢe ≈ 0.42 eᵀHe > K_n eᵀHe (K_n = 0.2): ν rises.

@@ -39,6 +39,7 @@ def test_every_shipped_family_loads_and_its_variants_validate():
             variant_scenario(family, i, None, None)
 
 
+@pytest.mark.slow
 def test_eq26_contact_force_excites_the_null_space_only_without_the_dc_inverse(tmp_path):
     """A 10 → 20 N step of the desired force, q̇_dⁿ = 0: the Moore–Penrose inverse shows
     several times the null-space velocity of the dynamically consistent one."""
@@ -55,6 +56,7 @@ def test_eq26_contact_force_excites_the_null_space_only_without_the_dc_inverse(t
         assert [row["variant"] for row in csv.DictReader(f)] == [v.name for v in family.variants]
 
 
+@pytest.mark.slow
 def test_eq24_nu_never_increases_with_full_compensation_and_does_without_coriolis(tmp_path):
     result = run_family(load_family("lyapunov"), tmp_path, jobs=2)
     rows = rows_by_variant(result)
@@ -64,6 +66,7 @@ def test_eq24_nu_never_increases_with_full_compensation_and_does_without_corioli
     assert no_coriolis["nu_increase_max_relative"] > 1e-5
 
 
+@pytest.mark.slow
 def test_gravity_vertical_fig3_meets_the_primary_task_bounds(tmp_path):
     """The vertical plane, gravity compensated: every fig3 bound met; without the g of
     Eq. 7 the tool sags and the bounds are not."""
@@ -74,6 +77,7 @@ def test_gravity_vertical_fig3_meets_the_primary_task_bounds(tmp_path):
     assert not rows["vertical, no gravity compensation"]["all_bounds_met"]
 
 
+@pytest.mark.slow
 def test_ablation_reproduces_section_4_omitting_both_terms(tmp_path):
     """Section 4: the compensation terms "can be omitted without serious performance
     degradation". At K_n = 100 the law without either term still meets every fig3

@@ -30,6 +30,7 @@ def fig3_run(tmp_path_factory):
     return out, result
 
 
+@pytest.mark.slow
 def test_fig3_acceptance_figures(fig3_run):
     out, result = fig3_run
     by_name = {m.name: m for m in result.metrics}
@@ -49,6 +50,7 @@ def test_fig3_acceptance_figures(fig3_run):
     assert 0.5 < by_name["first_contact_time"].value < 2.0
 
 
+@pytest.mark.slow
 def test_metrics_recompute_from_the_written_traces(fig3_run):
     """metrics.json's figures come from the CSV files alone: recomputing them from the
     written files and the scenario (no simulation) gives the same numbers."""

@@ -10,9 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import terms_at
-from drake_reference import AutoDiffArm
+from drake_reference import AutoDiffArm, christoffel_C
 from models import random_states
-from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 
 from nsdrake.impedance import primary_torque
 from nsdrake.null_space import lyapunov, null_space_torque, null_space_velocity_error
@@ -25,18 +24,6 @@ MP = GeneralizedInverse(PseudoInverseKind.moore_penrose)
 
 def rel(a, scale):
     return float(np.max(np.abs(a))) / max(float(scale), 1e-300)
-
-
-def christoffel_C(arm, q, v):
-    """C_ij = Σ_k ½ (∂H_ij/∂q_k + ∂H_ik/∂q_j − ∂H_jk/∂q_i) v_k, with ∂H/∂q from AutoDiff."""
-    ad = AutoDiffArm(arm)
-    ad.plant.SetPositions(ad.context, InitializeAutoDiff(q))
-    M = ad.plant.CalcMassMatrix(ad.context)
-    n = len(q)
-    dH = ExtractGradient(M.reshape(-1)).reshape(n, n, n)  # dH[i, j, k] = ∂H_ij/∂q_k
-    # G[i, j, k] = ½(∂_k H_ij + ∂_j H_ik − ∂_i H_jk)
-    G = 0.5 * (dH + np.einsum("ikj->ijk", dH) - np.einsum("jki->ijk", dH))
-    return np.einsum("ijk,k->ij", G, v)
 
 
 def random_null_space_inputs(arm, T, rng, inverse=DC):

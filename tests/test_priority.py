@@ -135,6 +135,7 @@ def test_an_inactive_level_fades_out_of_the_projection(arm4):
     assert gaps[0] > 1e-3 and gaps[-1] < 1e-8 and all(np.diff(gaps) <= 1e-12)
 
 
+@pytest.mark.slow
 def test_priority_demo_closed_loop(tmp_path):
     """The shipped priority_demo: modes 1, 2 and 3 visited, each mode's criterion improving
     while it is active, no torque step at a switch beyond 2 × the 99th percentile

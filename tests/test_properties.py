@@ -16,6 +16,7 @@ the ~1e-16 working precision: ~1e-10, well inside 1e-8. A wrong formula is off b
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import paper_arm, terms_at
 from drake_reference import AutoDiffArm
 from hypothesis import HealthCheck, assume, given, settings
@@ -39,6 +40,8 @@ SETTINGS = settings(
 
 finite = st.floats(-1.0, 1.0, allow_nan=False, allow_infinity=False)
 vectors = st.lists(finite, min_size=4, max_size=4).map(np.array)
+
+pytestmark = pytest.mark.slow  # 1000 states each
 
 
 offsets = st.tuples(st.sampled_from([-1.0, 1.0]), st.floats(5e-4, 1e-3)).map(lambda p: p[0] * p[1])
