@@ -130,7 +130,7 @@ def slug(text: str) -> str:
 
 
 @dataclass(frozen=True)
-class Context:
+class RunFacts:
     """What a measure may know besides the traces: the scenario and the station."""
 
     scenario: Scenario
@@ -173,7 +173,7 @@ def dc_null_space_speed(traces: Traces, arm: ArmModel) -> np.ndarray:
     return out
 
 
-def measure_contact_force_into_null_space(traces: Traces, ctx: Context) -> dict:
+def measure_contact_force_into_null_space(traces: Traces, ctx: RunFacts) -> dict:
     """Eq. 26. Null-space velocity after the desired-force step (1 s window) and before it
     (0.5 s of steady pressing: the floor of the contact model's own transient)."""
     s = ctx.scenario
@@ -199,7 +199,7 @@ def measure_contact_force_into_null_space(traces: Traces, ctx: Context) -> dict:
     }
 
 
-def measure_null_space_motion_into_task(traces: Traces, ctx: Context) -> dict:
+def measure_null_space_motion_into_task(traces: Traces, ctx: RunFacts) -> dict:
     """Eq. 11. Disturbance of force and position while the self-motion sweep runs
     (from the end of its ramp to the end of the run), against the 0.5 s before it."""
     s = ctx.scenario
@@ -226,7 +226,7 @@ def measure_null_space_motion_into_task(traces: Traces, ctx: Context) -> dict:
     }
 
 
-def measure_lyapunov(traces: Traces, ctx: Context) -> dict:
+def measure_lyapunov(traces: Traces, ctx: RunFacts) -> dict:
     """Eqs. 23–24. The largest increase of ν between consecutive control periods."""
     nu = traces["nu"]
     dnu = np.diff(nu)
@@ -240,7 +240,7 @@ def measure_lyapunov(traces: Traces, ctx: Context) -> dict:
     }
 
 
-def measure_fig3(traces: Traces, ctx: Context) -> dict:
+def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
     """The fig3 acceptance figures (primary task and null space), and the largest torque step."""
     from .runner import compute_metrics
 
@@ -256,7 +256,7 @@ def measure_fig3(traces: Traces, ctx: Context) -> dict:
     return row
 
 
-MEASURES: dict[str, Callable[[Traces, Context], dict]] = {
+MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
     "contact_force_into_null_space": measure_contact_force_into_null_space,
     "null_space_motion_into_task": measure_null_space_motion_into_task,
     "lyapunov": measure_lyapunov,
@@ -279,7 +279,7 @@ def _run_variant(args) -> tuple[int, dict]:
     folder.mkdir(parents=True, exist_ok=True)
     traces.write_csv(folder / "traces.csv")
     traces = Traces.read_csv(folder / "traces.csv")
-    return index, MEASURES[family.measure](traces, Context(scenario=scenario, station=built.station))
+    return index, MEASURES[family.measure](traces, RunFacts(scenario=scenario, station=built.station))
 
 
 @dataclass
@@ -378,7 +378,7 @@ def plot_family(path: Path, family: Family, traces: list[Traces]) -> None:
     for variant, tr in zip(family.variants, traces, strict=True):
         t = tr["t"]
         axes[0].plot(t, tr["f_n"], label=variant.name, lw=1)
-        error = np.sqrt(sum((tr[a] - tr[f"{a}_d"]) ** 2 for a in ("x", "y") if a in tr))
+        error = np.sqrt(sum((tr[a] - tr[f"{a}_d"]) ** 2 for a in tr.task_axes))
         axes[1].semilogy(t, np.maximum(error, 1e-9), lw=1)
         axes[2].semilogy(t, np.maximum(_norms(tr, "en"), 1e-9), lw=1)
         axes[3].semilogy(t, np.maximum(tr["nu"], 1e-15), lw=1)

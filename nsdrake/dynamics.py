@@ -112,11 +112,6 @@ class RobotTerms:
             raise ValueError("Ḣ needs the Coriolis matrix C; compute the terms with coriolis=True")
         return self.C + self.C.T
 
-    @property
-    def H_inv_dot(self) -> np.ndarray:
-        """d/dt H⁻¹ = −H⁻¹ Ḣ H⁻¹ (needs C). (n, n)."""
-        return -self.H_inv @ self.Hdot @ self.H_inv
-
 
 class JacobianPartials:
     """∂J/∂q_k for every k, analytically (module docstring), for a fixed topology

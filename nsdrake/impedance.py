@@ -10,7 +10,7 @@ closed loop is ẍ = ẍ_c.
 
 Eq. 5 treats the tool as a point. nsdrake's tool is a sphere of radius r: the
 friction force acts on its surface, r away from the task point T, and its
-moment r × f_t loads every joint (4 cm × 3 N on the fig3 arm gave a 10%
+moment r × f_t loads every joint (1.5 cm × 3 N on the fig3 arm gave a 10%
 normal-force error when left out). The sensor under the plate is a six-axis
 sensor, as the paper's JR3, so :func:`primary_torque` compensates the whole
 measured wrench W_T = [M_T; f] transported to T, with the spatial Jacobian J_T

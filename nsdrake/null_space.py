@@ -43,18 +43,11 @@ def lyapunov(H: np.ndarray, e_n: np.ndarray) -> float:
     return 0.5 * float(e_n @ H @ e_n)
 
 
-def task_velocity_compensation(
-    J: np.ndarray, Jdot: np.ndarray, J_pinv: np.ndarray, J_pinv_dot: np.ndarray, v: np.ndarray
-) -> np.ndarray:
-    """(J̇^# J + J^# J̇) q̇ = −Ṅ q̇ (Eqs. 15, 21), from the matrix J̇^#. (n,) [rad/s²]."""
-    return J_pinv_dot @ (J @ v) + J_pinv @ (Jdot @ v)
-
-
 def task_velocity_compensation_at(
-    terms: RobotTerms, inv: InverseAtState, inertia_weighted: bool
+    terms: RobotTerms, pinv: InverseAtState, inertia_weighted: bool
 ) -> np.ndarray:
     """(J̇^# J + J^# J̇) q̇ without forming J̇^#: the same quantity as
-    :func:`task_velocity_compensation`, in vector operations.
+    the J̇^# matrix form in vector operations (tests/reference_math.py has the matrix form).
 
     With J^# = W⁻¹ Jᵀ A⁻¹, A = J W⁻¹ Jᵀ + λ² I, y = A⁻¹ ẋ and u = J^# ẋ:
     J̇^# ẋ = Ẇ⁻¹ Jᵀ y + W⁻¹ J̇ᵀ y − J^# Ȧ y, with
@@ -62,16 +55,16 @@ def task_velocity_compensation_at(
     (Ḣ = C + Cᵀ), 0 for W = I.
     """
     J, Jdot = terms.J, terms.Jdot
-    y = inv.A_inv @ terms.xdot
-    u = inv.J_pinv @ terms.xdot
-    s = inv.W_inv @ (Jdot.T @ y)
+    y = pinv.A_inv @ terms.xdot
+    u = pinv.J_pinv @ terms.xdot
+    s = pinv.W_inv @ (Jdot.T @ y)
     if inertia_weighted:
         Hdot_u = terms.C @ u + terms.C.T @ u  # H⁻¹ Jᵀ y = u for W = H
         r = -(terms.H_inv @ Hdot_u)
     else:
         r = np.zeros(terms.n)
     A_dot_y = Jdot @ u + J @ (r + s)
-    return r + s - inv.J_pinv @ A_dot_y + inv.J_pinv @ terms.Jdot_v
+    return r + s - pinv.J_pinv @ A_dot_y + pinv.J_pinv @ terms.Jdot_v
 
 
 def null_space_torque(
@@ -89,12 +82,12 @@ def null_space_torque(
     dynamically consistent inverse, for the task-velocity one).
     """
     H, v = terms.H, terms.v
-    inv = inverse.at(terms)
-    N = inv.N
+    pinv = inverse.at(terms)
+    N = pinv.N
     e_n = null_space_velocity_error(qdot_ns_d, N, v)
     a = qddot_ns_d + K_n * e_n
     if task_velocity_comp:
-        a = a + task_velocity_compensation_at(terms, inv, inverse.inertia_weighted)
+        a = a + task_velocity_compensation_at(terms, pinv, inverse.inertia_weighted)
     if coriolis_comp:
         if terms.C is None:
             raise ValueError("the Coriolis compensation needs C in the robot terms")

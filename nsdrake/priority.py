@@ -131,9 +131,9 @@ def prioritized_velocity(
     last = len(levels) - 1
     for k, level in enumerate(levels):
         Phi = level.gradient
-        v = N @ (W_inv @ Phi)  # Eq. 30's direction, and the row this level removes
         if level.gain:
-            qdot = qdot + (level.gain * v if rotate else gradient_step(N, W_inv, Phi, level.gain, rotate))
+            qdot = qdot + gradient_step(N, W_inv, Phi, level.gain, rotate)  # Eq. 30 (or 28)
+        v = N @ (W_inv @ Phi)  # the row this level removes from the levels below
         if k == last or level.activation <= 0.0:
             continue
         denom = float(Phi @ v) + rank_damping * float(Phi @ Phi) * metric_scale

@@ -35,42 +35,6 @@ class PseudoInverseKind(str, enum.Enum):
     damped_least_squares = "damped_least_squares"
 
 
-def weighted_inverse(J: np.ndarray, W_inv: np.ndarray, damping: float = 0.0) -> np.ndarray:
-    """J^# = W⁻¹ Jᵀ (J W⁻¹ Jᵀ + λ² I)⁻¹ for a symmetric positive-definite W."""
-    A = J @ W_inv @ J.T
-    if damping:
-        A = A + damping**2 * np.eye(J.shape[0])
-    # A is symmetric, so J^# = (A⁻¹ J W⁻¹)ᵀ.
-    return np.linalg.solve(A, J @ W_inv).T
-
-
-def weighted_inverse_derivative(
-    J: np.ndarray,
-    Jdot: np.ndarray,
-    W_inv: np.ndarray,
-    W_inv_dot: np.ndarray | None,
-    damping: float = 0.0,
-) -> np.ndarray:
-    """d/dt J^# for J^# = W⁻¹ Jᵀ A⁻¹, A = J W⁻¹ Jᵀ + λ² I.
-
-    d(J^#) = Ẇ⁻¹ Jᵀ A⁻¹ + W⁻¹ J̇ᵀ A⁻¹ − W⁻¹ Jᵀ A⁻¹ Ȧ A⁻¹, with
-    Ȧ = J̇ W⁻¹ Jᵀ + J Ẇ⁻¹ Jᵀ + J W⁻¹ J̇ᵀ. ``W_inv_dot`` None means W is constant.
-    """
-    m = J.shape[0]
-    A = J @ W_inv @ J.T
-    if damping:
-        A = A + damping**2 * np.eye(m)
-    A_inv = np.linalg.inv(A)
-    WJt = W_inv @ J.T
-    A_dot = Jdot @ WJt
-    A_dot = A_dot + A_dot.T
-    term = W_inv @ Jdot.T
-    if W_inv_dot is not None:
-        A_dot = A_dot + J @ W_inv_dot @ J.T
-        term = term + W_inv_dot @ J.T
-    return (term - WJt @ A_inv @ A_dot) @ A_inv
-
-
 @dataclass(frozen=True)
 class InverseAtState:
     """A generalised inverse evaluated at one state."""
@@ -102,19 +66,6 @@ class GeneralizedInverse:
     def inertia_weighted(self) -> bool:
         return self.kind is PseudoInverseKind.dynamically_consistent
 
-    def of(self, J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
-        """J^# (n, m)."""
-        W_inv = H_inv if self.inertia_weighted else np.eye(J.shape[1])
-        return weighted_inverse(J, W_inv, self.damping)
-
-    def derivative(
-        self, J: np.ndarray, Jdot: np.ndarray, H_inv: np.ndarray, H_inv_dot: np.ndarray
-    ) -> np.ndarray:
-        """d/dt J^# (n, m); H_inv_dot = d/dt H⁻¹ = −H⁻¹ Ḣ H⁻¹."""
-        if self.inertia_weighted:
-            return weighted_inverse_derivative(J, Jdot, H_inv, H_inv_dot, self.damping)
-        return weighted_inverse_derivative(J, Jdot, np.eye(J.shape[1]), None, self.damping)
-
     def at(self, terms) -> InverseAtState:
         """J^#, N, A⁻¹ at the state of ``terms`` (a :class:`nsdrake.dynamics.RobotTerms`),
         computed once per RobotTerms and shared by every consumer."""
@@ -135,18 +86,3 @@ class GeneralizedInverse:
         N = -(J_pinv @ J)
         N[np.diag_indices(n)] += 1.0  # I − J^# J
         return InverseAtState(J_pinv=J_pinv, N=N, A_inv=A_inv, W_inv=W_inv)
-
-
-def dynamically_consistent_inverse(J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
-    """J̄ = H⁻¹ Jᵀ Λ (Eq. 13), the inertia-weighted pseudo-inverse. (n, m)."""
-    return weighted_inverse(J, H_inv)
-
-
-def moore_penrose_inverse(J: np.ndarray) -> np.ndarray:
-    """J⁺ = Jᵀ (J Jᵀ)⁻¹ for a full-row-rank J. (n, m)."""
-    return weighted_inverse(J, np.eye(J.shape[1]))
-
-
-def null_space_projector(J: np.ndarray, J_pinv: np.ndarray) -> np.ndarray:
-    """N = I − J^# J (Eq. 4). (n, n)."""
-    return np.eye(J.shape[1]) - J_pinv @ J

@@ -17,6 +17,11 @@ class Traces:
         self.names = list(columns)
         self.data = np.column_stack([np.asarray(v, dtype=float) for v in columns.values()])
 
+    @property
+    def task_axes(self) -> list[str]:
+        """The task axes the traces hold (each has a column and its reference ``<axis>_d``)."""
+        return [a for a in ("x", "y", "z") if a in self.names and f"{a}_d" in self.names]
+
     def __getitem__(self, name: str) -> np.ndarray:
         try:
             return self.data[:, self.names.index(name)]

@@ -12,6 +12,7 @@ import pytest
 from conftest import terms_at
 from drake_reference import AutoDiffArm, christoffel_C
 from models import random_states
+from reference_math import H_inv_dot, pinv_derivative, pinv_of
 
 from nsdrake.impedance import primary_torque
 from nsdrake.null_space import lyapunov, null_space_torque, null_space_velocity_error
@@ -91,8 +92,8 @@ def nu_dot_closed_loop(arm, q, v, qd, qdd, xddot_c, K_n, inverse, coriolis_comp=
     if inverse is DC:
         Jp, Jp_dot = ad.Jbar_and_dot(q, v)
     else:
-        Jp = inverse.of(T.J, T.H_inv)
-        Jp_dot = inverse.derivative(T.J, T.Jdot, T.H_inv, T.H_inv_dot)
+        Jp = pinv_of(inverse, T.J, T.H_inv)
+        Jp_dot = pinv_derivative(inverse, T.J, T.Jdot, T.H_inv, H_inv_dot(T))
     N = np.eye(arm.n) - Jp @ T.J
     N_dot = -(Jp_dot @ T.J + Jp @ ad.Jdot(q, v))
     e = qd - N @ v

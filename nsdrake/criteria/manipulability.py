@@ -21,7 +21,8 @@ def manipulability(J: np.ndarray, dJ_dq: np.ndarray) -> tuple[float, np.ndarray]
         dJ_dq: (n, m, n) with dJ_dq[j] = ∂J/∂q_j [m/rad²].
 
     Returns:
-        w [mᵐ/radᵐ… for a planar task, m²] and Φ (n,) [w/rad].
+        w [mᵐ per radᵐ, m the number of task axes: m² for the planar task] and
+        Φ (n,) [w's unit per rad].
     """
     A = J @ J.T
     w = float(np.sqrt(max(np.linalg.det(A), 0.0)))

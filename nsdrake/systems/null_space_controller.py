@@ -54,9 +54,9 @@ class NullSpaceController(LeafSystem):
         self._inverse = inverse
         self._K_n = K_n
         self._period = period
-        self._tvc = task_velocity_compensation
-        self._cc = coriolis_compensation
-        self._ff = acceleration_feedforward
+        self._task_velocity_compensation = task_velocity_compensation
+        self._coriolis_compensation = coriolis_compensation
+        self._feedforward = acceleration_feedforward
         self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
         self._qdot_ns_d = self.DeclareVectorInputPort("desired_null_space_velocity", n)
         # [previous q̇_dⁿ (n), 1 if that sample exists]
@@ -91,7 +91,7 @@ class NullSpaceController(LeafSystem):
     def desired_acceleration(self, context) -> np.ndarray:
         """q̈_dⁿ: (q̇_dⁿ(t) − q̇_dⁿ(t − T)) / T, or zero without a previous sample or feedforward."""
         previous = context.get_discrete_state(self._previous).value()
-        if not self._ff or previous[self._n] == 0.0:
+        if not self._feedforward or previous[self._n] == 0.0:
             return np.zeros(self._n)
         return (self._qdot_ns_d.Eval(context) - previous[: self._n]) / self._period
 
@@ -102,8 +102,8 @@ class NullSpaceController(LeafSystem):
             self._qdot_ns_d.Eval(context),
             self.desired_acceleration(context),
             self._K_n,
-            self._tvc,
-            self._cc,
+            self._task_velocity_compensation,
+            self._coriolis_compensation,
         )
 
     def _store(self, context, state):

@@ -145,15 +145,15 @@ class PrioritySelector(LeafSystem):
         n = terms.n
         if not self._active or state.mode == Mode.none:
             return np.zeros(n), state, 1.0
-        inv = self._inverse.at(terms)
+        pinv = self._inverse.at(terms)
         W, W_inv = (terms.H, terms.H_inv) if self._inverse.inertia_weighted else (np.eye(n), np.eye(n))
         levels = self._levels(context)
-        qdot = self._ordering_velocity(state.mode, levels, inv.N, W, W_inv)
+        qdot = self._ordering_velocity(state.mode, levels, pinv.N, W, W_inv)
         sigma = blend_weight(state, context.get_time(), self._blend_time)
         if sigma < 1.0:
-            old = self._ordering_velocity(state.previous, levels, inv.N, W, W_inv)
+            old = self._ordering_velocity(state.previous, levels, pinv.N, W, W_inv)
             qdot = sigma * qdot + (1.0 - sigma) * old
-        task_part = inv.J_pinv @ terms.xdot
+        task_part = pinv.J_pinv @ terms.xdot
         scale = joint_speed_scale(task_part, qdot, self._command_limits)
         return qdot * scale, state, scale
 
