@@ -211,9 +211,9 @@ def test_every_link_is_physically_valid(panda):
     """Every body with mass (base, links 1–7, tool), as written in the file, has m > 0 and a
     rotational inertia about its centre of mass that is positive definite and satisfies the
     triangle inequality (λ_i + λ_j ≥ λ_k, to 1e-12 kg m²); Drake's parsed inertia equals the
-    file's (to 1e-12), i.e. Drake did not repair it. Catches: an inertia entered about the link
-    origin instead of the centre of mass, a product of inertia with the wrong sign convention, a
-    typo in a moment that makes the tensor impossible for any mass distribution."""
+    file's (to 1e-12), i.e. Drake did not repair it. Catches: a typo in a moment that makes the
+    tensor impossible for any mass distribution, a chosen (base, tool) inertia too small for its
+    shape. (Sign flips and misplaced entries that stay feasible are the Gaz comparison's job.)"""
     inertials = file_inertials()
     assert sorted(inertials) == sorted([f"panda_link{i}" for i in range(8)] + ["tool"])
     for name, (m, c, I_com) in inertials.items():
