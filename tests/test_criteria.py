@@ -158,7 +158,7 @@ class ObstacleScene:
     def pairs(self, q, within=10.0):
         self.station.plant.SetPositions(self.plant_context, q)
         query = self.station.scene_graph.get_query_output_port().Eval(self.sg_context)
-        return self.distances.pairs(query, self.plant_context, within)
+        return self.distances.pairs(self.plant_context, within, query=query)
 
 
 @pytest.fixture(scope="module")

@@ -24,30 +24,33 @@ the feed-forward of q̈_dⁿ would turn it into a torque step.
 The function below is the math; :class:`ObstacleDistances` reads the pairs from a
 plant and a scene-graph ``QueryObject``.
 
-Precision. Drake computes the distance between a capsule and a box with an
-iterative (GJK-type) algorithm: the distance is accurate, but the witness point
-on the link can be off by ~1e-5 m, and n̂ᵀ J_C inherits a ~1e-6 relative error
-from it. For capsule and sphere links (the arm's), nsdrake therefore takes the
-witness only as a starting point: the link's capsule is its axis segment swollen
-by its radius r, so d = min_s φ_o(S(s)) − r, with φ_o Drake's *exact*
-point-to-shape signed distance (``ComputeSignedDistanceToPoint``, errors ~1e-15 m)
-and S(s) the axis point. A bracketed root search on the axis finds the minimising
-S; then ∂d/∂q = ∇φ_o(S)ᵀ J_S, the envelope theorem again. Other link shapes, and a link
-that already penetrates an obstacle (d ≤ 0, outside the domain the criterion
-is meant to keep the arm in), use the witness directly.
+Precision and speed. For capsule and sphere links against box and sphere obstacles
+(the shipped scenes) d and its minimiser come in closed form
+(:mod:`nsdrake.criteria.distance`): exact, and without a geometry engine. Other
+shapes use Drake's queries: Drake computes the distance between a capsule and a
+box with an iterative (GJK-type) algorithm whose witness point on the link can be
+off by ~1e-5 m, so nsdrake takes the witness only as a starting point there: the
+link's capsule is its axis segment swollen by its radius r, so d = min_s φ_o(S(s))
+− r, with φ_o Drake's *exact* point-to-shape signed distance
+(``ComputeSignedDistanceToPoint``), and a bracketed root search on the axis finds
+the minimising S; then ∂d/∂q = ∇φ_o(S)ᵀ J_S, the envelope theorem again. Other link
+shapes, and a link that already penetrates an obstacle (d ≤ 0, outside the domain
+the criterion is meant to keep the arm in), use the witness directly.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
-from pydrake.geometry import Capsule, QueryObject, Role, Sphere
+from pydrake.geometry import Box, Capsule, Role, Sphere
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import Context
 
 from ..reference import smoothstep
+from .distance import segments_box, segments_sphere
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,14 @@ def obstacle_potential(pairs: list[DistancePair], influence: float, n: int) -> t
 
 class ObstacleDistances:
     """Signed distances and their gradients between the arm's link geometries and
-    the obstacle geometries, from Drake's geometry queries.
+    the obstacle geometries of a plant registered with a SceneGraph.
+
+    Capsule and sphere links against box and sphere obstacles use the closed forms
+    of :mod:`nsdrake.criteria.distance` (exact, no geometry engine, the link poses
+    from the plant); other shapes, and pairs that touch, use Drake's geometry
+    queries (module docstring), asked for only then.
+
+    Obstacles must be fixed in the world (welded, or registered on the world body).
 
     Args:
         plant: the finalized plant (registered with a SceneGraph).
@@ -106,38 +116,93 @@ class ObstacleDistances:
                 axis = (shape.radius(), 0.0)
             else:
                 axis = None  # use the witness point as it is
-            self._links.append((g, inspector.GetName(g), body.body_frame(), X_BG, axis))
+            self._links.append((g, inspector.GetName(g), body, X_BG, axis))
         self._obstacles = [(g, inspector.GetName(g)) for g in obstacle_geometries]
+        self._shapes = [inspector.GetShape(g) for g in obstacle_geometries]
+        self._poses = [
+            (plant.GetBodyFromFrameId(inspector.GetFrameId(g)), inspector.GetPoseInFrame(g))
+            for g in obstacle_geometries
+        ]
+        self._closed_forms = None  # per obstacle, set on the first call (needs a context)
 
     @property
     def num_pairs(self) -> int:
         return len(self._links) * len(self._obstacles)
 
-    def pairs(self, query: QueryObject, plant_context: Context, gradient_within: float) -> list[DistancePair]:
+    def _obstacle_forms(self, plant_context) -> list:
+        """Per obstacle: a function of the links' segments (A, B) for its closed form, or None."""
+        forms = []
+        for shape, (body, X_BG) in zip(self._shapes, self._poses, strict=True):
+            X_WG = self.plant.EvalBodyPoseInWorld(plant_context, body) @ X_BG
+            R, p = X_WG.rotation().matrix(), X_WG.translation()
+            if isinstance(shape, Box):
+                half = 0.5 * np.array([shape.width(), shape.depth(), shape.height()])
+                forms.append(partial(_box_form, R, p, half))
+            elif isinstance(shape, Sphere):
+                forms.append(partial(_sphere_form, p, shape.radius()))
+            else:
+                forms.append(None)
+        return forms
+
+    def _segments(self, plant_context) -> tuple[list, np.ndarray, np.ndarray]:
+        """The links' body poses (R_WB, p_WB) and their axis segments A, B (k, 3), world
+        (a link without an axis gets a dummy segment, never used)."""
+        poses, A, B = [], np.zeros((len(self._links), 3)), np.zeros((len(self._links), 3))
+        for k, (_, _, body, X_BG, axis) in enumerate(self._links):
+            M = self.plant.EvalBodyPoseInWorld(plant_context, body).GetAsMatrix34()
+            R_WB, p_WB = M[:, :3], M[:, 3]
+            poses.append((R_WB, p_WB))
+            if axis is not None:
+                centre = R_WB @ X_BG[:, 3] + p_WB
+                half_axis = axis[1] * (R_WB @ X_BG[:, 2])
+                A[k], B[k] = centre - half_axis, centre + half_axis
+        return poses, A, B
+
+    def pairs(self, plant_context: Context, gradient_within: float, query=None) -> list[DistancePair]:
         """Every link–obstacle pair; ∂d/∂q only for pairs closer than ``gradient_within``.
 
-        ``plant_context`` must hold the same positions the query was evaluated at.
+        ``query``: a QueryObject at the positions of ``plant_context``, or a function
+        returning one; asked for only by pairs without a closed form.
         """
-        out = []
-        for g_link, link_name, body_frame, X_BG, axis in self._links:
-            X_WG = query.GetPoseInWorld(g_link)
-            for g_obs, obs_name in self._obstacles:
-                r = query.ComputeSignedDistancePairClosestPoints(g_link, g_obs)
-                distance, grad = r.distance, None
+        if self._closed_forms is None:
+            self._closed_forms = self._obstacle_forms(plant_context)
+        poses, A, B = self._segments(plant_context)
+        rows = [form(A, B) if form is not None else None for form in self._closed_forms]
+        plant, out = self.plant, []
+        for k, (g_link, link_name, body, X_BG, axis) in enumerate(self._links):
+            R_WB, p_WB = poses[k]
+            for o, (g_obs, obs_name) in enumerate(self._obstacles):
+                row = rows[o][k] if rows[o] is not None and axis is not None else None
+                if row is not None and not np.isnan(row[0]):
+                    distance, n_W, p_BC = row[0] - axis[0], row[1:4], R_WB.T @ (row[4:7] - p_WB)
+                else:
+                    if callable(query):
+                        query = query()
+                    distance, n_W, p_BC = self._queried(query, g_link, g_obs, X_BG, axis, gradient_within)
+                grad = None
                 if distance < gradient_within:
-                    if axis is None or distance <= 0.0:
-                        p_BC = X_BG[:, :3] @ r.p_ACa + X_BG[:, 3]  # the witness, in the link's body frame
-                        n_W = r.nhat_BA_W
-                    else:
-                        radius, half_length = axis
-                        distance, n_W, p_GS = self._refine(query, g_obs, X_WG, radius, half_length, distance)
-                        p_BC = X_BG[:, :3] @ p_GS + X_BG[:, 3]
-                    J_C = self.plant.CalcJacobianTranslationalVelocity(
-                        plant_context, JacobianWrtVariable.kV, body_frame, p_BC, self._world, self._world
+                    J_C = plant.CalcJacobianTranslationalVelocity(
+                        plant_context,
+                        JacobianWrtVariable.kV,
+                        body.body_frame(),
+                        p_BC,
+                        self._world,
+                        self._world,
                     )
                     grad = n_W @ J_C
                 out.append(DistancePair(distance, grad, link_name, obs_name))
         return out
+
+    def _queried(self, query, g_link, g_obs, X_BG, axis, gradient_within):
+        """(d, n̂, p_BC) from Drake's queries: the witness, refined on a capsule's axis."""
+        r = query.ComputeSignedDistancePairClosestPoints(g_link, g_obs)
+        distance, n_W = r.distance, r.nhat_BA_W
+        if axis is None or distance <= 0.0 or distance >= gradient_within:
+            return distance, n_W, X_BG[:, :3] @ r.p_ACa + X_BG[:, 3]
+        radius, half_length = axis
+        X_WG = query.GetPoseInWorld(g_link)
+        distance, n_W, p_GS = self._refine(query, g_obs, X_WG, radius, half_length, distance)
+        return distance, n_W, X_BG[:, :3] @ p_GS + X_BG[:, 3]
 
     def _refine(self, query, g_obs, X_WG, radius, half_length, distance):
         """(d, ∇φ, p_GS): the axis point S of a capsule (or sphere) nearest the obstacle,
@@ -192,6 +257,14 @@ class ObstacleDistances:
             if result.id_G == g_obs:
                 return float(result.distance), np.asarray(result.grad_W)
         raise RuntimeError("the obstacle geometry does not support point distance queries")
+
+
+def _box_form(R_WO, p_WO, half, A, B):
+    return segments_box(A, B, R_WO, p_WO, half)
+
+
+def _sphere_form(centre, radius, A, B):
+    return segments_sphere(A, B, centre, radius)
 
 
 def proximity_geometries(inspector, plant: MultibodyPlant, bodies) -> list:

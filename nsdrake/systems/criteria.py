@@ -148,9 +148,11 @@ class ObstacleCriterionSystem(_CriterionSystem):
         model = self._model
         plant_context = model.plant_context(scratch)
         model.plant.SetPositions(plant_context, terms.q)
-        query = model.scene_graph.get_query_output_port().Eval(
-            model.scene_graph.GetMyContextFromRoot(scratch)
+        scene_graph = model.scene_graph
+        pairs = self._distances.pairs(
+            plant_context,
+            self._influence,
+            query=lambda: scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(scratch)),
         )
-        pairs = self._distances.pairs(query, plant_context, self._influence)
         p, Phi = obstacle_potential(pairs, self._influence, terms.n)
         return p, Phi, min((pair.distance for pair in pairs), default=np.inf)
