@@ -18,8 +18,10 @@ by level, and scales the result to the joint-speed limits (end of Section 3.3).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
+@njit(cache=True)
 def gradient_step(N: np.ndarray, W_inv: np.ndarray, Phi: np.ndarray, K: float, rotate: bool) -> np.ndarray:
     """q̇_dⁿ = N K W⁻¹ Φ (``rotate``) or N K Φ. (n,) [rad/s].
 

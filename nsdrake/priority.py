@@ -59,6 +59,7 @@ import enum
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .gradient_projection import gradient_step
 from .reference import smoothstep
@@ -126,25 +127,44 @@ def prioritized_velocity(
     """q̇_dⁿ = Σ_k K_k u_k with each level in the null space of all levels above it
     (module docstring). N is the task's projector N_1 (n, n), W the inverse's
     metric (H for the dynamically consistent inverse, I otherwise) and W_inv its inverse."""
+    if not levels:
+        return np.zeros(N.shape[0])
+    return stacked_prioritized_velocity(
+        N,
+        W,
+        W_inv,
+        np.array([level.gradient for level in levels]),
+        np.array([level.gain for level in levels], dtype=float),
+        np.array([level.activation for level in levels], dtype=float),
+        rotate,
+        rank_damping,
+    )
+
+
+@njit(cache=True)
+def stacked_prioritized_velocity(N, W, W_inv, gradients, gains, activations, rotate, rank_damping):
+    """:func:`prioritized_velocity` with the levels stacked: gradients (k, n), gains and
+    activations (k,), highest priority first."""
     qdot = np.zeros(N.shape[0])
-    metric_scale = float(np.max(np.abs(W_inv)))
-    last = len(levels) - 1
-    for k, level in enumerate(levels):
-        Phi = level.gradient
-        if level.gain:
-            qdot = qdot + gradient_step(N, W_inv, Phi, level.gain, rotate)  # Eq. 30 (or 28)
-        v = N @ (W_inv @ Phi)  # the row this level removes from the levels below
-        if k == last or level.activation <= 0.0:
+    metric_scale = np.max(np.abs(W_inv))
+    last = gradients.shape[0] - 1
+    for k in range(gradients.shape[0]):
+        Phi = np.ascontiguousarray(gradients[k])
+        if gains[k] != 0.0:
+            qdot = qdot + gradient_step(N, W_inv, Phi, gains[k], rotate)  # Eq. 30 (or 28)
+        if k == last or activations[k] <= 0.0:
             continue
-        denom = float(Phi @ v) + rank_damping * float(Phi @ Phi) * metric_scale
+        v = N @ (W_inv @ Phi)  # the row this level removes from the levels below
+        denom = Phi @ v + rank_damping * (Phi @ Phi) * metric_scale
         if denom > 0.0:
-            N = N - (level.activation / denom) * np.outer(v, v @ W)
+            N = N - (activations[k] / denom) * np.outer(v, v @ W)
     return qdot
 
 
 SPEED_SCALE_SMOOTHNESS = 8  # the p of the p-norm soft minimum in joint_speed_scale
 
 
+@njit(cache=True)
 def joint_speed_scale(
     task_part: np.ndarray, qdot_ns: np.ndarray, limits: np.ndarray, p: int = SPEED_SCALE_SMOOTHNESS
 ) -> float:
@@ -162,14 +182,15 @@ def joint_speed_scale(
     above the hard bound. Where the task alone uses up a limit (b_i ≤ 0), s = 0.
     """
     total = 1.0
-    for a, b, lim in zip(task_part, qdot_ns, limits, strict=True):
+    for i in range(task_part.shape[0]):
+        a, b, lim = task_part[i], qdot_ns[i], limits[i]
         if b == 0.0 or not np.isfinite(lim):
             continue
         room = lim - a if b > 0 else lim + a  # distance to the limit on b's side
         if room <= 0.0:
             return 0.0
         total += (abs(b) / room) ** p
-    return float(total ** (-1.0 / p))
+    return total ** (-1.0 / p)
 
 
 @dataclass(frozen=True)

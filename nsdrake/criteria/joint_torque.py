@@ -10,8 +10,10 @@ F_d is the *desired* contact force, so the pose can be optimised before contact.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
+@njit(cache=True)
 def joint_torque_criterion(J: np.ndarray, dJ_dq: np.ndarray, F_d: np.ndarray) -> tuple[float, np.ndarray]:
     """(p, Φ) for p = ‖Jᵀ F_d‖².
 
@@ -24,5 +26,8 @@ def joint_torque_criterion(J: np.ndarray, dJ_dq: np.ndarray, F_d: np.ndarray) ->
         p [N² m²] and Φ (n,) [N² m²/rad].
     """
     tau = J.T @ F_d  # (n,) [N m]
-    grad_tau = np.einsum("jmi,m->ij", dJ_dq, F_d)  # (n, n): column j = (∂J/∂q_j)ᵀ F_d
-    return float(tau @ tau), 2.0 * (grad_tau.T @ tau)
+    n = J.shape[1]
+    Phi = np.empty(n)
+    for j in range(n):  # Φ_j = 2 τᵀ (∂J/∂q_j)ᵀ F_d
+        Phi[j] = 2.0 * (F_d @ (dJ_dq[j] @ tau))
+    return float(tau @ tau), Phi

@@ -10,9 +10,10 @@ in Eq. 30) keeps the arm away from singular poses (Section 3.5).
 from __future__ import annotations
 
 import numpy as np
-from pydrake.math import inv
+from numba import njit
 
 
+@njit(cache=True)
 def manipulability(J: np.ndarray, dJ_dq: np.ndarray) -> tuple[float, np.ndarray]:
     """(w, Φ) for w = √det(J Jᵀ).
 
@@ -25,9 +26,9 @@ def manipulability(J: np.ndarray, dJ_dq: np.ndarray) -> tuple[float, np.ndarray]
         Φ (n,) [w's unit per rad].
     """
     A = J @ J.T
-    w = float(np.sqrt(max(np.linalg.det(A), 0.0)))
-    if w == 0.0:
-        return 0.0, np.zeros(J.shape[1])
-    J_pinv_T = inv(A) @ J  # (J⁺)ᵀ, (m, n)
+    w = np.sqrt(max(np.linalg.det(A), 0.0))
     n, m = dJ_dq.shape[0], J.shape[0]
-    return w, w * (dJ_dq.reshape(n, m * J.shape[1]) @ J_pinv_T.ravel())
+    if w == 0.0:
+        return 0.0, np.zeros(n)
+    J_pinv_T = np.linalg.inv(A) @ J  # (J⁺)ᵀ, (m, n)
+    return w, w * (np.ascontiguousarray(dJ_dq).reshape(n, m * J.shape[1]) @ J_pinv_T.ravel())

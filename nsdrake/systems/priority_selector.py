@@ -11,15 +11,15 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from ..dynamics import RobotTerms
 from ..priority import (
     ORDERINGS,
+    RANK_DAMPING,
     Criterion,
-    Level,
     Mode,
     SelectorLimits,
     SwitchState,
     blend_weight,
     joint_speed_scale,
-    prioritized_velocity,
     select_mode,
+    stacked_prioritized_velocity,
     update_switch_state,
 )
 from ..pseudo_inverse import GeneralizedInverse
@@ -77,6 +77,10 @@ class PrioritySelector(LeafSystem):
         self._inverse = inverse
         self._gains = {Criterion(c): float(k) for c, k in gains.items()}
         self._active = any(self._gains.values())
+        self._order = [c for c in Criterion if c in self._gains]
+        self._row = {c: i for i, c in enumerate(self._order)}
+        self._gain_vector = np.array([self._gains[c] for c in self._order])
+        self._rows_of = {mode: [self._row[c] for c in ORDERINGS[mode] if c in self._row] for mode in Mode}
         self._limits = limits
         self._blend_time = blend_time
         self._rotate = rotate_gradient
@@ -126,18 +130,23 @@ class PrioritySelector(LeafSystem):
         new = select_mode(self._d_min.Eval(context)[0], self._w.Eval(context)[0], state.mode, self._limits)
         return update_switch_state(state, t, new)
 
-    def _levels(self, context) -> dict:
-        """Each criterion's Level (gradient, gain, activation), read from the ports once."""
-        activation = {c: 1.0 for c in Criterion}
-        activation[Criterion.obstacle] = float(self._obstacle_activation.Eval(context)[0])
-        return {
-            c: Level(self._gradients[c].Eval(context), gain, activation[c] if gain else 0.0)
-            for c, gain in self._gains.items()
-        }
+    def _levels(self, context) -> tuple[dict, np.ndarray, np.ndarray]:
+        """The criteria's gradients Φ (rows, in Criterion order) read from the ports once,
+        their gains and activations (the obstacle level fades in; a zero gain, none)."""
+        gradients = np.array([self._gradients[c].Eval(context) for c in self._order])
+        activations = np.array([float(gain != 0.0) for gain in self._gain_vector])
+        if Criterion.obstacle in self._order and activations[self._row[Criterion.obstacle]]:
+            activations[self._row[Criterion.obstacle]] = self._obstacle_activation.Eval(context)[0]
+        return gradients, self._gain_vector, activations
 
-    def _ordering_velocity(self, mode: Mode, levels: dict, N, W, W_inv) -> np.ndarray:
-        ordered = [levels[c] for c in ORDERINGS[mode] if c in levels]
-        return prioritized_velocity(N, W, W_inv, ordered, self._rotate)
+    def _ordering_velocity(self, mode: Mode, levels, N, W, W_inv) -> np.ndarray:
+        rows = self._rows_of[mode]
+        if not rows:
+            return np.zeros(N.shape[0])
+        gradients, gains, activations = levels
+        return stacked_prioritized_velocity(
+            N, W, W_inv, gradients[rows], gains[rows], activations[rows], self._rotate, RANK_DAMPING
+        )
 
     def _compute(self, context):
         terms = self._terms.Eval(context)
