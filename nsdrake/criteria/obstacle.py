@@ -117,6 +117,10 @@ class ObstacleDistances:
             else:
                 axis = None  # use the witness point as it is
             self._links.append((g, inspector.GetName(g), body, X_BG, axis))
+        self._bodies = [body for _, _, body, _, _ in self._links]
+        self._p_BG = np.array([X_BG[:, 3] for _, _, _, X_BG, _ in self._links]).reshape(-1, 3)
+        self._z_BG = np.array([X_BG[:, 2] for _, _, _, X_BG, _ in self._links]).reshape(-1, 3)
+        self._half_lengths = np.array([axis[1] if axis else 0.0 for _, _, _, _, axis in self._links])
         self._obstacles = [(g, inspector.GetName(g)) for g in obstacle_geometries]
         self._shapes = [inspector.GetShape(g) for g in obstacle_geometries]
         self._poses = [
@@ -144,19 +148,15 @@ class ObstacleDistances:
                 forms.append(None)
         return forms
 
-    def _segments(self, plant_context) -> tuple[list, np.ndarray, np.ndarray]:
-        """The links' body poses (R_WB, p_WB) and their axis segments A, B (k, 3), world
-        (a link without an axis gets a dummy segment, never used)."""
-        poses, A, B = [], np.zeros((len(self._links), 3)), np.zeros((len(self._links), 3))
-        for k, (_, _, body, X_BG, axis) in enumerate(self._links):
-            M = self.plant.EvalBodyPoseInWorld(plant_context, body).GetAsMatrix34()
-            R_WB, p_WB = M[:, :3], M[:, 3]
-            poses.append((R_WB, p_WB))
-            if axis is not None:
-                centre = R_WB @ X_BG[:, 3] + p_WB
-                half_axis = axis[1] * (R_WB @ X_BG[:, 2])
-                A[k], B[k] = centre - half_axis, centre + half_axis
-        return poses, A, B
+    def _segments(self, plant_context) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The links' body rotations R_WB (k, 3, 3) and origins p_WB (k, 3), and their axis
+        segments A, B (k, 3), world (a link without an axis gets a zero-length segment
+        at its geometry's origin, never used)."""
+        M = np.array([self.plant.EvalBodyPoseInWorld(plant_context, b).GetAsMatrix34() for b in self._bodies])
+        R_WB, p_WB = M[:, :, :3], M[:, :, 3]
+        centre = (R_WB @ self._p_BG[:, :, None])[:, :, 0] + p_WB
+        half_axis = self._half_lengths[:, None] * (R_WB @ self._z_BG[:, :, None])[:, :, 0]
+        return R_WB, p_WB, centre - half_axis, centre + half_axis
 
     def pairs(self, plant_context: Context, gradient_within: float, query=None) -> list[DistancePair]:
         """Every link–obstacle pair; ∂d/∂q only for pairs closer than ``gradient_within``.
@@ -166,11 +166,11 @@ class ObstacleDistances:
         """
         if self._closed_forms is None:
             self._closed_forms = self._obstacle_forms(plant_context)
-        poses, A, B = self._segments(plant_context)
+        R, p, A, B = self._segments(plant_context)
         rows = [form(A, B) if form is not None else None for form in self._closed_forms]
         plant, out = self.plant, []
         for k, (g_link, link_name, body, X_BG, axis) in enumerate(self._links):
-            R_WB, p_WB = poses[k]
+            R_WB, p_WB = R[k], p[k]
             for o, (g_obs, obs_name) in enumerate(self._obstacles):
                 row = rows[o][k] if rows[o] is not None and axis is not None else None
                 if row is not None and not np.isnan(row[0]):
