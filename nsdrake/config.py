@@ -24,6 +24,11 @@ class ImpedanceConfig:
     K_f: float = 1.0
     # Add the gravity torques g of Eq. 7 (needed in the vertical plane) [-].
     gravity_compensation: bool = True
+    # Largest task inertia Λ the law may use: near a singular pose Λ = (J H⁻¹ Jᵀ)⁻¹ grows
+    # without bound, and above this cap it is damped (nsdrake.dynamics.task_inertia);
+    # below it the law is exactly the paper's. inf turns the treatment off
+    # [kg, kg m² for rotational rows].
+    max_task_inertia: float = 50.0
 
 
 @dataclass

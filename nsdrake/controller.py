@@ -227,7 +227,9 @@ def _add_robot_terms(builder, model: ControllerModel, config: ControllerConfig):
     return builder.AddNamedSystem(
         "robot_terms",
         RobotTermsSystem(
-            model=model, coriolis_matrix=ns.task_velocity_compensation or ns.coriolis_compensation
+            model=model,
+            coriolis_matrix=ns.task_velocity_compensation or ns.coriolis_compensation,
+            max_task_inertia=config.impedance.max_task_inertia,
         ),
     )
 

@@ -21,6 +21,7 @@ Model terms (H, C q̇, g, C, J) come from one of two libraries:
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -163,11 +164,13 @@ class ControllerModel:
     def plant_context(self, scratch):
         return self.plant.GetMyMutableContextFromRoot(scratch) if self.diagram else scratch
 
-    def terms(self, scratch, q: np.ndarray, v: np.ndarray, coriolis: bool) -> RobotTerms:
+    def terms(
+        self, scratch, q: np.ndarray, v: np.ndarray, coriolis: bool, max_task_inertia: float = math.inf
+    ) -> RobotTerms:
         """:class:`nsdrake.dynamics.RobotTerms` at (q, q̇), from the chosen library."""
         if self._pinocchio is not None:
-            return self._pinocchio.terms(q, v, coriolis)
-        return self.arm.terms(self.plant_context(scratch), q, v, coriolis)
+            return self._pinocchio.terms(q, v, coriolis, max_task_inertia)
+        return self.arm.terms(self.plant_context(scratch), q, v, coriolis, max_task_inertia)
 
 
 def _moving_bodies(plant: MultibodyPlant) -> list:
@@ -244,7 +247,9 @@ class PinocchioDynamics:
         out[self._order] = x
         return out
 
-    def terms(self, q: np.ndarray, v: np.ndarray, coriolis: bool) -> RobotTerms:
+    def terms(
+        self, q: np.ndarray, v: np.ndarray, coriolis: bool, max_task_inertia: float = math.inf
+    ) -> RobotTerms:
         pin, model, data = self._pin, self._model, self._data
         qp, vp = self._to_pin(q), self._to_pin(v)
         pin.computeAllTerms(model, data, qp, vp)
@@ -274,6 +279,7 @@ class PinocchioDynamics:
             J_spatial=J_spatial,
             dJ_dq=self._partials(J_w, J_v),
             C=C,
+            max_task_inertia=max_task_inertia,
         )
 
 

@@ -28,11 +28,13 @@ from the task axes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 from pydrake.math import inv  # Eigen's: a third of numpy's cost on small matrices
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
@@ -61,6 +63,8 @@ class RobotTerms:
     J_spatial: np.ndarray  # (6, n) [angular; translational] Jacobian of T in the world
     dJ_dq: np.ndarray  # (n, m, n) dJ_dq[k] = ∂J/∂q_k [m/rad²]
     C: np.ndarray | None = None  # (n, n) Christoffel Coriolis matrix [N m s], if computed
+    # Cap on the task inertia Λ near singular poses (see Lambda) [kg; kg m² for rotations].
+    max_task_inertia: float = math.inf
     _memo: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -102,8 +106,9 @@ class RobotTerms:
 
     @cached_property
     def Lambda(self) -> np.ndarray:
-        """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1). (m, m) [kg]."""
-        return inv(self.J @ self.H_inv_Jt)
+        """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1), made robust near
+        singular poses (:func:`task_inertia`). (m, m) [kg]."""
+        return task_inertia(self.J @ self.H_inv_Jt, 1.0 / self.max_task_inertia)
 
     @cached_property
     def Hdot(self) -> np.ndarray:
@@ -111,6 +116,28 @@ class RobotTerms:
         if self.C is None:
             raise ValueError("Ḣ needs the Coriolis matrix C; compute the terms with coriolis=True")
         return self.C + self.C.T
+
+
+@njit(cache=True)
+def task_inertia(A: np.ndarray, floor: float) -> np.ndarray:
+    """Λ = (A + δ² I)⁻¹ for A = J H⁻¹ Jᵀ, with δ² = λ₀ (1 − λ_min/λ₀)² while the smallest
+    eigenvalue λ_min of A is below λ₀ = ``floor`` (= 1 / the largest task inertia
+    allowed), else δ = 0.
+
+    Away from singular poses (λ_min ≥ λ₀) this is the exact Λ of Section 3.1, and
+    the law is the paper's. As J loses rank, λ_min → 0 and the exact Λ, and with it
+    J̄ = H⁻¹ Jᵀ Λ and the torque Jᵀ Λ ẍ_c, grow without bound; the damping keeps every
+    eigenvalue of Λ at most 1/min(λ + λ₀(1 − λ/λ₀)²) = 4/(3 λ₀) (at λ = λ₀/2), and
+    δ² and its derivative vanish at λ_min = λ₀, so Λ stays continuous and smooth
+    through the switch. The price, only there: J̄ is no longer an exact right
+    inverse (J J̄ = I − δ² Λ), so τ₀ may leak into the task, as with the damped
+    least-squares inverse. (m, m).
+    """
+    if floor > 0.0:
+        lam_min = np.linalg.eigvalsh(A)[0]
+        if lam_min < floor:
+            A = A + floor * (1.0 - lam_min / floor) ** 2 * np.eye(A.shape[0])
+    return np.linalg.inv(A)
 
 
 class JacobianPartials:
@@ -244,7 +271,14 @@ class ArmModel:
         p = self.plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)
         return p[self.rows, 0]
 
-    def terms(self, context: Context, q: np.ndarray, v: np.ndarray, coriolis: bool) -> RobotTerms:
+    def terms(
+        self,
+        context: Context,
+        q: np.ndarray,
+        v: np.ndarray,
+        coriolis: bool,
+        max_task_inertia: float = math.inf,
+    ) -> RobotTerms:
         """Sets (q, v) into the plant ``context`` and evaluates every term.
 
         ``coriolis`` also computes the full matrix C (2n more bias evaluations).
@@ -278,6 +312,7 @@ class ArmModel:
             J_spatial=J_spatial,
             dJ_dq=dJ,
             C=C,
+            max_task_inertia=max_task_inertia,
         )
 
     def _bias(self, context: Context, v: np.ndarray) -> np.ndarray:

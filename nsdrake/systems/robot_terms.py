@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
@@ -33,10 +35,11 @@ class RobotTermsSystem(LeafSystem):
     never shared between contexts.
     """
 
-    def __init__(self, *, model: ControllerModel, coriolis_matrix: bool):
+    def __init__(self, *, model: ControllerModel, coriolis_matrix: bool, max_task_inertia: float = math.inf):
         super().__init__()
         self._model = model
         self._coriolis = coriolis_matrix
+        self._max_task_inertia = max_task_inertia
         n = model.n
         self._n = n
         self._state = self.DeclareVectorInputPort("estimated_state", 2 * n)
@@ -58,7 +61,9 @@ class RobotTermsSystem(LeafSystem):
         state = self._state.Eval(context)
         scratch = self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
         n = self._n
-        output.set_value(self._model.terms(scratch, state[:n], state[n:], self._coriolis))
+        output.set_value(
+            self._model.terms(scratch, state[:n], state[n:], self._coriolis, self._max_task_inertia)
+        )
 
     def _calc_task_position(self, context, output):
         output.SetFromVector(self._terms.Eval(context).x)
