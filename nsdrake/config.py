@@ -141,6 +141,17 @@ class DesiredNullSpaceConfig:
 
 
 @dataclass
+class ActuatorLimitsConfig:
+    """Drive limits, enforced with the primary task first (nsdrake/actuator_limits.py)."""
+
+    # Largest |τ| per joint, keyed by joint name; missing joints take the model's actuator
+    # effort limit (URDF <limit effort>), unlimited if it has none [N m].
+    torque: dict[str, float] = field(default_factory=dict)
+    # Largest |dτ/dt| per joint, keyed by joint name; missing joints are unlimited [N m/s].
+    torque_rate: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
 class ControllerConfig:
     """Everything :class:`nsdrake.NullSpaceImpedanceController` needs besides its model
     and task: gains, the pseudo-inverse, the compensation switches, the criteria, the
@@ -151,6 +162,7 @@ class ControllerConfig:
     impedance: ImpedanceConfig = field(default_factory=ImpedanceConfig)
     null_space: NullSpaceConfig = field(default_factory=NullSpaceConfig)
     desired_null_space: DesiredNullSpaceConfig = field(default_factory=DesiredNullSpaceConfig)
+    actuator_limits: ActuatorLimitsConfig = field(default_factory=ActuatorLimitsConfig)
     # Magnitude of the desired contact force F_d = f n that the joint-torque criterion
     # (Eq. 32) optimises for, before contact too [N].
     nominal_force: float = 10.0

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, ConstantVectorSource
+from pydrake.systems.primitives import ConstantVectorSource
 
 from .config import ControllerConfig
 from .controller_model import ControllerModel
@@ -17,6 +17,7 @@ from .impedance import ImpedanceGains
 from .priority import Criterion, SelectorLimits
 from .pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 from .systems import (
+    ActuatorLimitsSystem,
     ImpedanceController,
     JointTorqueCriterionSystem,
     ManipulabilityCriterionSystem,
@@ -104,6 +105,7 @@ class NullSpaceImpedanceController(Diagram):
         - joint_torque_criterion
         - obstacle_potential
         - task_position
+        - saturation
 
     Inputs: ``estimated_state`` [q; q̇] (2n) [rad, rad/s] in the controller model's
     velocity order; ``measured_wrench`` [M; f] (6) [N m, N], the wrench the tool
@@ -118,7 +120,10 @@ class NullSpaceImpedanceController(Diagram):
     level 2; ``speed_scale`` (1) the joint-speed limits' factor on q̇_dⁿ;
     ``manipulability`` w = √det(J Jᵀ) (1); ``d_min`` (1) [m] smallest link–obstacle
     distance; ``joint_torque_criterion`` ‖Jᵀ F_d‖² (1) [N² m²];
-    ``obstacle_potential`` (1) [m³]; ``task_position`` x (m) [m].
+    ``obstacle_potential`` (1) [m³]; ``task_position`` x (m) [m]; ``saturation`` (2):
+    the share s of τ₀ kept under the actuator limits and the number of joints whose
+    task torque had to be clipped (:mod:`nsdrake.actuator_limits`: τ = τ_task + s τ₀
+    within each joint's torque and torque-rate window, τ₀ reduced first).
 
     Args:
         controller_model: a :class:`nsdrake.ControllerModel`, a URDF path (the arm
@@ -164,9 +169,20 @@ class NullSpaceImpedanceController(Diagram):
             builder, terms, config, self.normal, model, model_terms
         )
         null_space = _add_null_space(builder, terms, qdot_ns, config, model_terms)
-        torque = builder.AddNamedSystem("torque_sum", Adder(2, model.n))
-        builder.Connect(impedance.get_output_port(), torque.get_input_port(0))
-        builder.Connect(null_space.GetOutputPort("generalized_force"), torque.get_input_port(1))
+        torque = builder.AddNamedSystem(
+            "actuator_limits",
+            ActuatorLimitsSystem(
+                torque_limits=torque_limits(config, model),
+                rate_limits=np.array(
+                    [config.actuator_limits.torque_rate.get(j, np.inf) for j in model.joint_names]
+                ),
+                period=config.period,
+            ),
+        )
+        builder.Connect(impedance.get_output_port(), torque.GetInputPort("task_torque"))
+        builder.Connect(
+            null_space.GetOutputPort("generalized_force"), torque.GetInputPort("null_space_torque")
+        )
         builder.ExportInput(terms.GetInputPort("estimated_state"), "estimated_state")
         builder.ExportInput(impedance.GetInputPort("measured_wrench"), "measured_wrench")
         for name, port in (
@@ -176,7 +192,8 @@ class NullSpaceImpedanceController(Diagram):
             ("desired_force", "f_d"),
         ):
             builder.ExportInput(impedance.GetInputPort(port), name)
-        builder.ExportOutput(torque.get_output_port(), "generalized_force")
+        builder.ExportOutput(torque.GetOutputPort("generalized_force"), "generalized_force")
+        builder.ExportOutput(torque.GetOutputPort("saturation"), "saturation")
         builder.ExportOutput(
             null_space.GetOutputPort("null_space_velocity_error"), "null_space_velocity_error"
         )
@@ -187,6 +204,17 @@ class NullSpaceImpedanceController(Diagram):
         builder.ExportOutput(terms.GetOutputPort("task_position"), "task_position")
         builder.BuildInto(self)
         self.set_name("controller")
+
+
+def torque_limits(config: ControllerConfig, model: ControllerModel) -> np.ndarray:
+    """|τ| limit per joint (velocity order): the configuration's, else the model's
+    actuator effort limit, else unlimited. [N m]."""
+    plant = model.plant
+    effort = {}
+    for index in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(index)
+        effort[actuator.joint().name()] = actuator.effort_limit()
+    return np.array([config.actuator_limits.torque.get(j, effort.get(j, np.inf)) for j in model.joint_names])
 
 
 def as_controller_model(source, tool_frame: str, task_axes: Sequence[str]) -> ControllerModel:
@@ -204,6 +232,8 @@ def check_config(config: ControllerConfig, model: ControllerModel) -> None:
     for where, table in (
         ("desired_null_space.joint_speed_limits", d.joint_speed_limits),
         ("desired_null_space.sweep.direction", d.sweep.direction),
+        ("actuator_limits.torque", config.actuator_limits.torque),
+        ("actuator_limits.torque_rate", config.actuator_limits.torque_rate),
     ):
         for name in table:
             if name not in model.joint_names:
@@ -346,6 +376,21 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
         builder.Connect(terms_port, sweep.get_input_port())
         command = sweep.get_output_port()
     return command, diagnostics
+
+
+def _add_actuator_limits(builder, impedance, null_space, config, model):
+    rates = config.actuator_limits.torque_rate
+    limits = builder.AddNamedSystem(
+        "actuator_limits",
+        ActuatorLimitsSystem(
+            torque_limits=torque_limits(config, model),
+            rate_limits=np.array([rates.get(j, np.inf) for j in model.joint_names]),
+            period=config.period,
+        ),
+    )
+    builder.Connect(impedance.get_output_port(), limits.GetInputPort("task_torque"))
+    builder.Connect(null_space.GetOutputPort("generalized_force"), limits.GetInputPort("null_space_torque"))
+    return limits
 
 
 def _add_null_space(builder, terms, qdot_ns, config, model_terms):

@@ -74,6 +74,7 @@ def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> Co
         impedance=scenario.impedance,
         null_space=scenario.null_space,
         desired_null_space=scenario.desired_null_space,
+        actuator_limits=scenario.actuator_limits,
         nominal_force=scenario.reference.force,
     )
     return config if null_space_task else without_null_space_task(config)
@@ -190,6 +191,7 @@ def add_loggers(builder, station, controller, sensor, reference, monitor, period
         "en": "null_space_velocity_error",
         "nu": "lyapunov",
         "p_tau": "joint_torque_criterion",
+        "saturation": "saturation",
     }.items():
         signals[name] = controller.GetOutputPort(port)
     loggers = {}

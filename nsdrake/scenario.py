@@ -21,6 +21,7 @@ from pydrake.common.yaml import yaml_load_typed
 
 from .config import (
     NULL_SPACE_SOURCES,
+    ActuatorLimitsConfig,
     DesiredNullSpaceConfig,
     ImpedanceConfig,
     NullSpaceConfig,
@@ -155,6 +156,7 @@ class Scenario:
     impedance: ImpedanceConfig = field(default_factory=ImpedanceConfig)
     null_space: NullSpaceConfig = field(default_factory=NullSpaceConfig)
     desired_null_space: DesiredNullSpaceConfig = field(default_factory=DesiredNullSpaceConfig)
+    actuator_limits: ActuatorLimitsConfig = field(default_factory=ActuatorLimitsConfig)
     # Obstacles besides the plate.
     obstacles: list[ObstacleConfig] = field(default_factory=list)
     report: ReportConfig = field(default_factory=ReportConfig)
@@ -435,6 +437,9 @@ def validate(s: Scenario) -> None:
     check_non_negative(src, "desired_null_space.speed_headroom", d.speed_headroom)
     if d.speed_headroom >= 1.0:
         _fail(src, "desired_null_space.speed_headroom", f"must be below 1, got {d.speed_headroom}")
+    for kind in ("torque", "torque_rate"):
+        for name, value in getattr(s.actuator_limits, kind).items():
+            check_positive(src, f"actuator_limits.{kind}.{name}", value)
     names = set()
     for i, ob in enumerate(s.obstacles):
         where = f"obstacles[{i}]"
@@ -474,6 +479,8 @@ def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:
         "arm.initial_velocities": s.arm.initial_velocities,
         "desired_null_space.joint_speed_limits": s.desired_null_space.joint_speed_limits,
         "desired_null_space.sweep.direction": s.desired_null_space.sweep.direction,
+        "actuator_limits.torque": s.actuator_limits.torque,
+        "actuator_limits.torque_rate": s.actuator_limits.torque_rate,
     }
     for where, table in tables.items():
         for name in table:

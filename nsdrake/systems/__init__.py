@@ -1,5 +1,6 @@
 """Drake LeafSystems: thin shells that read ports, call nsdrake's math, write outputs."""
 
+from .actuator_limits import ActuatorLimitsSystem
 from .contact_monitor import ContactMonitor
 from .criteria import JointTorqueCriterionSystem, ManipulabilityCriterionSystem, ObstacleCriterionSystem
 from .force_sensor import ForceSensor
@@ -11,6 +12,7 @@ from .robot_terms import RobotTermsSystem
 from .self_motion import SelfMotionSweep
 
 __all__ = [
+    "ActuatorLimitsSystem",
     "ContactMonitor",
     "ForceSensor",
     "ImpedanceController",

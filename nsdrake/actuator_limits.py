@@ -1,0 +1,49 @@
+"""Actuator limits that keep the primary task's priority.
+
+A real arm's drives saturate: each joint's torque stays within ±τ_max and changes by
+at most ρ_max T per control period T. Clipping the summed torque τ = τ_task + τ₀
+joint by joint would let the null-space torque τ₀ push the task torque out of the
+actuators' range. So τ₀ gives way first:
+
+    τ = τ_task + s τ₀,   s ∈ [0, 1] the largest with lo ≤ τ_task + s τ₀ ≤ hi,
+
+for each joint's window [lo, hi] = [−τ_max, τ_max] ∩ [τ_prev − ρ_max T, τ_prev + ρ_max T].
+Since J H⁻¹ τ₀ = 0 (Eq. 11), scaling τ₀ leaves the task untouched; only the
+null-space velocity tracking slows down. Only when τ_task alone leaves a window
+(s = 0) is τ_task clipped to it, joint by joint, and then the primary task itself
+is degraded: the number of such joints is reported.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def limit_torque(tau_task, tau0, lower, upper):
+    """(τ, s, clipped): τ = τ_task + s τ₀ within [lower, upper] per joint (module docstring);
+    ``clipped`` counts the joints where τ_task itself had to be clipped."""
+    s = 1.0
+    clipped = 0
+    for i in range(tau_task.shape[0]):
+        a, b = tau_task[i], tau0[i]
+        if a < lower[i] or a > upper[i]:
+            s = 0.0
+            clipped += 1
+        elif b > 0.0 and a + b > upper[i]:
+            s = min(s, (upper[i] - a) / b)
+        elif b < 0.0 and a + b < lower[i]:
+            s = min(s, (lower[i] - a) / b)
+    tau = np.minimum(upper, np.maximum(lower, tau_task + s * tau0))
+    return tau, s, clipped
+
+
+def torque_window(tau_max, rate_max, period, tau_prev):
+    """(lower, upper) per joint: ±τ_max, narrowed to τ_prev ± ρ_max T when a previous
+    torque exists (``tau_prev`` None: the first period, no rate limit). [N m]."""
+    lower, upper = -tau_max, tau_max
+    if tau_prev is not None:
+        step = rate_max * period
+        lower, upper = np.maximum(lower, tau_prev - step), np.minimum(upper, tau_prev + step)
+    return lower, upper
