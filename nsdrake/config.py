@@ -22,6 +22,10 @@ class ImpedanceConfig:
     K_v_normal: float = 200.0
     # Force gain normal to the plate [m/(s² N)].
     K_f: float = 1.0
+    # Rotational stiffness k_p,r on the orientation error log(R_d R_WTᵀ), for pose tasks [1/s²].
+    K_p_rotation: float = 400.0
+    # Rotational damping k_v,r on the angular-velocity error, for pose tasks [1/s].
+    K_v_rotation: float = 40.0
     # Add the gravity torques g of Eq. 7 (needed in the vertical plane) [-].
     gravity_compensation: bool = True
     # Largest task inertia Λ the law may use: near a singular pose Λ = (J H⁻¹ Jᵀ)⁻¹ grows

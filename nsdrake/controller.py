@@ -63,7 +63,9 @@ class NullSpaceImpedanceController(Diagram):
 
     The law, with the model terms H, C, g, J of the controller's own model at the
     measured state (q, q̇), x = p(q) the tool point on the task axes, F the measured
-    contact force and n the unit task direction in which the tool pushes::
+    contact force and n the unit task direction in which the tool pushes (for a
+    pose task, x_d − x is the pose error [x_d − x; log(R_d R_WTᵀ)], ẋ = [v_T; ω]
+    and J the task rows of the tool's spatial Jacobian: :mod:`nsdrake.orientation`)::
 
         τ    = Jᵀ Λ (ẍ_c − J̇ q̇) + J_Tᵀ W_T + C q̇ + g + τ₀                 (Eqs. 6–7)
         ẍ_c  = ẍ_d + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − nᵀF)      (Eq. 8 + force)
@@ -93,6 +95,9 @@ class NullSpaceImpedanceController(Diagram):
         - desired_velocity
         - desired_acceleration
         - desired_force
+        - desired_orientation (with rotational task axes)
+        - desired_angular_velocity (with rotational task axes)
+        - desired_angular_acceleration (with rotational task axes)
         output_ports:
         - generalized_force
         - null_space_velocity_error
@@ -111,7 +116,11 @@ class NullSpaceImpedanceController(Diagram):
     velocity order; ``measured_wrench`` [M; f] (6) [N m, N], the wrench the tool
     exerts on the environment, world frame, moment about ``wrench_point``;
     ``desired_position``, ``desired_velocity``, ``desired_acceleration`` x_d, ẋ_d,
-    ẍ_d (m) [m, m/s, m/s²]; ``desired_force`` f_d (1) [N] along n.
+    ẍ_d (m_t, one per translational task axis) [m, m/s, m/s²]; ``desired_force``
+    f_d (1) [N] along n. With rotational task axes (``rx``, ``ry``, ``rz``, after the
+    translational ones): ``desired_orientation`` R_d as a unit quaternion [w, x, y, z]
+    (4), ``desired_angular_velocity`` ω_d and ``desired_angular_acceleration`` ω̇_d
+    (3 each, world frame) [rad/s, rad/s²]; the law uses their task rows.
 
     Outputs: ``generalized_force`` τ (n) [N m], velocity order (map it to the
     plant's actuation with Bᵀ); ``null_space_velocity_error`` eⁿ (n) [rad/s];
@@ -120,7 +129,7 @@ class NullSpaceImpedanceController(Diagram):
     level 2; ``speed_scale`` (1) the joint-speed limits' factor on q̇_dⁿ;
     ``manipulability`` w = √det(J Jᵀ) (1); ``d_min`` (1) [m] smallest link–obstacle
     distance; ``joint_torque_criterion`` ‖Jᵀ F_d‖² (1) [N² m²];
-    ``obstacle_potential`` (1) [m³]; ``task_position`` x (m) [m]; ``saturation`` (2):
+    ``obstacle_potential`` (1) [m³]; ``task_position`` x (m_t) [m]; ``saturation`` (2):
     the share s of τ₀ kept under the actuator limits and the number of joints whose
     task torque had to be clipped (:mod:`nsdrake.actuator_limits`: τ = τ_task + s τ₀
     within each joint's torque and torque-rate window, τ₀ reduced first).
@@ -130,8 +139,10 @@ class NullSpaceImpedanceController(Diagram):
             alone, welded to the world by the file), or a finalized MultibodyPlant
             of the arm that the controller may own — never the simulated plant.
         tool_frame: the frame whose origin is the task point (URDF/plant input only).
-        task_axes: world axes of x, e.g. ("x", "y") (URDF/plant input only).
-        normal: (m,) task-space direction in which the tool pushes (normalised here).
+        task_axes: world axes of x, e.g. ("x", "y"), ("x", "y", "z") or the full pose
+            ("x", "y", "z", "rx", "ry", "rz") (URDF/plant input only).
+        normal: (m_t,) direction on the translational task axes in which the tool
+            pushes (normalised here).
         config: gains, inverse, switches, criteria, selector and speed limits.
         wrench_point: p_WSo (3,), the point the measured moment is about [m];
             None: the tool point itself.
@@ -155,18 +166,22 @@ class NullSpaceImpedanceController(Diagram):
         self.model = model
         self.config = config
         normal = np.asarray(normal, dtype=float)
-        if normal.shape != (model.m,) or not np.linalg.norm(normal) > 0:
+        m_t = model.arm.m_t
+        if normal.shape != (m_t,) or not np.linalg.norm(normal) > 0:
             raise ControllerConfigError(
-                f"normal must be a non-zero vector on the {model.m} task axes, got {normal.tolist()}"
+                f"normal must be a non-zero vector on the {m_t} translational task axes, "
+                f"got {normal.tolist()}"
             )
         self.normal = normal / np.linalg.norm(normal)
         check_config(config, model)
+        # n on every task axis: zero on the rotational rows.
+        task_normal = np.concatenate([self.normal, np.zeros(model.arm.m_r)])
         builder = DiagramBuilder()
         terms = _add_robot_terms(builder, model, config)
         model_terms = model.terms(model.create_scratch(), np.zeros(model.n), np.zeros(model.n), True)
         impedance = _add_impedance(builder, terms, config, self.normal, wrench_point, model, model_terms)
         qdot_ns, diagnostics = _add_desired_null_space(
-            builder, terms, config, self.normal, model, model_terms
+            builder, terms, config, task_normal, model, model_terms
         )
         null_space = _add_null_space(builder, terms, qdot_ns, config, model_terms)
         torque = builder.AddNamedSystem(
@@ -192,6 +207,13 @@ class NullSpaceImpedanceController(Diagram):
             ("desired_force", "f_d"),
         ):
             builder.ExportInput(impedance.GetInputPort(port), name)
+        if model.arm.m_r:
+            for name, port in (
+                ("desired_orientation", "R_d"),
+                ("desired_angular_velocity", "omega_d"),
+                ("desired_angular_acceleration", "omegadot_d"),
+            ):
+                builder.ExportInput(impedance.GetInputPort(port), name)
         builder.ExportOutput(torque.GetOutputPort("generalized_force"), "generalized_force")
         builder.ExportOutput(torque.GetOutputPort("saturation"), "saturation")
         builder.ExportOutput(
@@ -250,6 +272,40 @@ def check_config(config: ControllerConfig, model: ControllerModel) -> None:
             f"task axes {list(model.arm.task_axes)}: the arm has {model.n} joints, "
             "no redundancy for a null space"
         )
+    check_task_span(model)
+
+
+SPAN_SAMPLES = 8  # random poses at which the task Jacobian's rank is checked
+SPAN_TOLERANCE = 1e-8  # σ_min / σ_max of J below this counts as rank-deficient
+
+
+def check_task_span(model: ControllerModel, seed: int = 0) -> None:
+    """Refuses, in one line, task axes the arm cannot span: J (m × n) rank-deficient at
+    every one of SPAN_SAMPLES seeded random poses within the joint limits (e.g. a
+    vertical axis, or a rotation out of the plane, for a planar arm). The message names
+    the task axes that the missing direction involves."""
+    plant = model.plant
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    lower = np.where(np.isfinite(lower), lower, -np.pi)
+    upper = np.where(np.isfinite(upper), upper, np.pi)
+    rng = np.random.default_rng(seed)
+    context = plant.CreateDefaultContext()
+    zero = np.zeros(model.n)
+    best, direction = 0.0, None
+    for _ in range(SPAN_SAMPLES):
+        J = model.arm.terms(context, rng.uniform(lower, upper), zero, False).J
+        U, sigma, _ = np.linalg.svd(J)
+        ratio = sigma[-1] / sigma[0] if sigma[0] > 0 else 0.0
+        if ratio > SPAN_TOLERANCE:
+            return
+        if direction is None or ratio >= best:
+            best, direction = ratio, U[:, -1]
+    axes = model.arm.task_axes
+    involved = [a for a, u in zip(axes, direction, strict=True) if abs(u) > 0.1]
+    raise ControllerConfigError(
+        f"task axes {list(axes)}: the arm cannot span them (J has rank < {model.m} at every sampled pose; "
+        f"no joint moves the tool along {' + '.join(involved)})"
+    )
 
 
 def _add_robot_terms(builder, model: ControllerModel, config: ControllerConfig):
@@ -270,12 +326,21 @@ def _add_impedance(builder, terms, config, normal, wrench_point, model, model_te
         "impedance_controller",
         ImpedanceController(
             gains=ImpedanceGains.along_surface(
-                normal, imp.K_p_tangent, imp.K_p_normal, imp.K_v_tangent, imp.K_v_normal, imp.K_f
+                normal,
+                imp.K_p_tangent,
+                imp.K_p_normal,
+                imp.K_v_tangent,
+                imp.K_v_normal,
+                imp.K_f,
+                imp.K_p_rotation,
+                imp.K_v_rotation,
+                model.arm.m_r,
             ),
             task_rows=model.arm.rows,
             p_WSo=wrench_point,
             gravity_compensation=imp.gravity_compensation,
             model_terms=model_terms,
+            rot_rows=model.arm.rot_rows,
         ),
     )
     builder.Connect(terms.GetOutputPort("robot_terms"), impedance.GetInputPort("robot_terms"))

@@ -236,6 +236,8 @@ class PinocchioDynamics:
         order = [self._model.joints[self._model.getJointId(j)].idx_v for j in arm.joint_names]
         self._order = None if order == list(range(arm.n)) else np.array(order)
         self._rows = arm.rows
+        self._spatial_rows = arm.spatial_rows
+        self._rotation = arm.m_r > 0
         self._lower = np.tril_indices(arm.n, -1)
         self._drake_rows = np.array([3, 4, 5, 0, 1, 2])
         self._partials = arm._partials
@@ -257,7 +259,9 @@ class PinocchioDynamics:
         H[self._lower] = H.T[self._lower]
         nle = data.nle.copy()
         J6 = pin.getFrameJacobian(model, data, self._tool, pin.LOCAL_WORLD_ALIGNED)
-        p_WT = pin.updateFramePlacement(model, data, self._tool).translation.copy()
+        X_WT = pin.updateFramePlacement(model, data, self._tool)
+        p_WT = X_WT.translation.copy()
+        R_WT = X_WT.rotation.copy() if self._rotation else None
         g = pin.computeGeneralizedGravity(model, data, qp).copy()
         C = pin.computeCoriolisMatrix(model, data, qp, vp).copy() if coriolis else None
         J_spatial = J6[self._drake_rows]  # Drake's order: [angular; translational]
@@ -275,10 +279,11 @@ class PinocchioDynamics:
             g=g,
             x=p_WT[self._rows],
             p_WT=p_WT,
-            J=J_v[self._rows],
+            J=J_spatial[self._spatial_rows],
             J_spatial=J_spatial,
             dJ_dq=self._partials(J_w, J_v),
             C=C,
+            R_WT=R_WT,
             max_task_inertia=max_task_inertia,
         )
 

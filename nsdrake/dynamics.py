@@ -15,15 +15,24 @@ computes it from a Drake ``MultibodyPlant``:
   gives b(q, v) = C(q, v) v, a quadratic form in v whose polarisation is
   C(q, v) e, so column j is C e_j = (b(q, v + s e_j) − b(q, v − s e_j)) / (4 s)
   for any s > 0 (READING_NOTES). Then Ḣ = C + Cᵀ.
-- J is the translational Jacobian of the tool point, restricted to the task
-  axes, and ∂J/∂q_k is analytic for revolute and prismatic joints: with w_k the
-  axis of a revolute joint and J_i the i-th column,
-      ∂J_i/∂q_k = w_k × J_i   if joint k is joint i or inboard of it (k revolute),
-      ∂J_i/∂q_k = w_i × J_k   if joint k is outboard of joint i (i revolute),
-  and zero otherwise. J̇ = Σ_k ∂J/∂q_k q̇_k, and J̇ q̇ follows.
+- J is the spatial Jacobian of the tool point T in the world, restricted to the
+  task axes: the rows of its translational part J_v (velocity of T) for the
+  translational axes ``x``, ``y``, ``z``, then the rows of its angular part J_w
+  (angular velocity of the tool) for the rotational axes ``rx``, ``ry``, ``rz``.
+  So ẋ = J q̇ = [v_T; ω] on those axes: m = 3 for a position task, 6 for a full
+  pose. ∂J/∂q_k is analytic for revolute and prismatic joints: with w_k the axis
+  of a revolute joint (column k of J_w) and J_v,i, J_w,i the i-th columns,
+      ∂J_v,i/∂q_k = w_k × J_v,i   if joint k is joint i or inboard of it (k revolute),
+      ∂J_v,i/∂q_k = w_i × J_v,k   if joint k is outboard of joint i (i revolute),
+      ∂J_w,i/∂q_k = w_k × J_w,i   if joint k is joint i or inboard of it (k revolute),
+  and zero otherwise (an axis moves only with the joints inboard of it; a
+  prismatic joint's J_w column is zero). J̇ = Σ_k ∂J/∂q_k q̇_k, and J̇ q̇ follows;
+  for the rotational rows J̇ q̇ is the angular part of the tool's spatial
+  acceleration bias, ω̇ − J_w q̈.
 
 Nothing here assumes four joints or a planar task: n comes from the plant and m
-from the task axes.
+from the task axes. The tool's orientation R_WT is part of the terms whenever the
+task has rotational axes (the pose error of :mod:`nsdrake.orientation` needs it).
 """
 
 from __future__ import annotations
@@ -40,7 +49,25 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import Context
 
-AXIS_NAMES = ("x", "y", "z")
+AXIS_NAMES = ("x", "y", "z")  # translational task axes: rows of J_v
+ROTATION_AXIS_NAMES = ("rx", "ry", "rz")  # rotational task axes: rows of J_w
+
+
+def parse_task_axes(task_axes: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, rot_rows): the world axes (0, 1, 2) of the translational and of the
+    rotational task axes. Axes must be distinct names among x, y, z, rx, ry, rz, the
+    translational ones first; ValueError (one line) otherwise."""
+    axes = list(task_axes)
+    valid = AXIS_NAMES + ROTATION_AXIS_NAMES
+    bad = [a for a in axes if a not in valid]
+    if bad or len(set(axes)) != len(axes) or not axes:
+        raise ValueError(f"task axes must be distinct names among {valid}, got {axes}")
+    kinds = [a in ROTATION_AXIS_NAMES for a in axes]
+    if kinds != sorted(kinds):
+        raise ValueError(f"task axes: the translational axes come before the rotational ones, got {axes}")
+    rows = np.array([AXIS_NAMES.index(a) for a in axes if a in AXIS_NAMES], dtype=int)
+    rot_rows = np.array([ROTATION_AXIS_NAMES.index(a) for a in axes if a in ROTATION_AXIS_NAMES], dtype=int)
+    return rows, rot_rows
 
 
 @dataclass(frozen=True)
@@ -57,12 +84,13 @@ class RobotTerms:
     H_inv: np.ndarray  # (n, n) its inverse
     Cv: np.ndarray  # (n,) Coriolis and centrifugal torques C q̇ [N m]
     g: np.ndarray  # (n,) gravity torques of Eq. 5 [N m]
-    x: np.ndarray  # (m,) task position of the tool point [m]
+    x: np.ndarray  # (m_t,) task position of the tool point on the translational axes [m]
     p_WT: np.ndarray  # (3,) tool point T in the world [m]
-    J: np.ndarray  # (m, n) task Jacobian [m/rad]
+    J: np.ndarray  # (m, n) task Jacobian: translational rows [m/rad], then rotational rows [rad/rad]
     J_spatial: np.ndarray  # (6, n) [angular; translational] Jacobian of T in the world
     dJ_dq: np.ndarray  # (n, m, n) dJ_dq[k] = ∂J/∂q_k [m/rad²]
     C: np.ndarray | None = None  # (n, n) Christoffel Coriolis matrix [N m s], if computed
+    R_WT: np.ndarray | None = None  # (3, 3) tool orientation in the world, for tasks with rotational axes
     # Cap on the task inertia Λ near singular poses (see Lambda) [kg; kg m² for rotations].
     max_task_inertia: float = math.inf
     _memo: dict = field(default_factory=dict, repr=False, compare=False)
@@ -73,7 +101,7 @@ class RobotTerms:
 
     @property
     def m(self) -> int:
-        return self.x.shape[0]
+        return self.J.shape[0]
 
     def memo(self, key, compute: Callable[[], object]):
         """``compute()``, evaluated once per RobotTerms and ``key``."""
@@ -91,12 +119,12 @@ class RobotTerms:
 
     @cached_property
     def Jdot_v(self) -> np.ndarray:
-        """J̇ q̇, (m,) [m/s²]."""
+        """J̇ q̇, (m,) [m/s², rad/s² on rotational rows]."""
         return self.Jdot @ self.v
 
     @cached_property
     def xdot(self) -> np.ndarray:
-        """ẋ = J q̇ (Eq. 2), (m,) [m/s]."""
+        """ẋ = J q̇ (Eq. 2), (m,) [m/s; rad/s on rotational rows: the tool's angular velocity]."""
         return self.J @ self.v
 
     @cached_property
@@ -147,30 +175,38 @@ class JacobianPartials:
     Args:
         revolute: (n,) bool, joint k is revolute (else prismatic).
         inboard: (n, n) bool, inboard[k, i] = joint k is joint i or inboard of it.
-        rows: indices of the world axes kept in J (the task axes).
+        rows: indices of the world axes kept in J's translational rows.
+        rot_rows: indices of the world axes kept in J's rotational rows (after them).
     """
 
-    def __init__(self, revolute: np.ndarray, inboard: np.ndarray, rows=(0, 1, 2)):
+    def __init__(self, revolute: np.ndarray, inboard: np.ndarray, rows=(0, 1, 2), rot_rows=()):
         revolute = np.asarray(revolute, dtype=bool)
         inboard = np.asarray(inboard, dtype=bool)
-        rows = np.asarray(rows)
+        rows = np.asarray(rows, dtype=int)
+        rot_rows = np.asarray(rot_rows, dtype=int)
         # D[k, :, i] = w_k × J_i where joint k is joint i or inboard of it (k revolute),
-        #            = w_i × J_k where joint k is outboard of joint i (i revolute).
+        #            = w_i × J_k where joint k is outboard of joint i (i revolute; translational rows).
         self._own = (inboard & revolute[:, None]).astype(float)[:, None, :]
         self._other = (~inboard & revolute[None, :]).astype(float)[:, None, :]
         # w ↦ the task rows of [w]×, flattened: [w]×[rows] = (w @ G).reshape(m, 3).
-        G = np.stack([skew(e)[rows].ravel() for e in np.eye(3)])  # (3, 3m)
-        self._G = G
+        self._G = np.stack([skew(e)[rows].ravel() for e in np.eye(3)])  # (3, 3 m_t)
         self._m = len(rows)
+        self._G_r = np.stack([skew(e)[rot_rows].ravel() for e in np.eye(3)])  # (3, 3 m_r)
+        self._m_r = len(rot_rows)
 
     def __call__(self, J_w: np.ndarray, J_v: np.ndarray) -> np.ndarray:
-        """(n, m, n) array D with D[k] = ∂J/∂q_k (task rows of the translational
-        Jacobian), from the (3, n) angular Jacobian J_w (column k is the world axis
-        of revolute joint k) and the (3, n) translational Jacobian J_v of the tool point."""
+        """(n, m, n) array D with D[k] = ∂J/∂q_k (the task rows: translational rows of
+        J_v, then rotational rows of J_w), from the (3, n) angular Jacobian J_w (column
+        k is the world axis of revolute joint k) and the (3, n) translational Jacobian
+        J_v of the tool point."""
         n = J_w.shape[1]
         S = (J_w.T @ self._G).reshape(n, self._m, 3)  # S[k] = rows of [w_k]×
-        P = S @ J_v  # (n, m, n): P[k, :, i] = (w_k × J_i)[rows]
-        return P * self._own + P.transpose(2, 1, 0) * self._other
+        P = S @ J_v  # (n, m_t, n): P[k, :, i] = (w_k × J_i)[rows]
+        D = P * self._own + P.transpose(2, 1, 0) * self._other
+        if not self._m_r:
+            return D
+        S_r = (J_w.T @ self._G_r).reshape(n, self._m_r, 3)
+        return np.concatenate([D, (S_r @ J_w) * self._own], axis=1)  # (w_k × w_i)[rot_rows]
 
 
 def skew(w: np.ndarray) -> np.ndarray:
@@ -205,7 +241,8 @@ class ArmModel:
     Args:
         plant: the finalized plant.
         tool_frame: the frame whose origin is the task point (the tool tip).
-        task_axes: world axes of the task, e.g. ("x", "y"); m = len(task_axes).
+        task_axes: world axes of the task, e.g. ("x", "y"), ("x", "y", "z") or the
+            full pose ("x", "y", "z", "rx", "ry", "rz"); m = len(task_axes).
     """
 
     def __init__(self, plant: MultibodyPlant, tool_frame: Frame, task_axes: Sequence[str]):
@@ -216,20 +253,20 @@ class ArmModel:
                 "nsdrake needs nq == nv (revolute and prismatic joints only); "
                 f"the plant has nq={plant.num_positions()}, nv={plant.num_velocities()}"
             )
-        bad = [a for a in task_axes if a not in AXIS_NAMES]
-        if bad or len(set(task_axes)) != len(task_axes) or not task_axes:
-            raise ValueError(f"task axes must be distinct names among {AXIS_NAMES}, got {list(task_axes)}")
+        self.rows, self.rot_rows = parse_task_axes(task_axes)
         self.plant = plant
         self.tool_frame = tool_frame
         self.task_axes = tuple(task_axes)
-        self.rows = np.array([AXIS_NAMES.index(a) for a in task_axes])
         self.n = plant.num_velocities()
         self.m = len(task_axes)
+        self.m_t, self.m_r = len(self.rows), len(self.rot_rows)
+        # Rows of Drake's spatial Jacobian [J_w; J_v] that make J.
+        self.spatial_rows = np.concatenate([3 + self.rows, self.rot_rows])
         self.joints = self._joints_by_velocity_index()
         self.joint_names = tuple(j.name() for j in self.joints)
         self.revolute = np.array([j.type_name() == "revolute" for j in self.joints])
         self.inboard = self._inboard_matrix()
-        self._partials = JacobianPartials(self.revolute, self.inboard, self.rows)
+        self._partials = JacobianPartials(self.revolute, self.inboard, self.rows, self.rot_rows)
         self._origin = np.zeros(3)
         self._world = plant.world_frame()
 
@@ -267,7 +304,8 @@ class ArmModel:
             ) from None
 
     def task_position(self, context: Context) -> np.ndarray:
-        """x = p(q) (Eq. 1) for the positions already in ``context``. (m,) [m]."""
+        """x = p(q) (Eq. 1), the translational task axes, for the positions already in
+        ``context``. (m_t,) [m]."""
         p = self.plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)
         return p[self.rows, 0]
 
@@ -295,6 +333,7 @@ class ArmModel:
         J_w, J_v = J_spatial[:3], J_spatial[3:]
         dJ = self._partials(J_w, J_v)
         p_WT = self.plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)[:, 0]
+        R_WT = self.tool_frame.CalcPoseInWorld(context).rotation().matrix() if self.m_r else None
         C = None
         if coriolis:
             C = coriolis_matrix(lambda w: self._bias(context, w), v)
@@ -308,10 +347,11 @@ class ArmModel:
             g=g,
             x=p_WT[self.rows],
             p_WT=p_WT,
-            J=J_v[self.rows],
+            J=J_spatial[self.spatial_rows],
             J_spatial=J_spatial,
             dJ_dq=dJ,
             C=C,
+            R_WT=R_WT,
             max_task_inertia=max_task_inertia,
         )
 

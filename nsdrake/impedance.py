@@ -30,6 +30,16 @@ Eq. 10 (READING_NOTES: the OCR's (ẋ − ẋ_d), (x − x_d) are sign slips).
 Along the plate this is Eq. 8: the friction force μ f_n is part of F, so the
 Jᵀ F term cancels it and it leaves no position error.
 
+Pose tasks. With rotational task axes (``rx``, ``ry``, ``rz``) x stacks the tool
+position on the translational axes and the tool's orientation; ẋ = J q̇ is
+[v_T; ω] on those axes, Λ = (J H⁻¹ Jᵀ)⁻¹ is 6 × 6 for the full pose and J̇ q̇ is
+the spatial acceleration bias. x_d − x becomes the pose error
+e = [x_d − x; e_o], e_o = log(R_d R_WTᵀ) the rotation vector from the measured to
+the desired tool frame (:mod:`nsdrake.orientation` says why the closed loop is
+still Eq. 10's), the rotational gains are scalars k_p,r I and k_v,r I, and n has
+zeros on the rotational rows: the force is pushed along a translational direction,
+and the measured moment enters only through J_Tᵀ W_T.
+
 Normal to the plate, in contact with a surface of stiffness k_c (a point
 contact: f_n ≈ k_c × penetration), and with x_d,n held fixed after contact,
 the steady state of ẍ = ẍ_c is
@@ -52,6 +62,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import RobotTerms
+from .orientation import orientation_error
 
 
 @dataclass(frozen=True)
@@ -61,7 +72,7 @@ class ImpedanceGains:
     K_p: np.ndarray  # (m, m) position gain [1/s²]
     K_v: np.ndarray  # (m, m) velocity gain [1/s]
     K_f: float  # force gain [m/(s² N)]
-    normal: np.ndarray  # (m,) unit direction in which the tool pushes
+    normal: np.ndarray  # (m,) unit direction in which the tool pushes (zero on rotational rows)
 
     @classmethod
     def along_surface(
@@ -72,18 +83,31 @@ class ImpedanceGains:
         K_v_tangent: float,
         K_v_normal: float,
         K_f: float,
+        K_p_rotation: float = 0.0,
+        K_v_rotation: float = 0.0,
+        rotational_axes: int = 0,
     ) -> ImpedanceGains:
-        """Gains diagonal in the frame of a surface with unit normal ``normal``."""
+        """Gains diagonal in the frame of a surface with unit normal ``normal`` (on the
+        translational axes), and, for ``rotational_axes`` rotational rows after them,
+        the scalar rotational gains k_p,r I and k_v,r I [1/s², 1/s]."""
         n = np.asarray(normal, dtype=float)
         n = n / np.linalg.norm(n)
         P_n = np.outer(n, n)
         P_t = np.eye(n.shape[0]) - P_n
-        return cls(
-            K_p=K_p_tangent * P_t + K_p_normal * P_n,
-            K_v=K_v_tangent * P_t + K_v_normal * P_n,
-            K_f=K_f,
-            normal=n,
-        )
+        K_p = K_p_tangent * P_t + K_p_normal * P_n
+        K_v = K_v_tangent * P_t + K_v_normal * P_n
+        if rotational_axes:
+            K_p = _block_diagonal(K_p, K_p_rotation * np.eye(rotational_axes))
+            K_v = _block_diagonal(K_v, K_v_rotation * np.eye(rotational_axes))
+            n = np.concatenate([n, np.zeros(rotational_axes)])
+        return cls(K_p=K_p, K_v=K_v, K_f=K_f, normal=n)
+
+
+def _block_diagonal(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    out = np.zeros((A.shape[0] + B.shape[0], A.shape[1] + B.shape[1]))
+    out[: A.shape[0], : A.shape[1]] = A
+    out[A.shape[0] :, A.shape[1] :] = B
+    return out
 
 
 def command_acceleration(
@@ -97,13 +121,40 @@ def command_acceleration(
     gains: ImpedanceGains,
 ) -> np.ndarray:
     """ẍ_c = ẍ_d + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − nᵀF). (m,) [m/s²]."""
+    return command_acceleration_from_error(x_d - x, xdot, xdot_d, xddot_d, F, f_d, gains)
+
+
+def command_acceleration_from_error(
+    error: np.ndarray,
+    xdot: np.ndarray,
+    xdot_d: np.ndarray,
+    xddot_d: np.ndarray,
+    F: np.ndarray,
+    f_d: float,
+    gains: ImpedanceGains,
+) -> np.ndarray:
+    """ẍ_c = ẍ_d + K_v (ẋ_d − ẋ) + K_p e + n K_f (f_d − nᵀF) for a task error e (x_d − x,
+    or the pose error of :func:`pose_error`). (m,) [m/s², rad/s² on rotational rows]."""
     f_n = gains.normal @ F
     return (
-        xddot_d
-        + gains.K_v @ (xdot_d - xdot)
-        + gains.K_p @ (x_d - x)
-        + gains.normal * (gains.K_f * (f_d - f_n))
+        xddot_d + gains.K_v @ (xdot_d - xdot) + gains.K_p @ error + gains.normal * (gains.K_f * (f_d - f_n))
     )
+
+
+def pose_error(
+    x: np.ndarray, x_d: np.ndarray, R_WT: np.ndarray, R_d: np.ndarray, rot_rows: np.ndarray
+) -> np.ndarray:
+    """e = [x_d − x; e_o[rot_rows]], e_o = log(R_d R_WTᵀ) (:mod:`nsdrake.orientation`).
+    (m,) [m, rad]."""
+    return np.concatenate([x_d - x, orientation_error(R_d, R_WT)[rot_rows]])
+
+
+def task_wrench(W_T: np.ndarray, rows: np.ndarray, rot_rows: np.ndarray) -> np.ndarray:
+    """F on the task axes from the wrench [M_T; f] at the tool point: the force on the
+    translational rows, the moment on the rotational ones. (m,) [N, N m]."""
+    if not len(rot_rows):
+        return W_T[3:][rows]
+    return np.concatenate([W_T[3:][rows], W_T[:3][rot_rows]])
 
 
 def wrench_at_tool(wrench_So: np.ndarray, p_WSo: np.ndarray, p_WT: np.ndarray) -> np.ndarray:

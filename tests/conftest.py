@@ -31,6 +31,65 @@ def paper_arm() -> ArmModel:
     return ArmModel(plant, plant.GetFrameByName("tool"), ("x", "y"))
 
 
+PANDA_POSE_AXES = ("x", "y", "z", "rx", "ry", "rz")
+# urdf/README's table-wiping start: tool 0.5 m in front of the base, 0.15 m high, pointing down.
+PANDA_Q0 = np.array([0.0, 0.182, 0.0, -2.400, 0.0, 2.582, 0.785])
+
+
+def panda_arm(axes=PANDA_POSE_AXES) -> ArmModel:
+    """urdf/panda.urdf alone in a continuous plant, with ``axes`` as task axes."""
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModels(str(models_dir() / "panda.urdf"))
+    plant.Finalize()
+    return ArmModel(plant, plant.GetFrameByName("tool"), axes)
+
+
+def panda_configurations(count: int, seed: int, near_singular: int = 0) -> list[np.ndarray]:
+    """``count`` seeded q uniform within the Panda's joint limits, then ``near_singular``
+    more within 1e-3 rad (offsets 5e-4…1e-3 rad per joint, random signs) of poses where
+    the 6 × 7 pose Jacobian loses rank (:func:`panda_singular_poses`)."""
+    rng = np.random.default_rng(seed)
+    plant = panda_arm().plant
+    lo, hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    out = [rng.uniform(lo, hi) for _ in range(count)]
+    singular = panda_singular_poses(max(1, min(near_singular, 4)), seed)
+    for k in range(near_singular):
+        offset = rng.choice([-1.0, 1.0], 7) * rng.uniform(5e-4, 1e-3, 7)
+        out.append(singular[k % len(singular)] + offset)
+    return out
+
+
+def panda_singular_poses(count: int, seed: int) -> list[np.ndarray]:
+    """``count`` poses within the Panda's limits where the pose Jacobian's smallest
+    singular value is below 1e-8 (from ~0.1 elsewhere): σ_min² minimised from seeded
+    random starts. (The 6 × 7 Jacobian loses rank on a set of codimension 2, e.g.
+    q2 = 0, which lines joint 3 up with joint 1, together with one more condition;
+    a search finds such poses without listing the conditions.)"""
+    from scipy.optimize import minimize
+
+    arm = panda_arm()
+    context = arm.plant.CreateDefaultContext()
+    lo, hi = arm.plant.GetPositionLowerLimits(), arm.plant.GetPositionUpperLimits()
+    zero = np.zeros(7)
+    rng = np.random.default_rng(seed)
+
+    def sigma_min(q):
+        return np.linalg.svd(arm.terms(context, q, zero, False).J, compute_uv=False)[-1]
+
+    out = []
+    while len(out) < count:
+        result = minimize(
+            lambda q: sigma_min(q) ** 2,
+            rng.uniform(lo + 0.2, hi - 0.2),
+            method="L-BFGS-B",
+            bounds=list(zip(lo + 0.05, hi - 0.05, strict=True)),
+            options={"ftol": 1e-30, "gtol": 1e-14, "maxiter": 2000},
+        )
+        if sigma_min(result.x) < 1e-8:
+            out.append(result.x)
+    return out
+
+
 ARM_NAMES = ["arm4", *TEST_ARMS]
 
 

@@ -22,11 +22,12 @@ class AutoDiffArm:
         self.world = self.plant.world_frame()
 
     def _jacobian(self, q_ad):
+        """The task rows of the tool's spatial Jacobian [J_w; J_v] (translational rows first)."""
         self.plant.SetPositions(self.context, q_ad)
-        J = self.plant.CalcJacobianTranslationalVelocity(
+        J = self.plant.CalcJacobianSpatialVelocity(
             self.context, JacobianWrtVariable.kV, self.tool, np.zeros(3), self.world, self.world
         )
-        return J[self.arm.rows]
+        return J[self.arm.spatial_rows]
 
     def dJ_dq(self, q) -> np.ndarray:
         """(n, m, n): ∂J/∂q_k by forward-mode AutoDiff w.r.t. all of q."""
@@ -58,30 +59,32 @@ class AutoDiffArm:
 
 
 def plant_terms(arm: ArmModel, q, v):
-    """H, C q̇, g, J, J̇ q̇ and x straight from the plant (no nsdrake code)."""
+    """H, C q̇, g, J, J̇ q̇, x and R_WT straight from the plant (no nsdrake code). J and
+    J̇ q̇ take the task rows (translational, then rotational) of the tool's spatial
+    Jacobian and of its spatial acceleration bias."""
     plant = arm.plant
     context = plant.CreateDefaultContext()
     plant.SetPositionsAndVelocities(context, np.concatenate([q, v]))
     world = plant.world_frame()
-    J = plant.CalcJacobianTranslationalVelocity(
-        context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
-    )
-    Jdot_v = plant.CalcBiasTranslationalAcceleration(
-        context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
-    )[:, 0]
     J_spatial = plant.CalcJacobianSpatialVelocity(
         context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
     )
-    x = plant.CalcPointsPositions(context, arm.tool_frame, np.zeros(3), world)[:, 0]
+    bias = plant.CalcBiasSpatialAcceleration(
+        context, JacobianWrtVariable.kV, arm.tool_frame, np.zeros(3), world, world
+    )
+    Jdot_v = np.concatenate([bias.rotational(), bias.translational()])
+    X_WT = arm.tool_frame.CalcPoseInWorld(context)
+    x = X_WT.translation()
     return {
         "H": plant.CalcMassMatrix(context),
         "Cv": plant.CalcBiasTerm(context),
         "g": -plant.CalcGravityGeneralizedForces(context),
-        "J": J[arm.rows],
-        "Jdot_v": Jdot_v[arm.rows],
+        "J": J_spatial[arm.spatial_rows],
+        "Jdot_v": Jdot_v[arm.spatial_rows],
         "J_spatial": J_spatial,
         "x": x[arm.rows],
         "p_WT": x,
+        "R_WT": X_WT.rotation().matrix(),
     }
 
 

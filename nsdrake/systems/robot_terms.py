@@ -27,7 +27,7 @@ class RobotTermsSystem(LeafSystem):
         - task_position
 
     ``estimated_state`` is [q; q̇] (2n); ``robot_terms`` is an abstract
-    RobotTerms; ``task_position`` is x (m) [m].
+    RobotTerms; ``task_position`` is x (m_t, the translational task axes) [m].
 
     The terms come from the controller's own model (:class:`nsdrake.ControllerModel`),
     never from the simulated plant; the model context it writes q and q̇ into is
@@ -54,7 +54,7 @@ class RobotTermsSystem(LeafSystem):
             prerequisites_of_calc=on_state,
         )
         self.DeclareVectorOutputPort(
-            "task_position", model.m, self._calc_task_position, prerequisites_of_calc=on_state
+            "task_position", model.arm.m_t, self._calc_task_position, prerequisites_of_calc=on_state
         )
 
     def _calc_terms(self, context, output):
