@@ -80,12 +80,26 @@ class ManipulabilityCriterionConfig:
 
 
 @dataclass
+class JointLimitsCriterionConfig:
+    """Joint-limit avoidance (nsdrake/criteria/joint_limits.py): p = −⅓ Σ max(0, ρ − margin)³,
+    the limits read from the controller's model."""
+
+    # Step gain K of Eq. 30; >= 0, a positive gain pushes the joints away from their limits
+    # [rad/s per rad³/(kg m²)].
+    gain: float = 0.0
+    # Influence distance ρ: joints farther than this from both limits feel nothing [rad].
+    influence: float = 0.3
+
+
+@dataclass
 class CriteriaConfig:
-    """The criteria of Section 3.5. A zero gain keeps a criterion in the hierarchy with no effect."""
+    """The criteria of Section 3.5, and joint limits. A zero gain keeps a criterion in the
+    hierarchy with no effect."""
 
     obstacle: ObstacleCriterionConfig = field(default_factory=ObstacleCriterionConfig)
     joint_torque: JointTorqueCriterionConfig = field(default_factory=JointTorqueCriterionConfig)
     manipulability: ManipulabilityCriterionConfig = field(default_factory=ManipulabilityCriterionConfig)
+    joint_limits: JointLimitsCriterionConfig = field(default_factory=JointLimitsCriterionConfig)
 
 
 @dataclass
@@ -100,6 +114,11 @@ class SelectorConfig:
     w_lim: float = 0.01
     # Hysteresis: manipulability leaves level 2 only above w_lim + w_band [m²].
     w_band: float = 0.005
+    # A joint closer than this to one of its limits puts joint-limit avoidance on level 2
+    # (checked after the obstacle); 0 turns the branch off [rad].
+    q_lim: float = 0.0
+    # Hysteresis: joint-limit avoidance leaves level 2 only beyond q_lim + q_band [rad].
+    q_band: float = 0.0
     # After a switch, q̇_dⁿ blends from the old ordering to the new over this time [s].
     blend_time: float = 0.2
 
@@ -136,8 +155,8 @@ class DesiredNullSpaceConfig:
     criteria: CriteriaConfig = field(default_factory=CriteriaConfig)
     selector: SelectorConfig = field(default_factory=SelectorConfig)
     # Largest joint speed, keyed by joint name: q̇_dⁿ is scaled, keeping its direction, so
-    # that no joint's commanded speed (task part plus q̇_dⁿ) exceeds it. Missing joints are
-    # unlimited [rad/s].
+    # that no joint's commanded speed (task part plus q̇_dⁿ) exceeds it. Missing joints take
+    # the model's velocity limit (URDF <limit velocity>; unlimited if it has none) [rad/s].
     joint_speed_limits: dict[str, float] = field(default_factory=dict)
     # Fraction of each speed limit kept free for the null-space tracking error: commands
     # stay within (1 − headroom) × limit, so the measured speeds stay within the limit [-].

@@ -19,6 +19,7 @@ from .pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 from .systems import (
     ActuatorLimitsSystem,
     ImpedanceController,
+    JointLimitsCriterionSystem,
     JointTorqueCriterionSystem,
     ManipulabilityCriterionSystem,
     NullSpaceController,
@@ -71,7 +72,8 @@ class NullSpaceImpedanceController(Diagram):
         ẍ_c  = ẍ_d + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − nᵀF)      (Eq. 8 + force)
         τ₀   = H N (q̈_dⁿ + (J̄̇ J + J̄ J̇) q̇ + K_n eⁿ + H⁻¹ C eⁿ)           (Eq. 21)
         eⁿ   = q̇_dⁿ − N q̇,   N = I − J̄ J,   J̄ = H⁻¹ Jᵀ Λ,   Λ = (J H⁻¹ Jᵀ)⁻¹  (Eqs. 13, 14)
-        q̇_dⁿ = Σ_k K_k N_k H⁻¹ Φ_k  (Eq. 30 on each priority level; Fig. 1 orders them)
+        q̇_dⁿ = Σ_k K_k N_k H⁻¹ Φ_k  (Eq. 30 on each priority level; Fig. 1 orders them,
+                                      joint-limit avoidance added: nsdrake.priority)
 
     J_Tᵀ W_T is Eq. 6's Jᵀ F for the whole measured wrench moved to the tool point
     (:mod:`nsdrake.impedance`); q̈_dⁿ is the backward difference of q̇_dⁿ over one
@@ -109,6 +111,8 @@ class NullSpaceImpedanceController(Diagram):
         - d_min
         - joint_torque_criterion
         - obstacle_potential
+        - joint_limits_criterion
+        - joint_limit_margin
         - task_position
         - saturation
 
@@ -125,11 +129,14 @@ class NullSpaceImpedanceController(Diagram):
     Outputs: ``generalized_force`` τ (n) [N m], velocity order (map it to the
     plant's actuation with Bᵀ); ``null_space_velocity_error`` eⁿ (n) [rad/s];
     ``lyapunov`` ν (1) [J]; ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s];
-    ``mode`` (1): 0 none, 1 obstacle avoidance, 2 joint torque, 3 manipulability on
-    level 2; ``speed_scale`` (1) the joint-speed limits' factor on q̇_dⁿ;
+    ``mode`` (1): 0 none, 1 obstacle avoidance, 2 joint torque, 3 manipulability, 4
+    joint limits on level 2; ``speed_scale`` (1) the joint-speed limits' factor on q̇_dⁿ;
     ``manipulability`` w = √det(J Jᵀ) (1); ``d_min`` (1) [m] smallest link–obstacle
     distance; ``joint_torque_criterion`` ‖Jᵀ F_d‖² (1) [N² m²];
-    ``obstacle_potential`` (1) [m³]; ``task_position`` x (m_t) [m]; ``saturation`` (2):
+    ``obstacle_potential`` (1) [m³]; ``joint_limits_criterion`` (1) [rad³] and
+    ``joint_limit_margin`` (1) [rad], the smallest distance of a joint to a limit of
+    the controller model (:mod:`nsdrake.criteria.joint_limits`); ``task_position`` x
+    (m_t) [m]; ``saturation`` (2):
     the share s of τ₀ kept under the actuator limits and the number of joints whose
     task torque had to be clipped (:mod:`nsdrake.actuator_limits`: τ = τ_task + s τ₀
     within each joint's torque and torque-rate window, τ₀ reduced first).
@@ -237,6 +244,20 @@ def torque_limits(config: ControllerConfig, model: ControllerModel) -> np.ndarra
         actuator = plant.get_joint_actuator(index)
         effort[actuator.joint().name()] = actuator.effort_limit()
     return np.array([config.actuator_limits.torque.get(j, effort.get(j, np.inf)) for j in model.joint_names])
+
+
+def speed_limits(config: ControllerConfig, model: ControllerModel) -> np.ndarray:
+    """Joint-speed limit per joint (velocity order) for q̇_dⁿ's scaling: the configuration's,
+    else the model's velocity limit (URDF ``<limit velocity>``; zero or none counts as
+    unlimited, as URDF writers use 0 for "not given"). [rad/s]."""
+    model_limits = model.plant.GetVelocityUpperLimits()
+    table = config.desired_null_space.joint_speed_limits
+    return np.array(
+        [
+            table.get(j, limit if limit > 0 else np.inf)
+            for j, limit in zip(model.joint_names, model_limits, strict=True)
+        ]
+    )
 
 
 def as_controller_model(source, tool_frame: str, task_axes: Sequence[str]) -> ControllerModel:
@@ -359,6 +380,12 @@ def _add_criteria(builder, terms_port, config, normal, model, model_terms) -> di
         systems[Criterion.obstacle] = ObstacleCriterionSystem(
             model=model, influence_distance=crit.obstacle.influence_distance, model_terms=model_terms
         )
+    systems[Criterion.joint_limits] = JointLimitsCriterionSystem(
+        lower=model.plant.GetPositionLowerLimits(),
+        upper=model.plant.GetPositionUpperLimits(),
+        influence=crit.joint_limits.influence,
+        model_terms=model_terms,
+    )
     added = {}
     for c in Criterion:
         if c in systems:
@@ -377,26 +404,38 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
         Criterion.obstacle: d.criteria.obstacle.gain,
         Criterion.joint_torque: d.criteria.joint_torque.gain,
         Criterion.manipulability: d.criteria.manipulability.gain,
+        Criterion.joint_limits: d.criteria.joint_limits.gain,
     }
-    limits = d.joint_speed_limits
     sel = d.selector
     selector = builder.AddNamedSystem(
         "priority_selector",
         PrioritySelector(
             inverse=generalized_inverse(config),
             gains=gains,
-            limits=SelectorLimits(d_lim=sel.d_lim, w_lim=sel.w_lim, d_band=sel.d_band, w_band=sel.w_band),
+            limits=SelectorLimits(
+                d_lim=sel.d_lim,
+                w_lim=sel.w_lim,
+                d_band=sel.d_band,
+                w_band=sel.w_band,
+                q_lim=sel.q_lim,
+                q_band=sel.q_band,
+            ),
             blend_time=sel.blend_time,
             rotate_gradient=d.rotate_gradient,
-            speed_limits=np.array([limits.get(j, np.inf) for j in model.joint_names]),
+            speed_limits=speed_limits(config, model),
             speed_headroom=d.speed_headroom,
             period=config.period,
             model_terms=model_terms,
         ),
     )
     builder.Connect(terms_port, selector.GetInputPort("robot_terms"))
-    for c in (Criterion.joint_torque, Criterion.manipulability):
+    for c in (Criterion.joint_torque, Criterion.manipulability, Criterion.joint_limits):
         builder.Connect(criteria[c].GetOutputPort("gradient"), selector.GetInputPort(f"{c.value}_gradient"))
+    joint_limits = criteria[Criterion.joint_limits]
+    builder.Connect(joint_limits.GetOutputPort("margin"), selector.GetInputPort("joint_limit_margin"))
+    builder.Connect(
+        joint_limits.GetOutputPort("activation"), selector.GetInputPort("joint_limits_activation")
+    )
     manipulability = criteria[Criterion.manipulability]
     builder.Connect(manipulability.GetOutputPort("value"), selector.GetInputPort("manipulability"))
     diagnostics = {
@@ -404,6 +443,8 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
         "speed_scale": selector.GetOutputPort("speed_scale"),
         "manipulability": manipulability.GetOutputPort("value"),
         "joint_torque_criterion": criteria[Criterion.joint_torque].GetOutputPort("value"),
+        "joint_limits_criterion": joint_limits.GetOutputPort("value"),
+        "joint_limit_margin": joint_limits.GetOutputPort("margin"),
     }
     if Criterion.obstacle in criteria:
         obstacle = criteria[Criterion.obstacle]

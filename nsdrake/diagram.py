@@ -30,6 +30,7 @@ from pydrake.systems.primitives import LogVectorOutput, MatrixGain, VectorLogSin
 from .config import ControllerConfig
 from .controller import ControllerConfigError, NullSpaceImpedanceController, without_null_space_task
 from .controller_model import ControllerModel
+from .dynamics import ArmModel
 from .plant import Station, add_station, station_obstacles
 from .reference import SlideAndPress
 from .scenario import Scenario, ScenarioError
@@ -62,9 +63,14 @@ def initial_task_position(station: Station) -> np.ndarray:
     return station.arm_model.task_position(context)
 
 
-def speed_limit_vector(scenario: Scenario, joint_names: tuple[str, ...]) -> np.ndarray:
+def speed_limit_vector(scenario: Scenario, arm: ArmModel) -> np.ndarray:
+    """Each joint's speed limit (velocity order): the scenario's, else the arm model's
+    velocity limit (zero or none: unlimited), as the controller uses them. [rad/s]."""
     limits = scenario.desired_null_space.joint_speed_limits
-    return np.array([limits.get(name, np.inf) for name in joint_names])
+    model = arm.plant.GetVelocityUpperLimits()
+    return np.array(
+        [limits.get(name, m if m > 0 else np.inf) for name, m in zip(arm.joint_names, model, strict=True)]
+    )
 
 
 def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> ControllerConfig:

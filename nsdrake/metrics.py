@@ -221,11 +221,12 @@ def priority_metrics(
     contact_threshold: float | None = None,
     required_modes: tuple[int, ...] = (),
 ) -> list[Metric]:
-    """Fig. 1's switching, from the ``mode``, ``d_min``, ``w``, ``p_tau`` and ``tau`` traces.
+    """Fig. 1's switching, from the ``mode``, ``d_min``, ``w``, ``p_tau`` and ``tau`` traces
+    (and ``q_margin`` for an arm with joint limits).
 
     - modes visited, with the time spent in each, and whether ``required_modes`` all appear;
-    - in every interval of mode 1 (3, 2) that lasts at least ``blend_time`` (so
-      its ordering is fully active), d_min (w) grows and p_tau falls from the
+    - in every interval of mode 1 (3, 4, 2) that lasts at least ``blend_time`` (so
+      its ordering is fully active), d_min (w, q_margin) grows and p_tau falls from the
       interval's start to its end;
     - the largest torque step Δτ in the [switch, switch + blend_time] windows,
       against twice the 99th percentile of Δτ over the other rows, first contact
@@ -250,6 +251,8 @@ def priority_metrics(
     else:
         metrics.append(Metric("modes_visited", float(len(visited)), "modes", f"visited {visited}", None))
     criteria = {1: ("d_min", +1, "d_min grows"), 2: ("p_tau", -1, "p_tau falls"), 3: ("w", +1, "w grows")}
+    if "q_margin" in traces:  # an arm with joint limits: mode 4, joint-limit avoidance
+        criteria[4] = ("q_margin", +1, "the smallest joint-limit margin grows")
     for m, (column, sign, words) in criteria.items():
         spans = _intervals(mode == m)
         active = float(sum((t[b] - t[a] + h) for a, b in spans))
@@ -263,7 +266,7 @@ def priority_metrics(
             Metric(
                 f"mode{m}_{column}_change_min",
                 worst,
-                {"d_min": "m", "p_tau": "N^2 m^2", "w": "m^2"}[column],
+                {"d_min": "m", "p_tau": "N^2 m^2", "w": "m^2", "q_margin": "rad"}[column],
                 f"> 0 in each of the {len(judged)} mode-{m} interval(s) of >= {blend_time:g} s ({words})",
                 worst > 0,
             )

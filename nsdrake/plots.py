@@ -14,14 +14,14 @@ import numpy as np  # noqa: E402
 from .metrics import torque_steps  # noqa: E402
 from .traces import Traces  # noqa: E402
 
-MODE_NAMES = {0: "none", 1: "obstacle", 2: "joint torque", 3: "manipulability"}
+MODE_NAMES = {0: "none", 1: "obstacle", 2: "joint torque", 3: "manipulability", 4: "joint limits"}
 
 
 def _mode_axis(ax, traces: Traces, fontsize: int) -> None:
     """The mode over time as a step plot, its ticks named after Fig. 1's branches."""
     ax.step(traces["t"], traces["mode"], where="post", color="k", lw=1.2, label="mode")
     ax.set_yticks(list(MODE_NAMES), [f"{k} {v}" for k, v in MODE_NAMES.items()], fontsize=fontsize)
-    ax.set_ylim(-0.3, 3.3)
+    ax.set_ylim(-0.3, max(MODE_NAMES) + 0.3)
     ax.set_ylabel("level-2 criterion")
 
 

@@ -4,11 +4,23 @@ Fig. 1's decision tree (its drawing is missing from the text; READING_NOTES):
 level 1 is always the primary task (position and force). Then
 
 - a link closer to an obstacle than d_lim      → obstacle avoidance on level 2 (mode 1);
+- else, a joint closer to a limit than q_lim   → joint-limit avoidance on level 2 (mode 4);
 - else, manipulability w above its limit w_lim → joint-torque minimisation on level 2 (mode 2);
 - else                                          → manipulability maximisation on level 2 (mode 3).
 
 The other criteria take the lower levels in a fixed order per mode
 (:data:`ORDERINGS`). Mode 0 means no criterion is configured.
+
+Joint-limit avoidance (:mod:`nsdrake.criteria.joint_limits`) is not in the paper,
+whose arm has no joint limits. It joins the tree as the second test, after the
+obstacle and before the two optimisation criteria, and it follows the obstacle in
+every ordering, because both guard against damage while joint torque and
+manipulability only improve the pose: running into a joint's mechanical stop is, like
+a collision, something a lower-priority preference must never cause. A collision is
+checked first because it hurts the surroundings too, and because the arm's own
+controller brakes a joint at its limit anyway (a real Panda stops), while nothing
+stops a link at an obstacle. With q_lim = 0 (the default) the branch never fires
+and, with a zero gain, the level does nothing: the paper's three-branch tree.
 
 Each level is resolved in the null space of every level above it, as in the
 multi-level task-priority method of Baerlocher & Boulic (1998), here in the
@@ -69,6 +81,7 @@ class Criterion(str, enum.Enum):
     obstacle = "obstacle"
     joint_torque = "joint_torque"
     manipulability = "manipulability"
+    joint_limits = "joint_limits"
 
 
 class Mode(enum.IntEnum):
@@ -76,13 +89,16 @@ class Mode(enum.IntEnum):
     obstacle_avoidance = 1
     joint_torque = 2
     manipulability = 3
+    joint_limits = 4
 
 
+_O, _L, _T, _M = Criterion.obstacle, Criterion.joint_limits, Criterion.joint_torque, Criterion.manipulability
 ORDERINGS: dict[Mode, tuple[Criterion, ...]] = {
     Mode.none: (),
-    Mode.obstacle_avoidance: (Criterion.obstacle, Criterion.joint_torque, Criterion.manipulability),
-    Mode.joint_torque: (Criterion.joint_torque, Criterion.obstacle, Criterion.manipulability),
-    Mode.manipulability: (Criterion.manipulability, Criterion.obstacle, Criterion.joint_torque),
+    Mode.obstacle_avoidance: (_O, _L, _T, _M),
+    Mode.joint_limits: (_L, _O, _T, _M),
+    Mode.joint_torque: (_T, _O, _L, _M),
+    Mode.manipulability: (_M, _O, _L, _T),
 }
 
 
@@ -92,13 +108,21 @@ class SelectorLimits:
     w_lim: float  # manipulability below which its maximisation goes on level 2
     d_band: float = 0.0  # [m] hysteresis on d_lim
     w_band: float = 0.0  # hysteresis on w_lim
+    q_lim: float = 0.0  # [rad] a joint closer than this to a limit puts joint-limit avoidance on level 2
+    q_band: float = 0.0  # [rad] hysteresis on q_lim
 
 
-def select_mode(d_min: float, w: float, previous: Mode, limits: SelectorLimits) -> Mode:
-    """Fig. 1's decision tree with hysteresis (see the module docstring)."""
+def select_mode(
+    d_min: float, w: float, previous: Mode, limits: SelectorLimits, margin: float = np.inf
+) -> Mode:
+    """Fig. 1's decision tree, extended by the joint-limit branch, with hysteresis (see
+    the module docstring); ``margin`` is the smallest distance of a joint to its limits."""
     staying = previous == Mode.obstacle_avoidance and d_min < limits.d_lim + limits.d_band
     if d_min < limits.d_lim or staying:
         return Mode.obstacle_avoidance
+    staying = previous == Mode.joint_limits and margin < limits.q_lim + limits.q_band
+    if margin < limits.q_lim or staying:
+        return Mode.joint_limits
     low = w < limits.w_lim or (previous == Mode.manipulability and w < limits.w_lim + limits.w_band)
     return Mode.manipulability if low else Mode.joint_torque
 

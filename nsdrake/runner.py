@@ -181,5 +181,5 @@ def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Trace
             contact_threshold=threshold,
             required_modes=tuple(scenario.report.required_modes),
         )
-    metrics.append(joint_speed_metric(traces, speed_limit_vector(scenario, station.arm_model.joint_names)))
+    metrics.append(joint_speed_metric(traces, speed_limit_vector(scenario, station.arm_model)))
     return metrics

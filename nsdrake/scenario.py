@@ -132,7 +132,7 @@ class ReportConfig:
     # null space follows its command) and/or priority (modes, criteria, torque steps) [-].
     checks: list[str] = field(default_factory=lambda: ["fig3"])
     # With the priority check: the modes the run must visit (1 obstacle avoidance,
-    # 2 joint torque, 3 manipulability) [-].
+    # 2 joint torque, 3 manipulability, 4 joint limits) [-].
     required_modes: list[int] = field(default_factory=list)
 
 
@@ -363,8 +363,8 @@ def validate(s: Scenario) -> None:
     for i, check in enumerate(s.report.checks):
         check_choice(src, f"report.checks[{i}]", check, REPORT_CHECKS)
     for i, m in enumerate(s.report.required_modes):
-        if m not in (0, 1, 2, 3):
-            _fail(src, f"report.required_modes[{i}]", f"must be a mode 0-3, got {m!r}")
+        if m not in (0, 1, 2, 3, 4):
+            _fail(src, f"report.required_modes[{i}]", f"must be a mode 0-4, got {m!r}")
     check_choice(src, "contact.approximation", s.contact.approximation, CONTACT_APPROXIMATIONS)
     check_choice(src, "contact.model", s.contact.model, CONTACT_MODELS)
     axes = s.task.axes
@@ -390,7 +390,7 @@ def validate(s: Scenario) -> None:
             f"{r.contact_threshold} N must be below reference.force {r.force} N",
         )
     imp = s.impedance
-    for name in ("K_p_tangent", "K_v_tangent", "K_v_normal", "K_f"):
+    for name in ("K_p_tangent", "K_v_tangent", "K_v_normal", "K_f", "K_p_rotation", "K_v_rotation"):
         check_positive(src, f"impedance.{name}", getattr(imp, name))
     check_non_negative(src, "impedance.K_p_normal", imp.K_p_normal)
     ns = s.null_space
@@ -422,9 +422,19 @@ def validate(s: Scenario) -> None:
             f"must be <= 0 (a negative gain minimises the torque), got {d.criteria.joint_torque.gain}",
         )
     check_non_negative(src, f"{crit}.manipulability.gain", d.criteria.manipulability.gain)
+    check_non_negative(src, f"{crit}.joint_limits.gain", d.criteria.joint_limits.gain)
+    check_positive(src, f"{crit}.joint_limits.influence", d.criteria.joint_limits.influence)
     sel = d.selector
-    for name in ("d_lim", "w_lim", "d_band", "w_band", "blend_time"):
+    for name in ("d_lim", "w_lim", "d_band", "w_band", "q_lim", "q_band", "blend_time"):
         check_non_negative(src, f"desired_null_space.selector.{name}", getattr(sel, name))
+    if sel.q_lim > 0 and d.criteria.joint_limits.influence < sel.q_lim + sel.q_band:
+        _fail(
+            src,
+            f"{crit}.joint_limits.influence",
+            f"{d.criteria.joint_limits.influence} rad must be >= selector.q_lim + q_band = "
+            f"{sel.q_lim + sel.q_band} rad, or joint-limit avoidance would have no gradient "
+            "when it takes level 2",
+        )
     if d.criteria.obstacle.influence_distance < sel.d_lim + sel.d_band:
         _fail(
             src,

@@ -195,13 +195,14 @@ def test_selector_blends_from_the_old_ordering_after_a_switch():
         Criterion.obstacle: crit.obstacle.gain,
         Criterion.joint_torque: crit.joint_torque.gain,
         Criterion.manipulability: crit.manipulability.gain,
+        Criterion.joint_limits: crit.joint_limits.gain,
     }
     levels = {}
     for c in Criterion:
         system = controller.GetSubsystemByName(f"{c.value}_criterion")
         gradient = system.GetOutputPort("gradient").Eval(system.GetMyContextFromRoot(context))
         a = 1.0
-        if c is Criterion.obstacle:
+        if c in (Criterion.obstacle, Criterion.joint_limits):
             a = system.GetOutputPort("activation").Eval(system.GetMyContextFromRoot(context))[0]
         levels[c] = Level(gradient, gains[c], a if gains[c] else 0.0)
 

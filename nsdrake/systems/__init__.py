@@ -5,6 +5,7 @@ from .contact_monitor import ContactMonitor
 from .criteria import JointTorqueCriterionSystem, ManipulabilityCriterionSystem, ObstacleCriterionSystem
 from .force_sensor import ForceSensor
 from .impedance_controller import ImpedanceController
+from .joint_limits import JointLimitsCriterionSystem
 from .null_space_controller import NullSpaceController
 from .priority_selector import PrioritySelector
 from .reference import SlideAndPressReference
@@ -16,6 +17,7 @@ __all__ = [
     "ContactMonitor",
     "ForceSensor",
     "ImpedanceController",
+    "JointLimitsCriterionSystem",
     "JointTorqueCriterionSystem",
     "ManipulabilityCriterionSystem",
     "NullSpaceController",

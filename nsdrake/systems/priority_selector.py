@@ -40,19 +40,23 @@ class PrioritySelector(LeafSystem):
         - obstacle_gradient
         - joint_torque_gradient
         - manipulability_gradient
+        - joint_limits_gradient
         - d_min
         - manipulability
         - obstacle_activation
+        - joint_limit_margin
+        - joint_limits_activation
         output_ports:
         - desired_null_space_velocity
         - mode
         - speed_scale
 
     Gradients are Φ (n); ``d_min`` [m], ``manipulability`` (w) and
-    ``obstacle_activation`` come from the obstacle and manipulability criteria.
-    ``mode`` is 0 (no criterion), 1 (obstacle avoidance on level 2), 2 (joint
-    torque) or 3 (manipulability); the discrete state is (mode, mode blended
-    from, switch time).
+    ``obstacle_activation`` come from the obstacle and manipulability criteria,
+    ``joint_limit_margin`` [rad] and ``joint_limits_activation`` from the joint-limit
+    criterion. ``mode`` is 0 (no criterion), 1 (obstacle avoidance on level 2), 2
+    (joint torque), 3 (manipulability) or 4 (joint limits); the discrete state is
+    (mode, mode blended from, switch time).
 
     The commanded joint speed, task part J^# J q̇ plus q̇_dⁿ, is kept within
     (1 − ``speed_headroom``) of each joint's limit: the measured speed is the
@@ -90,11 +94,21 @@ class PrioritySelector(LeafSystem):
         self._d_min = self.DeclareVectorInputPort("d_min", 1)
         self._w = self.DeclareVectorInputPort("manipulability", 1)
         self._obstacle_activation = self.DeclareVectorInputPort("obstacle_activation", 1)
+        self._margin = self.DeclareVectorInputPort("joint_limit_margin", 1)
+        self._joint_limits_activation = self.DeclareVectorInputPort("joint_limits_activation", 1)
         # [mode, mode blended from, switch time]; starts in mode 0 so the first
         # selection blends in from rest.
         self._state = self.DeclareDiscreteState(BasicVector([0.0, 0.0, -math.inf]))
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
-        inputs = [self._terms, *self._gradients.values(), self._d_min, self._w, self._obstacle_activation]
+        inputs = [
+            self._terms,
+            *self._gradients.values(),
+            self._d_min,
+            self._w,
+            self._obstacle_activation,
+            self._margin,
+            self._joint_limits_activation,
+        ]
         deps = {self.input_port_ticket(p.get_index()) for p in inputs}
         deps |= {self.discrete_state_ticket(self._state), self.time_ticket()}
         self._result = self.DeclareCacheEntry(
@@ -127,16 +141,27 @@ class PrioritySelector(LeafSystem):
         state = SwitchState(Mode(int(mode)), Mode(int(previous)), switch_time)
         if not self._active:
             return state
-        new = select_mode(self._d_min.Eval(context)[0], self._w.Eval(context)[0], state.mode, self._limits)
+        new = select_mode(
+            self._d_min.Eval(context)[0],
+            self._w.Eval(context)[0],
+            state.mode,
+            self._limits,
+            self._margin.Eval(context)[0],
+        )
         return update_switch_state(state, t, new)
 
     def _levels(self, context) -> tuple[dict, np.ndarray, np.ndarray]:
         """The criteria's gradients Φ (rows, in Criterion order) read from the ports once,
-        their gains and activations (the obstacle level fades in; a zero gain, none)."""
+        their gains and activations (the obstacle and joint-limit levels fade in; a zero
+        gain, none)."""
         gradients = np.array([self._gradients[c].Eval(context) for c in self._order])
         activations = np.array([float(gain != 0.0) for gain in self._gain_vector])
-        if Criterion.obstacle in self._order and activations[self._row[Criterion.obstacle]]:
-            activations[self._row[Criterion.obstacle]] = self._obstacle_activation.Eval(context)[0]
+        for c, port in (
+            (Criterion.obstacle, self._obstacle_activation),
+            (Criterion.joint_limits, self._joint_limits_activation),
+        ):
+            if c in self._order and activations[self._row[c]]:
+                activations[self._row[c]] = port.Eval(context)[0]
         return gradients, self._gain_vector, activations
 
     def _ordering_velocity(self, mode: Mode, levels, N, W, W_inv) -> np.ndarray:
