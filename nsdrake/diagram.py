@@ -9,6 +9,8 @@
     │   └── actuation ◄─ actuation_map ◄───────┼─── controller.generalized_force
     └─────────────────────────────────────────┘
     reference ─► controller.desired_position / _velocity / _acceleration / _force
+    orientation_reference ─► controller.desired_orientation / _angular_velocity /
+                             _angular_acceleration  (pose tasks only)
 
 The controller (:class:`nsdrake.NullSpaceImpedanceController`) is a diagram of its
 own — robot_terms, impedance_controller, the criteria, priority_selector,
@@ -25,16 +27,17 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput, MatrixGain, VectorLogSink
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, MatrixGain, VectorLogSink
 
 from .config import ControllerConfig
 from .controller import ControllerConfigError, NullSpaceImpedanceController, without_null_space_task
 from .controller_model import ControllerModel
 from .dynamics import ArmModel
-from .plant import Station, add_station, station_obstacles
-from .reference import SlideAndPress
+from .orientation import rotation_to_quaternion
+from .plant import Station, add_station, desired_tool_orientation, station_obstacles
+from .reference import CircleOnSurface, SlideAndPress
 from .scenario import Scenario, ScenarioError
-from .systems import ContactMonitor, ForceSensor, SlideAndPressReference
+from .systems import CircleReference, ContactMonitor, ForceSensor, SlideAndPressReference, SurfaceReference
 from .visualization import Visualizers, add_visualizers, visualizer_period
 
 
@@ -48,6 +51,8 @@ class ControlledStation:
     loggers: dict[str, VectorLogSink]
     scenario: Scenario
     visualizers: Visualizers | None = None  # when built with a Meshcat
+    # Pose tasks: the desired tool orientation R_d (3, 3), held throughout; None otherwise.
+    desired_orientation: np.ndarray | None = None
 
     def system(self, name: str):
         """The subsystem called ``name``, in the diagram or inside the controller."""
@@ -61,6 +66,14 @@ def initial_task_position(station: Station) -> np.ndarray:
     context = station.plant.CreateDefaultContext()
     station.plant.SetPositions(context, station.q0)
     return station.arm_model.task_position(context)
+
+
+def has_joint_limits(station: Station) -> bool:
+    """Whether the arm has any finite joint position limit (the Panda; not the paper's arm)."""
+    plant = station.plant
+    return bool(
+        np.isfinite(plant.GetPositionLowerLimits()).any() or np.isfinite(plant.GetPositionUpperLimits()).any()
+    )
 
 
 def speed_limit_vector(scenario: Scenario, arm: ArmModel) -> np.ndarray:
@@ -114,13 +127,34 @@ def build_controller(
         raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
 
 
-def add_reference(
-    builder: DiagramBuilder, scenario: Scenario, station: Station, sensor
-) -> SlideAndPressReference:
+def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station, sensor) -> SurfaceReference:
+    """The task reference the scenario's ``reference.path`` names, fed by the force sensor."""
     r = scenario.reference
-    reference = builder.AddNamedSystem(
-        "reference",
-        SlideAndPressReference(
+    common = {
+        "task_rows": station.arm_model.rows,
+        "contact_threshold": r.contact_threshold,
+        "period": scenario.control_period,
+    }
+    if r.path == "circle":
+        system = CircleReference(
+            reference=CircleOnSurface(
+                x0=initial_task_position(station),
+                tangent=station.tangent,
+                normal=station.normal,
+                radius=r.radius,
+                laps=r.laps,
+                speed=r.tangent_speed,
+                start_angle=r.start_angle,
+                delay=r.delay,
+                approach_speed=r.approach_speed,
+                blend_time=r.blend_time,
+                force=r.force,
+                force_ramp_time=r.force_ramp_time,
+            ),
+            **common,
+        )
+    else:
+        system = SlideAndPressReference(
             reference=SlideAndPress(
                 x0=initial_task_position(station),
                 tangent=station.tangent,
@@ -133,13 +167,23 @@ def add_reference(
                 step_time=r.step_time if r.step_time > 0 else math.inf,
                 step_force=r.step_force,
             ),
-            task_rows=station.arm_model.rows,
-            contact_threshold=r.contact_threshold,
-            period=scenario.control_period,
-        ),
-    )
+            **common,
+        )
+    reference = builder.AddNamedSystem("reference", system)
     builder.Connect(sensor.GetOutputPort("force"), reference.GetInputPort("measured_force"))
     return reference
+
+
+def add_orientation_reference(builder, controller, R_d: np.ndarray) -> None:
+    """A pose task's desired orientation R_d (held), zero desired angular velocity and
+    acceleration, into the controller's rotational ports."""
+    for name, port, value in (
+        ("orientation_reference", "desired_orientation", rotation_to_quaternion(R_d)),
+        ("angular_velocity_reference", "desired_angular_velocity", np.zeros(3)),
+        ("angular_acceleration_reference", "desired_angular_acceleration", np.zeros(3)),
+    ):
+        source = builder.AddNamedSystem(name, ConstantVectorSource(value))
+        builder.Connect(source.get_output_port(), controller.GetInputPort(port))
 
 
 def add_sensing(builder: DiagramBuilder, station: Station) -> tuple[ForceSensor, ContactMonitor]:
@@ -200,6 +244,8 @@ def add_loggers(builder, station, controller, sensor, reference, monitor, period
         "saturation": "saturation",
     }.items():
         signals[name] = controller.GetOutputPort(port)
+    if has_joint_limits(station):
+        signals["p_joint_limits"] = controller.GetOutputPort("joint_limits_criterion")
     loggers = {}
     for name, port in signals.items():
         logger = LogVectorOutput(port, builder, publish_period=period)
@@ -224,11 +270,19 @@ def build_diagram(
     controller = build_controller(scenario, station, sensor.p_WSo, null_space_task=null_space_task)
     builder.AddSystem(controller)
     connect_controller(builder, station, controller, sensor, reference)
+    R_d = None
+    if station.arm_model.m_r:
+        R_d = desired_tool_orientation(station, scenario.reference.orientation)
+        add_orientation_reference(builder, controller, R_d)
     loggers = add_loggers(builder, station, controller, sensor, reference, monitor, scenario.control_period)
     visualizers = None
     if meshcat is not None:
         visualizers = add_visualizers(
-            builder, station, meshcat, period=visualizer_period(scenario.control_period)
+            builder,
+            station,
+            meshcat,
+            period=visualizer_period(scenario.control_period),
+            camera=(scenario.report.camera_position, scenario.report.camera_target),
         )
     diagram = builder.Build()
     diagram.set_name("nsdrake")
@@ -239,4 +293,5 @@ def build_diagram(
         loggers=loggers,
         scenario=scenario,
         visualizers=visualizers,
+        desired_orientation=R_d,
     )

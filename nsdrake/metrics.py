@@ -9,6 +9,12 @@ and whether it does, so that metrics.json and the report show pass/fail.
 - :func:`priority_metrics`: Fig. 1's switching: modes visited, each mode's
   criterion improving while the mode is active, torque steps at switches.
 - :func:`joint_speed_metric`: the measured joint speeds against their limits.
+- :func:`pose_metrics`: a pose task on a surface (panda_wipe): force, in-plane position
+  and orientation tracking in the same window as fig3's, the smallest distance of the
+  arm's links to each obstacle against the selector's d_lim, forbidden contacts, and
+  every joint's closest approach to its position, speed and torque limits.
+- :func:`self_motion_metrics`: the elbow's swivel while the tool holds its pose and force
+  (panda_self_motion, Eq. 11 on a real arm).
 """
 
 from __future__ import annotations
@@ -26,6 +32,9 @@ SETTLE_TIME = 0.5  # [s] after first contact, start of the window
 FORCE_RMS_BOUND = 0.02  # RMS(f_n − f_d) ≤ 2% of f_d
 FORCE_MAX_BOUND = 0.10  # max |f_n − f_d| ≤ 10% of f_d
 POSITION_RMS_BOUND = 1e-3  # RMS of the tangential position error ≤ 1 mm [m]
+ORIENTATION_RMS_BOUND = 0.5  # RMS of the orientation error ≤ 0.5° [deg]
+ORIENTATION_MAX_BOUND = 2.0  # largest orientation error ≤ 2° [deg]
+SWIVEL_RANGE_BOUND = 0.5  # the elbow swivels through at least 0.5 rad [rad]
 NULL_SPACE_RELATIVE_BOUND = 0.05  # RMS ‖eⁿ‖ ≤ 5% of RMS ‖q̇_dⁿ‖ …
 NULL_SPACE_ABSOLUTE_BOUND = 1e-3  # … or 1e-3 rad/s, whichever is larger [rad/s]
 D_MIN_AFTER = 1.0  # [s] from this time on, d_min must stay above d_lim
@@ -308,3 +317,202 @@ def write_metrics(path: Path, metrics: list[Metric], extra: dict | None = None) 
     if extra:
         body.update(extra)
     Path(path).write_text(json.dumps(body, indent=2) + "\n")
+
+
+def _window(traces: Traces, contact_threshold: float) -> tuple[list[Metric], np.ndarray | None]:
+    """The fig3 window (from SETTLE_TIME after first contact), with its metrics; None if empty."""
+    t = traces["t"]
+    k0 = first_contact_index(traces, contact_threshold)
+    if k0 is None:
+        return [Metric("first_contact_time", math.inf, "s", "contact happens", False)], None
+    t_contact = float(t[k0])
+    window = t >= t_contact + SETTLE_TIME
+    metrics = [Metric("first_contact_time", t_contact, "s", "", None)]
+    if not window.any():
+        return metrics + [Metric("window_rows", 0, "rows", "> 0 rows after settling", False)], None
+    metrics.append(Metric("window_start", t_contact + SETTLE_TIME, "s", "", None))
+    metrics.append(Metric("window_rows", int(window.sum()), "rows", "", None))
+    return metrics, window
+
+
+def _force_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
+    f_n, f_d = traces["f_n"][window], traces["f_d"][window]
+    f_ref = float(np.max(f_d))
+    err = f_n - f_d
+    rms_f, max_f = _rms(err), float(np.max(np.abs(err)))
+    return [
+        Metric(
+            "normal_force_min",
+            float(f_n.min()),
+            "N",
+            "> 0 (tool never leaves the plate)",
+            bool(f_n.min() > 0),
+        ),
+        Metric(
+            "force_error_rms",
+            rms_f,
+            "N",
+            f"<= {FORCE_RMS_BOUND:.0%} of f_d = {FORCE_RMS_BOUND * f_ref:.4g} N",
+            rms_f <= FORCE_RMS_BOUND * f_ref,
+        ),
+        Metric(
+            "force_error_max",
+            max_f,
+            "N",
+            f"<= {FORCE_MAX_BOUND:.0%} of f_d = {FORCE_MAX_BOUND * f_ref:.4g} N",
+            max_f <= FORCE_MAX_BOUND * f_ref,
+        ),
+    ]
+
+
+def in_plane_errors(traces: Traces, normal: np.ndarray, task_axes: tuple[str, ...]) -> np.ndarray:
+    """‖(I − n nᵀ)(x − x_d)‖ per row: the position error along the surface (the normal
+    coordinate is force-controlled). (rows,) [m]."""
+    x = np.column_stack([traces[a] for a in task_axes])
+    x_d = np.column_stack([traces[f"{a}_d"] for a in task_axes])
+    e = x - x_d
+    return np.linalg.norm(e - np.outer(e @ normal, normal), axis=1)
+
+
+def _orientation_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
+    if "rot_err" not in traces:
+        return []
+    rot = np.degrees(traces["rot_err"][window])
+    rms, largest = _rms(rot), float(np.max(rot))
+    return [
+        Metric(
+            "orientation_error_rms",
+            rms,
+            "deg",
+            f"<= {ORIENTATION_RMS_BOUND:g} deg",
+            rms <= ORIENTATION_RMS_BOUND,
+        ),
+        Metric(
+            "orientation_error_max",
+            largest,
+            "deg",
+            f"<= {ORIENTATION_MAX_BOUND:g} deg",
+            largest <= ORIENTATION_MAX_BOUND,
+        ),
+    ]
+
+
+def limit_metrics(traces: Traces) -> list[Metric]:
+    """Every joint's closest approach to its position, speed and torque limits over the
+    whole run (the q_margin, v_margin, tau_margin columns; > 0: never reached), and how
+    often the task torque itself had to be clipped."""
+    metrics = []
+    words = {
+        "q": ("rad", "position"),
+        "v": ("rad/s", "speed (the model's velocity limit)"),
+        "tau": ("N m", "torque (the actuator limit)"),
+    }
+    for kind, (unit, what) in words.items():
+        block = traces.block(f"{kind}_margin")
+        for i in range(block.shape[1]):
+            closest = float(np.min(block[:, i]))
+            if not math.isfinite(closest):
+                continue
+            bound = (
+                ">= 0 (the applied torque never exceeds it)"
+                if kind == "tau"
+                else f"> 0 (never reaches its {what} limit)"
+            )
+            passed = closest >= 0 if kind == "tau" else closest > 0
+            metrics.append(Metric(f"{kind}_margin{i + 1}_min", closest, unit, bound, passed))
+    metrics.append(
+        Metric("saturated_joints_max", float(traces["saturated_joints"].max()), "joints", "", None)
+    )
+    return metrics
+
+
+def pose_metrics(
+    traces: Traces,
+    *,
+    normal: np.ndarray,
+    task_axes: tuple[str, ...],
+    contact_threshold: float,
+    d_lim: float,
+    obstacles: tuple[str, ...],
+) -> list[Metric]:
+    """The acceptance figures of a pose task on a surface (panda_wipe), from the traces.
+
+    Args:
+        traces: the run's traces (with rot_err, d_<obstacle>, the margin columns).
+        normal: (m_t,) unit push direction on the translational task axes.
+        task_axes: the translational task axes, e.g. ("x", "y", "z").
+        contact_threshold: normal force that counts as contact [N].
+        d_lim: the selector's obstacle limit; every obstacle but the plate must stay
+            farther than this from the arm's links throughout [m].
+        obstacles: names of the obstacles besides the plate.
+    """
+    metrics, window = _window(traces, contact_threshold)
+    if window is None:
+        return metrics
+    metrics += _force_metrics(traces, window)
+    rms_x = _rms(in_plane_errors(traces, normal, task_axes)[window])
+    metrics.append(
+        Metric("position_error_rms", rms_x, "m", f"<= {POSITION_RMS_BOUND:g} m", rms_x <= POSITION_RMS_BOUND)
+    )
+    metrics += _orientation_metrics(traces, window)
+    for name in obstacles:
+        closest = float(traces[f"d_{name}"].min())
+        metrics.append(Metric(f"d_{name}_min", closest, "m", f"> d_lim = {d_lim:g} m", closest > d_lim))
+    if "d_plate" in traces:
+        closest = float(traces["d_plate"].min())
+        metrics.append(Metric("d_plate_min", closest, "m", "> 0 (no link touches the plate)", closest > 0))
+    forbidden = float(traces["forbidden_contacts"].max())
+    metrics.append(
+        Metric(
+            "forbidden_contacts_max",
+            forbidden,
+            "contacts",
+            "0 (only the tool touches the plate and the obstacles)",
+            forbidden == 0,
+        )
+    )
+    clipped = float(traces["saturated_joints"][window].max())
+    metrics.append(
+        Metric(
+            "saturated_joints_max_in_window",
+            clipped,
+            "joints",
+            "0 (the task torque never clipped while in contact)",
+            clipped == 0,
+        )
+    )
+    return metrics + limit_metrics(traces)
+
+
+def self_motion_metrics(
+    traces: Traces, *, normal: np.ndarray, task_axes: tuple[str, ...], contact_threshold: float
+) -> list[Metric]:
+    """The elbow's swivel (max − min of the ``swivel`` column over the window) while the
+    tool holds its pose and force: the largest in-plane position error and the force
+    error's RMS in the same window (fig3's, from 0.5 s after first contact)."""
+    metrics, window = _window(traces, contact_threshold)
+    if window is None:
+        return metrics
+    swivel = traces["swivel"][window]
+    travel = float(swivel.max() - swivel.min())
+    metrics.append(
+        Metric(
+            "swivel_range",
+            travel,
+            "rad",
+            f">= {SWIVEL_RANGE_BOUND:g} rad (the elbow sweeps through the null space)",
+            travel >= SWIVEL_RANGE_BOUND,
+        )
+    )
+    largest = float(np.max(in_plane_errors(traces, normal, task_axes)[window]))
+    metrics.append(
+        Metric(
+            "position_error_max",
+            largest,
+            "m",
+            f"<= {POSITION_RMS_BOUND:g} m",
+            largest <= POSITION_RMS_BOUND,
+        )
+    )
+    metrics += [m for m in _force_metrics(traces, window) if m.name != "force_error_max"]
+    return metrics + _orientation_metrics(traces, window)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.geometry import Box, Cylinder, ProximityProperties, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
@@ -53,6 +54,8 @@ class Station:
     # Proximity geometries of the arm's links (the tool's excepted) and of the obstacles (plate included).
     link_geometries: list = field(default_factory=list)
     obstacle_geometries: list = field(default_factory=list)
+    # Pose of the plate frame in the world (its +y is the push direction).
+    X_WP: RigidTransform | None = None
 
     @property
     def tool_body(self):
@@ -130,6 +133,9 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     except ValueError as e:
         raise ScenarioError(f"{src}: arm.urdf: {e}") from None
     check_against_plant(scenario, arm_model.joint_names)
+    for name in scenario.report.swivel_frames:
+        if not plant.HasFrameNamed(name, arm):
+            raise ScenarioError(f"{src}: report.swivel_frames: no frame '{name}' in {arm_file.name}")
     if plant.num_actuators() != arm_model.n:
         raise ScenarioError(
             f"{src}: arm.urdf: the arm needs one actuator per joint ({arm_model.n}), "
@@ -144,6 +150,8 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
         normal, tangent = surface_directions(X_WP.rotation().matrix(), arm_model.rows)
     except ValueError as e:
         raise ScenarioError(f"{src}: plate: {e} {scenario.task.axes}") from None
+    if scenario.reference.path == "circle" and np.linalg.norm(tangent) < 0.99:
+        raise ScenarioError(f"{src}: plate: the plate's x axis leaves the task axes {scenario.task.axes}")
     inspector = scene_graph.model_inspector()
     tool = arm_model.tool_frame.body().index()
     arm_bodies = [b for b in plant.GetBodyIndices(arm) if b != tool]
@@ -164,6 +172,7 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
         obstacle_bodies=obstacle_bodies,
         link_geometries=proximity_geometries(inspector, plant, arm_bodies),
         obstacle_geometries=proximity_geometries(inspector, plant, obstacle_indices),
+        X_WP=X_WP,
     )
 
 
@@ -205,3 +214,25 @@ def station_obstacles(station: Station) -> list[Obstacle]:
         X_WG = plant.EvalBodyPoseInWorld(context, body) @ inspector.GetPoseInFrame(g)
         out.append(Obstacle(inspector.GetName(g), inspector.GetShape(g).Clone(), X_WG))
     return out
+
+
+def tool_orientation(station: Station, q: np.ndarray) -> np.ndarray:
+    """R_WT, the tool frame's orientation in the world at joint positions q. (3, 3)."""
+    context = station.plant.CreateDefaultContext()
+    station.plant.SetPositions(context, q)
+    return station.arm_model.tool_frame.CalcPoseInWorld(context).rotation().matrix()
+
+
+def desired_tool_orientation(station: Station, how: str) -> np.ndarray:
+    """R_d for a pose task (scenario ``reference.orientation``): the tool's orientation at
+    q0 ("start"), or that one turned by the smallest rotation that points the tool frame's
+    z axis along the plate's push direction ("perpendicular"). (3, 3)."""
+    R0 = tool_orientation(station, station.q0)
+    if how == "start":
+        return R0
+    z = station.X_WP.rotation().matrix()[:, 1]  # the push direction, world
+    axis = np.cross(R0[:, 2], z)
+    s, c = np.linalg.norm(axis), float(R0[:, 2] @ z)
+    if s < 1e-15:
+        return R0 if c > 0 else RollPitchYaw(np.pi, 0.0, 0.0).ToRotationMatrix().matrix() @ R0
+    return AngleAxis(np.arctan2(s, c), axis / s).rotation() @ R0

@@ -1,4 +1,4 @@
-"""Desired task trajectories: the Fig. 3 task of Section 4.
+"""Desired task trajectories: the Fig. 3 task of Section 4, and a closed path on a surface.
 
 "x is the ramp function with the constant velocity; y changes until the robot
 hits the wall", then the desired force is tracked. :class:`SlideAndPress`
@@ -12,12 +12,18 @@ gives, at time t and for a contact time t_c (∞ before contact):
 - the desired normal force f_d: 0 before contact, then a smoothstep from 0 to
   ``force`` over ``force_ramp_time``; optionally a step to ``step_force`` at
   ``step_time`` after contact (the Eq. 26 experiment).
+
+:class:`CircleOnSurface` is the wiping task (panda_wipe): the same approach and
+press, then, ``delay`` after contact, the tool follows a circle of radius r on the
+surface, ``laps`` times round at speed v, starting and ending at rest (speed
+blended with the same smoothstep as the ramp), and stays where it started.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -89,3 +95,87 @@ def detect_contact(t: float, t_contact: float, f_n: float, threshold: float) -> 
     if math.isfinite(t_contact):
         return t_contact
     return t if f_n >= threshold else math.inf
+
+
+def there_and_back(t: float, length: float, speed: float, blend_time: float) -> tuple[float, float, float]:
+    """(s, ṡ, s̈) of a move of ``length`` from rest to rest: :func:`ramp_profile` up to the
+    middle, its mirror image after, so ṡ rises to ``speed`` and falls back to 0 with a
+    smoothstep over ``blend_time`` at each end. It lasts length/speed + blend_time; s
+    stays at ``length`` after. Needs length ≥ speed · blend_time."""
+    duration = length / speed + blend_time
+    if t <= 0.0:
+        return 0.0, 0.0, 0.0
+    if t >= duration:
+        return length, 0.0, 0.0
+    if t <= 0.5 * duration:
+        return ramp_profile(t, speed, blend_time)
+    s, sd, sdd = ramp_profile(duration - t, speed, blend_time)
+    return length - s, sd, -sdd
+
+
+@dataclass(frozen=True)
+class CircleOnSurface:
+    """Approach and press as :class:`SlideAndPress` (without sliding), then a circle on the
+    surface. m = 3 translational task axes; see the module docstring.
+
+    The circle lies in the plane of the unit tangents t₁ and t₂ = t₁ × n (for a plate,
+    its x and z axes). It starts at the contact point p_c, at the angle φ₀ =
+    ``start_angle`` on the circle (measured from t₁ toward t₂): its centre is
+    c = p_c − r u(φ₀), u(φ) = cos φ t₁ + sin φ t₂, and x_d = c + r u(φ₀ + s/r) with s the
+    arc length (:func:`there_and_back`); a negative speed goes round clockwise.
+    """
+
+    x0: np.ndarray  # (3,) tool position at t = 0 [m]
+    tangent: np.ndarray  # (3,) t₁, unit, in the surface
+    normal: np.ndarray  # (3,) n, unit, into the surface
+    radius: float  # r [m]
+    laps: float  # times round [-]
+    speed: float  # v along the circle; negative: clockwise from t₁ toward −t₂ [m/s]
+    start_angle: float  # φ₀ [rad]
+    delay: float  # [s] from contact to the start of the circle
+    approach_speed: float  # [m/s]
+    blend_time: float  # [s]
+    force: float  # [N]
+    force_ramp_time: float  # [s]
+
+    @cached_property
+    def tangent2(self) -> np.ndarray:
+        """t₂ = t₁ × n, the surface's second tangent. (3,)."""
+        return np.cross(self.tangent, self.normal)
+
+    @cached_property
+    def _start(self) -> tuple[np.ndarray, float]:
+        """u(φ₀), and the circle's length [m]."""
+        phi0 = self.start_angle
+        return math.cos(phi0) * self.tangent + math.sin(
+            phi0
+        ) * self.tangent2, 2.0 * math.pi * self.radius * self.laps
+
+    @property
+    def duration(self) -> float:
+        """Time from the start of the circle to its end [s]."""
+        return 2.0 * math.pi * self.radius * self.laps / abs(self.speed) + self.blend_time
+
+    def at(self, t: float, t_contact: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact)."""
+        n, t1, t2 = self.normal, self.tangent, self.tangent2
+        if t < t_contact:
+            r, rd, rdd = ramp_profile(t, self.approach_speed, self.blend_time)
+            return self.x0 + r * n, rd * n, rdd * n, 0.0
+        r = ramp_profile(t_contact, self.approach_speed, self.blend_time)[0]
+        if self.force_ramp_time > 0.0:
+            f_d = self.force * smoothstep((t - t_contact) / self.force_ramp_time)
+        else:
+            f_d = self.force
+        u0, length = self._start
+        s, sd, sdd = there_and_back(t - t_contact - self.delay, length, abs(self.speed), self.blend_time)
+        sign = 1.0 if self.speed >= 0 else -1.0
+        s, sd, sdd = sign * s, sign * sd, sign * sdd
+        phi = self.start_angle + s / self.radius
+        u = math.cos(phi) * t1 + math.sin(phi) * t2
+        du = -math.sin(phi) * t1 + math.cos(phi) * t2  # du/dφ
+        centre = self.x0 + r * n - self.radius * u0
+        x_d = centre + self.radius * u
+        xdot_d = sd * du
+        xddot_d = sdd * du - (sd * sd / self.radius) * u
+        return x_d, xdot_d, xddot_d, f_d

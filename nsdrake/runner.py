@@ -16,10 +16,12 @@ from .metrics import (
     fig3_metrics,
     first_contact_index,
     joint_speed_metric,
+    pose_metrics,
     priority_metrics,
+    self_motion_metrics,
     write_metrics,
 )
-from .plots import plot_fig3, plot_priority
+from .plots import plot_fig3, plot_pose, plot_priority
 from .report import write_report
 from .scenario import Scenario
 from .simulate import run
@@ -93,6 +95,8 @@ def run_to_folder(
     - metrics.json: the acceptance figures, computed from the CSV files;
     - fig3.png: the Fig. 3-style plots (with the fig3 check);
     - priority.png: mode timeline and criteria (with the priority check);
+    - pose.png: force, path on the surface, position and orientation errors, obstacle
+      distances, joint-limit margins, the elbow's swivel (with the pose or self_motion check);
     - scenario.yaml: the scenario as run;
     - diagram.dot and diagram.svg (if Graphviz's dot is found): the Drake diagram;
     - replay.html: the main run in Meshcat, self-contained (unless not ``replay``);
@@ -144,6 +148,18 @@ def run_to_folder(
             title=scenario.description,
             selector=scenario.desired_null_space.selector,
         )
+    if {"pose", "self_motion"} & set(scenario.report.checks):
+        plots.append(out / "pose.png")
+        plot_pose(
+            traces,
+            out / "pose.png",
+            normal=built.station.normal,
+            task_axes=task_axes[: built.station.arm_model.m_t],
+            title=scenario.description,
+            baseline=baseline,
+            contact_time=contact_time,
+            d_lim=scenario.desired_null_space.selector.d_lim,
+        )
     notes = [picture.note] if picture.note else []
     write_report(
         out,
@@ -180,6 +196,21 @@ def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Trace
             blend_time=selector.blend_time,
             contact_threshold=threshold,
             required_modes=tuple(scenario.report.required_modes),
+        )
+    arm = station.arm_model
+    translational = arm.task_axes[: arm.m_t]
+    if "pose" in scenario.report.checks:
+        metrics += pose_metrics(
+            traces,
+            normal=station.normal,
+            task_axes=translational,
+            contact_threshold=threshold,
+            d_lim=selector.d_lim,
+            obstacles=tuple(ob.name for ob in scenario.obstacles),
+        )
+    if "self_motion" in scenario.report.checks:
+        metrics += self_motion_metrics(
+            traces, normal=station.normal, task_axes=translational, contact_threshold=threshold
         )
     metrics.append(joint_speed_metric(traces, speed_limit_vector(scenario, station.arm_model)))
     return metrics

@@ -26,6 +26,7 @@ from .config import (
     ImpedanceConfig,
     NullSpaceConfig,
 )
+from .dynamics import AXIS_NAMES, ROTATION_AXIS_NAMES, parse_task_axes
 from .pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
@@ -75,15 +76,25 @@ class ContactConfig:
 
 @dataclass
 class TaskConfig:
-    # World axes of the primary task, the tool point's coordinates x (Eq. 1) [-].
+    # World axes of the primary task: x, y, z for the tool point's coordinates x (Eq. 1), then
+    # rx, ry, rz for its orientation (a pose task; [x, y, z, rx, ry, rz] is the full pose) [-].
     axes: list[str] = field(default_factory=lambda: ["x", "y"])
+
+
+REFERENCE_PATHS = ("slide", "circle")
+ORIENTATIONS = ("start", "perpendicular")
 
 
 @dataclass
 class ReferenceConfig:
-    """The Fig. 3 task: slide along the plate, approach it until contact, then press."""
+    """The task: approach the plate until contact, then press; along the plate, the Fig. 3
+    ramp (path: slide) or, after the press, a circle on the surface (path: circle)."""
 
-    # Speed of the constant-velocity ramp along the plate [m/s].
+    # slide: a constant-velocity ramp along the plate from the start (Fig. 3); circle: once in
+    # contact, a circle on the surface, laps times round (needs the task axes x, y, z) [-].
+    path: str = "slide"
+    # Speed along the plate: of the ramp (slide) or along the circle, negative for clockwise
+    # (circle) [m/s].
     tangent_speed: float = 0.05
     # Speed of the approach toward the plate, held until contact is detected; 0 holds the
     # distance (a run without contact) [m/s].
@@ -100,6 +111,19 @@ class ReferenceConfig:
     step_time: float = 0.0
     # The desired normal force after that step [N].
     step_force: float = 0.0
+    # Circle: its radius [m].
+    radius: float = 0.1
+    # Circle: how many times round [-].
+    laps: float = 2.0
+    # Circle: where on it the tool starts, the angle from the plate's x axis toward its z
+    # axis (-pi/2: the circle lies toward the plate's +z from the contact point) [rad].
+    start_angle: float = -1.5707963267948966
+    # Circle: time from first contact to the start of the motion along it [s].
+    delay: float = 0.3
+    # Pose tasks: the desired tool orientation, held throughout. start: the tool's at the
+    # initial pose; perpendicular: that one turned by the smallest rotation that points the
+    # tool frame's z axis along the plate's push direction [-].
+    orientation: str = "start"
 
 
 OBSTACLE_SHAPES = {"box": 3, "sphere": 1, "cylinder": 2}  # number of size entries
@@ -121,7 +145,7 @@ class ObstacleConfig:
     yaw: float = 0.0
 
 
-REPORT_CHECKS = ("fig3", "priority")
+REPORT_CHECKS = ("fig3", "priority", "pose", "self_motion")
 
 
 @dataclass
@@ -129,8 +153,18 @@ class ReportConfig:
     # Also run the scenario with q̇_dⁿ = 0 and report its final joint-torque criterion [-].
     compare_without_null_space_task: bool = True
     # Acceptance figures to compute: fig3 (contact, force and position tracking, the
-    # null space follows its command) and/or priority (modes, criteria, torque steps) [-].
+    # null space follows its command), priority (modes, criteria, torque steps), pose
+    # (force, position and orientation tracking of a pose task, distances to the obstacles,
+    # joint position, speed and torque margins) and/or self_motion (the elbow's swivel
+    # while the tool holds its pose and force) [-].
     checks: list[str] = field(default_factory=lambda: ["fig3"])
+    # Frames of the shoulder, elbow and wrist (e.g. panda_link2, panda_link4, panda_link7):
+    # the traces get the elbow's swivel angle about the shoulder-wrist line, a coordinate
+    # of the self-motion while the tool holds its pose; empty: none [-].
+    swivel_frames: list[str] = field(default_factory=list)
+    # Replay camera position and target in the world; empty: nsdrake's default view [m].
+    camera_position: list[float] = field(default_factory=list)
+    camera_target: list[float] = field(default_factory=list)
     # With the priority check: the modes the run must visit (1 obstacle avoidance,
     # 2 joint torque, 3 manipulability, 4 joint limits) [-].
     required_modes: list[int] = field(default_factory=list)
@@ -369,10 +403,39 @@ def validate(s: Scenario) -> None:
     check_choice(src, "contact.model", s.contact.model, CONTACT_MODELS)
     axes = s.task.axes
     for i, a in enumerate(axes):
-        check_choice(src, f"task.axes[{i}]", a, ("x", "y", "z"))
+        check_choice(src, f"task.axes[{i}]", a, AXIS_NAMES + ROTATION_AXIS_NAMES)
     if not axes or len(set(axes)) != len(axes):
         _fail(src, "task.axes", f"must be distinct axes, got {axes!r}")
+    try:
+        rows, _ = parse_task_axes(axes)
+    except ValueError as e:
+        _fail(src, "task.axes", _one_line(e))
+    if s.report.swivel_frames and len(s.report.swivel_frames) != 3:
+        _fail(src, "report.swivel_frames", f"must name three frames or none, got {s.report.swivel_frames!r}")
+    for name in ("camera_position", "camera_target"):
+        value = getattr(s.report, name)
+        if value and (len(value) != 3 or not all(math.isfinite(v) for v in value)):
+            _fail(src, f"report.{name}", f"must be [x, y, z] or empty, got {value!r}")
     r = s.reference
+    check_choice(src, "reference.path", r.path, REFERENCE_PATHS)
+    check_choice(src, "reference.orientation", r.orientation, ORIENTATIONS)
+    if r.path == "circle":
+        if len(rows) != 3:
+            _fail(src, "reference.path", f"a circle on the surface needs the task axes x, y, z, got {axes!r}")
+        check_positive(src, "reference.radius", r.radius)
+        check_positive(src, "reference.laps", r.laps)
+        check_finite(src, "reference.start_angle", r.start_angle)
+        check_non_negative(src, "reference.delay", r.delay)
+        if r.tangent_speed == 0:
+            _fail(src, "reference.tangent_speed", "a circle needs a non-zero speed")
+        length = 2 * math.pi * r.radius * r.laps
+        if length < abs(r.tangent_speed) * r.blend_time:
+            _fail(
+                src,
+                "reference.laps",
+                f"the circle ({length:.4g} m) is shorter than the speed blends need "
+                f"(|tangent_speed| x blend_time = {abs(r.tangent_speed) * r.blend_time:.4g} m)",
+            )
     for name in ("tangent_speed", "approach_speed"):
         check_finite(src, f"reference.{name}", getattr(r, name))
     check_non_negative(src, "reference.approach_speed", r.approach_speed)

@@ -8,7 +8,10 @@ import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import Simulator
 
-from .diagram import ControlledStation, build_diagram
+from .controller import torque_limits
+from .criteria.obstacle import ObstacleDistances
+from .diagram import ControlledStation, build_diagram, has_joint_limits
+from .orientation import orientation_error
 from .scenario import Scenario
 from .traces import Traces
 
@@ -64,7 +67,7 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
         for i, name in enumerate(names):
             columns[f"{prefix}{name}"] = data[i]
 
-    axes = arm.task_axes
+    axes = arm.task_axes[: arm.m_t]  # the translational ones
     state = logs["state"].data()
     add("", task_positions(built, state[:n]), axes)
     add("", logs["x_d"].data(), [f"{a}_d" for a in axes])
@@ -88,15 +91,112 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
     columns["forbidden_contacts"] = logs["forbidden_contacts"].data()[0]
     columns["tau0_scale"] = logs["saturation"].data()[0]
     columns["saturated_joints"] = logs["saturation"].data()[1]
+    if built.desired_orientation is not None:
+        columns["rot_err"] = orientation_errors(built, state[:n])
+    if has_joint_limits(built.station):
+        columns["p_joint_limits"] = logs["p_joint_limits"].data()[0]
+        margins = limit_margins(built, state[:n], state[n:], logs["tau"].data())
+        for kind in ("q", "v", "tau"):
+            add(f"{kind}_margin", margins[kind], joints)
+        columns["q_margin"] = np.min(margins["q"], axis=0)
+        for name, d in obstacle_distances(built, root_context, state[:n]).items():
+            columns[f"d_{name}"] = d
+    if built.scenario.report.swivel_frames:
+        columns["swivel"] = swivel_angles(built, state[:n], built.scenario.report.swivel_frames)
     return Traces(columns)
 
 
 def task_positions(built: ControlledStation, q: np.ndarray) -> np.ndarray:
-    """x = p(q) (Eq. 1) for each column of ``q`` (n, k). (m, k) [m]."""
+    """x = p(q) (Eq. 1), the translational task axes, for each column of ``q`` (n, k). (m_t, k) [m]."""
     plant, arm = built.station.plant, built.station.arm_model
     context = plant.CreateDefaultContext()
-    out = np.empty((arm.m, q.shape[1]))
+    out = np.empty((arm.m_t, q.shape[1]))
     for k in range(q.shape[1]):
         plant.SetPositions(context, q[:, k])
         out[:, k] = arm.task_position(context)
     return out
+
+
+def orientation_errors(built: ControlledStation, q: np.ndarray) -> np.ndarray:
+    """rot_err: the angle between the desired tool orientation and the simulated tool's,
+    ‖log(R_d R_WTᵀ)‖, for each column of ``q`` (n, k). (k,) [rad]."""
+    plant, tool = built.station.plant, built.station.arm_model.tool_frame
+    context = plant.CreateDefaultContext()
+    R_d = built.desired_orientation
+    out = np.empty(q.shape[1])
+    for k in range(q.shape[1]):
+        plant.SetPositions(context, q[:, k])
+        out[k] = np.linalg.norm(orientation_error(R_d, tool.CalcPoseInWorld(context).rotation().matrix()))
+    return out
+
+
+def limit_margins(built: ControlledStation, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> dict:
+    """Per joint and row, how far each joint is from its limits (negative: beyond):
+    q: min(q − q_min, q_max − q) [rad]; v: v_max − |q̇| [rad/s], v_max the model's velocity
+    limit; tau: τ_max − |τ| [N m], τ_max the actuator limit the controller applies (the
+    scenario's, else the model's effort limit). Each (n, k); inf where there is no limit."""
+    plant = built.station.plant
+    lower, upper = plant.GetPositionLowerLimits()[:, None], plant.GetPositionUpperLimits()[:, None]
+    v_max = plant.GetVelocityUpperLimits()[:, None]
+    v_max = np.where(v_max > 0, v_max, np.inf)
+    tau_max = torque_limits(built.controller.config, built.controller.model)[:, None]
+    return {"q": np.minimum(q - lower, upper - q), "v": v_max - np.abs(v), "tau": tau_max - np.abs(tau)}
+
+
+def obstacle_distances(built: ControlledStation, root_context, q: np.ndarray) -> dict[str, np.ndarray]:
+    """The smallest signed distance between the arm's moving links (not the tool, not the
+    welded base) and each obstacle of the simulated station, per column of ``q`` (n, k):
+    {"plate": (k,), <obstacle name>: (k,), …} [m]. From the station's own geometry, not
+    the controller's model."""
+    station = built.station
+    plant, scene_graph = station.plant, station.scene_graph
+    inspector = scene_graph.model_inspector()
+    moving = moving_link_geometries(station)
+    context = root_context.Clone()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    names = {}
+    for g in station.obstacle_geometries:
+        body = plant.GetBodyFromFrameId(inspector.GetFrameId(g))
+        names[inspector.GetName(g)] = "plate" if body.model_instance() == station.plate else body.name()
+    distances = ObstacleDistances(plant, moving, station.obstacle_geometries, inspector)
+    out = {name: np.full(q.shape[1], np.inf) for name in dict.fromkeys(names.values())}
+    for k in range(q.shape[1]):
+        plant.SetPositions(plant_context, q[:, k])
+        query = lambda: scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))  # noqa: E731
+        for pair in distances.pairs(plant_context, -np.inf, query=query):
+            column = out[names[pair.obstacle]]
+            column[k] = min(column[k], pair.distance)
+    return out
+
+
+def moving_link_geometries(station) -> list:
+    """The station's link geometries on bodies that some joint moves (the base excepted)."""
+    plant, inspector = station.plant, station.scene_graph.model_inspector()
+    joints = [j for j in plant.GetJointIndices() if plant.get_joint(j).num_velocities()]
+    moving = {int(b) for b in plant.GetBodiesKinematicallyAffectedBy(joints)}
+    return [
+        g
+        for g in station.link_geometries
+        if int(plant.GetBodyFromFrameId(inspector.GetFrameId(g)).index()) in moving
+    ]
+
+
+def swivel_angles(built: ControlledStation, q: np.ndarray, frames) -> np.ndarray:
+    """The elbow's swivel angle ψ about the shoulder–wrist line, per column of ``q`` (n, k),
+    unwrapped. With S, E, W the origins of the three ``frames`` and a = (W − S)/‖W − S‖:
+    ψ is the angle of E's offset from the line, e = (E − S) − ((E − S)·a) a, measured about
+    a from the world's vertical projected off the line. While the tool holds its pose S and
+    W stay put (for a shoulder fixed to the base and a wrist frame rigid with the tool), so
+    ψ moves only with the self-motion. (k,) [rad]."""
+    plant = built.station.plant
+    context = plant.CreateDefaultContext()
+    shoulder, elbow, wrist = (plant.GetFrameByName(f) for f in frames)
+    out = np.empty(q.shape[1])
+    for k in range(q.shape[1]):
+        plant.SetPositions(context, q[:, k])
+        S, E, W = (f.CalcPoseInWorld(context).translation() for f in (shoulder, elbow, wrist))
+        a = (W - S) / np.linalg.norm(W - S)
+        e = (E - S) - ((E - S) @ a) * a
+        r0 = np.array([0.0, 0.0, 1.0]) - a[2] * a
+        out[k] = np.arctan2(a @ np.cross(r0, e), r0 @ e)
+    return np.unwrap(out)

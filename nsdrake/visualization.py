@@ -87,10 +87,12 @@ class Visualizers:
 
 
 def add_visualizers(
-    builder: DiagramBuilder, station: Station, meshcat: Meshcat, *, period: float
+    builder: DiagramBuilder, station: Station, meshcat: Meshcat, *, period: float, camera=((), ())
 ) -> Visualizers:
     """Adds ``meshcat_visualizer`` and ``contact_visualizer`` to ``builder``, publishing
-    every ``period`` seconds, and points the camera at the arm and the plate."""
+    every ``period`` seconds, and points the camera at the arm and the plate: from
+    ``camera`` = (position, target) [m], world, where given (each may be empty: the
+    default view)."""
     visualizer = MeshcatVisualizer.AddToBuilder(
         builder,
         station.scene_graph,
@@ -111,7 +113,8 @@ def add_visualizers(
         ),
     )
     contact.set_name("contact_visualizer")
-    meshcat.SetCameraPose(list(CAMERA_POSITION), list(CAMERA_TARGET))
+    position, target = camera
+    meshcat.SetCameraPose(list(position or CAMERA_POSITION), list(target or CAMERA_TARGET))
     return Visualizers(meshcat=meshcat, visualizer=visualizer, contact_visualizer=contact)
 
 

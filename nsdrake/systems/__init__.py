@@ -8,12 +8,13 @@ from .impedance_controller import ImpedanceController
 from .joint_limits import JointLimitsCriterionSystem
 from .null_space_controller import NullSpaceController
 from .priority_selector import PrioritySelector
-from .reference import SlideAndPressReference
+from .reference import CircleReference, SlideAndPressReference, SurfaceReference
 from .robot_terms import RobotTermsSystem
 from .self_motion import SelfMotionSweep
 
 __all__ = [
     "ActuatorLimitsSystem",
+    "CircleReference",
     "ContactMonitor",
     "ForceSensor",
     "ImpedanceController",
@@ -26,4 +27,5 @@ __all__ = [
     "RobotTermsSystem",
     "SelfMotionSweep",
     "SlideAndPressReference",
+    "SurfaceReference",
 ]

@@ -1,4 +1,4 @@
-"""SlideAndPressReference: the Fig. 3 task reference, with contact detection."""
+"""Task references with contact detection: the Fig. 3 task, and a circle on the surface."""
 
 from __future__ import annotations
 
@@ -7,19 +7,19 @@ import math
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from ..reference import SlideAndPress, detect_contact
+from ..reference import CircleOnSurface, SlideAndPress, detect_contact
 from ._util import python_value_producer
 
 
-class SlideAndPressReference(LeafSystem):
-    """Desired position, velocity, acceleration and normal force of the Fig. 3
-    task (:class:`nsdrake.reference.SlideAndPress`). Contact is detected once,
-    when the measured normal force reaches ``contact_threshold``; its time is
-    the discrete state, updated every ``period``.
+class SurfaceReference(LeafSystem):
+    """Desired position, velocity, acceleration and normal force of a task on a surface
+    whose reference (``reference.at(t, t_contact)``) depends on the contact time.
+    Contact is detected once, when the measured normal force reaches
+    ``contact_threshold``; its time is the discrete state, updated every ``period``.
 
     .. pydrake_system::
 
-        name: SlideAndPressReference
+        name: SurfaceReference
         input_ports:
         - measured_force
         output_ports:
@@ -35,7 +35,12 @@ class SlideAndPressReference(LeafSystem):
     """
 
     def __init__(
-        self, *, reference: SlideAndPress, task_rows: np.ndarray, contact_threshold: float, period: float
+        self,
+        *,
+        reference: SlideAndPress | CircleOnSurface,
+        task_rows: np.ndarray,
+        contact_threshold: float,
+        period: float,
     ):
         super().__init__()
         self._ref = reference
@@ -69,4 +74,28 @@ class SlideAndPressReference(LeafSystem):
         f_n = float(self._ref.normal @ self._force.Eval(context)[self._rows])
         discrete_state.get_mutable_vector(self._t_contact).SetAtIndex(
             0, detect_contact(context.get_time(), t_contact, f_n, self._threshold)
+        )
+
+
+class SlideAndPressReference(SurfaceReference):
+    """The Fig. 3 task (:class:`nsdrake.reference.SlideAndPress`): ramp along the plate,
+    approach, press. Ports as :class:`SurfaceReference`."""
+
+    def __init__(
+        self, *, reference: SlideAndPress, task_rows: np.ndarray, contact_threshold: float, period: float
+    ):
+        super().__init__(
+            reference=reference, task_rows=task_rows, contact_threshold=contact_threshold, period=period
+        )
+
+
+class CircleReference(SurfaceReference):
+    """The wiping task (:class:`nsdrake.reference.CircleOnSurface`): approach, press, then
+    a circle on the surface. Ports as :class:`SurfaceReference`."""
+
+    def __init__(
+        self, *, reference: CircleOnSurface, task_rows: np.ndarray, contact_threshold: float, period: float
+    ):
+        super().__init__(
+            reference=reference, task_rows=task_rows, contact_threshold=contact_threshold, period=period
         )
