@@ -489,7 +489,9 @@ def self_motion_metrics(
 ) -> list[Metric]:
     """The elbow's swivel (max − min of the ``swivel`` column over the window) while the
     tool holds its pose and force: the largest in-plane position error and the force
-    error's RMS in the same window (fig3's, from 0.5 s after first contact)."""
+    error's RMS in the same window (fig3's, from 0.5 s after first contact), the
+    orientation error, forbidden contacts, and the joints' closest approach to their
+    limits (:func:`limit_metrics`)."""
     metrics, window = _window(traces, contact_threshold)
     if window is None:
         return metrics
@@ -515,4 +517,15 @@ def self_motion_metrics(
         )
     )
     metrics += [m for m in _force_metrics(traces, window) if m.name != "force_error_max"]
-    return metrics + _orientation_metrics(traces, window)
+    metrics += _orientation_metrics(traces, window)
+    forbidden = float(traces["forbidden_contacts"].max())
+    metrics.append(
+        Metric(
+            "forbidden_contacts_max",
+            forbidden,
+            "contacts",
+            "0 (only the tool touches the plate)",
+            forbidden == 0,
+        )
+    )
+    return metrics + (limit_metrics(traces) if "q_margin1" in traces else [])

@@ -175,6 +175,7 @@ def plot_pose(
         ax.set_xlabel(f"{plane[0]} [m]")
         ax.set_ylabel(f"{plane[1]} [m]")
         ax.set_aspect("equal", adjustable="datalim")
+        ax.ticklabel_format(useOffset=True, style="sci", scilimits=(-3, 3))
         ax.legend(loc="best", fontsize=8)
     ax = fig.add_subplot(grid[1, :])
     ax.plot(
