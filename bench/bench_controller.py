@@ -1,7 +1,7 @@
 """Benchmark: CPU time per control tick inside real simulations, and the controller's
 cost per step on a 4-joint and a 7-joint arm.
 
-    python bench/bench_controller.py [--repeats N] [--steps N]
+    python bench/bench_controller.py [--repeats N] [--steps N] [--panda-repeats N]
 
 - ``fig3_tick_us``: process CPU time of ``Simulator.AdvanceTo`` over the fig3 run
   (5 s, 2500 control ticks; building the diagram excluded), divided by the ticks.
@@ -10,6 +10,9 @@ cost per step on a 4-joint and a 7-joint arm.
   the tool presses and slides on the plate as in fig3), state and force logged.
   Runs are interleaved with fig3's, so both see the same machine load; ``ratio``
   is fig3 over baseline.
+- ``panda_wipe_tick_us``: the same for the shipped panda_wipe (28 s at 1 kHz, 28000
+  ticks: the Panda with gravity, the table on its sensor, the post, the full pose task,
+  obstacle and joint-limit criteria), median of ``--panda-repeats`` runs (at least 3).
 - ``controller_step_us_4dof`` / ``_7dof``: the controller diagram's
   ``generalized_force`` evaluated hot at fresh states (a new ``estimated_state``
   each call, as a real-robot loop would), on fig3's arm and controller, and on
@@ -60,6 +63,14 @@ def fig3_run(scenario):
     st = built.station
     cpu, context = simulate_cpu(built.diagram, st.plant, st.q0, st.v0, scenario.duration)
     return cpu, collect_traces(built, context)
+
+
+def tick_us(scenario) -> float:
+    """CPU µs per control tick of Initialize + AdvanceTo over the scenario (diagram built already)."""
+    built = build_diagram(scenario)
+    st = built.station
+    cpu, _ = simulate_cpu(built.diagram, st.plant, st.q0, st.v0, scenario.duration)
+    return cpu / round(scenario.duration / scenario.control_period) * 1e6
 
 
 def baseline_run(scenario, traces) -> float:
@@ -139,6 +150,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5, help="runs per figure (median), at least 5")
     parser.add_argument("--steps", type=int, default=3000, help="controller evaluations per step-cost run")
+    parser.add_argument("--panda-repeats", type=int, default=3, help="panda_wipe runs (median), at least 3")
     args = parser.parse_args()
 
     scenario = load_scenario("fig3")
@@ -154,6 +166,17 @@ def main():
     print(f"  nsdrake (plant, sensor, reference, controller, loggers)  {fig3_us:7.1f} µs   (target ≤ 200)")
     print(f"  JointStiffnessController (C++), same plant and sensor   {base_us:7.1f} µs")
     print(f"  ratio {'':49} {fig3_us / base_us:7.2f}      (target ≤ 3)")
+
+    panda = load_scenario("panda_wipe")
+    wipe = []
+    for k in range(args.panda_repeats):
+        wipe.append(tick_us(panda))
+        print(f"  run {k + 1}: panda_wipe {wipe[-1]:6.1f} µs/tick", flush=True)
+    wipe_us = statistics.median(wipe)
+    ticks = round(panda.duration / panda.control_period)
+    print(f"panda_wipe, {panda.duration:g} s simulated ({ticks} ticks), CPU per tick, ", end="")
+    print(f"median of {args.panda_repeats}:")
+    print(f"  nsdrake (Panda, table, post, pose task, criteria, loggers)  {wipe_us:7.1f} µs   (aim ≤ 350)")
 
     steps = {}
     for label, make in (("4dof", fig3_controller), ("7dof", panda_controller)):
@@ -171,6 +194,7 @@ def main():
                 "fig3_tick_us": round(fig3_us, 1),
                 "baseline_tick_us": round(base_us, 1),
                 "ratio": round(fig3_us / base_us, 2),
+                "panda_wipe_tick_us": round(wipe_us, 1),
                 "controller_step_us_4dof": round(steps["4dof"], 1),
                 "controller_step_us_7dof": round(steps["7dof"], 1),
             }
