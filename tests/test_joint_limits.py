@@ -100,7 +100,9 @@ def test_smooth_where_a_joint_enters_the_zone(limits):
 
 
 def test_activation_fades_in_inside_the_zone():
-    """The level's weight: 0 beyond ρ, 1 within ρ/2, the smoothstep between."""
+    """The level's weight: 0 beyond ρ, 1 within ρ/2, the smoothstep between. Catches a level
+    that takes its direction from the levels below at once as a joint enters the zone
+    (a step in q̇_dⁿ), or one that never takes it."""
     assert activation(RHO, RHO) == 0.0 and activation(2 * RHO, RHO) == 0.0
     assert activation(0.75 * RHO, RHO) == pytest.approx(0.5)
     assert activation(0.5 * RHO, RHO) == 1.0 and activation(0.0, RHO) == 1.0

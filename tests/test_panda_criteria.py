@@ -61,7 +61,9 @@ def J_dJ(arm, q):
 
 
 def test_near_singular_configurations_are_near_singular(configurations):
-    """The 20 near-singular poses do have a small σ_min of the pose Jacobian (vs ~0.1 elsewhere)."""
+    """The 20 near-singular poses do have a small σ_min of the pose Jacobian (vs ~0.1
+    elsewhere). Catches a search that returns ordinary poses, which would leave the
+    gradients untested where they are hardest."""
     arm = panda_arm()
     smallest = [np.linalg.svd(J_dJ(arm, q)[0], compute_uv=False)[-1] for q in configurations[RANDOM:]]
     assert max(smallest) < 5e-3
@@ -185,7 +187,8 @@ def test_distance_gradients_against_central_differences(scene, clear_configurati
 
 def test_obstacle_potential_gradient(scene, clear_configurations):
     """Eq. 31's potential p = −⅓ Σ max(0, d_∞ − d)³ over every pair, with a wide influence
-    distance so that several links contribute, against central differences."""
+    distance so that several links contribute, against central differences. Catches
+    pairs summed with the wrong weight (depth instead of depth²) or one obstacle dropped."""
     influence = 0.4
     nonzero = 0
     for q in clear_configurations:
@@ -242,7 +245,8 @@ def test_eq19_null_space_vectors_are_H_orthogonal_to_Jbar(arm):
 def test_eq26_contact_forces_leave_the_null_space_alone(arm):
     """(I − J̄ J) H⁻¹ Jᵀ F = 0 for every task force F (6-D: force and moment), and the
     Moore–Penrose projector fails it (Eq. 26: only the dynamically consistent inverse
-    decouples contact forces from the null space)."""
+    decouples contact forces from the null space). Catches a J̄ built from a Λ of the
+    translational rows only, which breaks the decoupling for moments."""
     rng = np.random.default_rng(26)
     for T in regular_states(arm, 30, seed=26):
         F = rng.standard_normal(T.m) * 10.0
