@@ -125,6 +125,16 @@ REPORT_CHECKS = ("fig3", "priority")
 
 
 @dataclass
+class DivergenceConfig:
+    """When a run counts as diverged and is stopped (nsdrake/simulate.py)."""
+
+    # Any joint faster than this [rad/s].
+    max_joint_speed: float = 100.0
+    # Any commanded joint torque larger than this [N m].
+    max_torque: float = 1.0e4
+
+
+@dataclass
 class ReportConfig:
     # Also run the scenario with q̇_dⁿ = 0 and report its final joint-torque criterion [-].
     compare_without_null_space_task: bool = True
@@ -160,6 +170,7 @@ class Scenario:
     # Obstacles besides the plate.
     obstacles: list[ObstacleConfig] = field(default_factory=list)
     report: ReportConfig = field(default_factory=ReportConfig)
+    divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     # Where the scenario was read from (set by the loader; not a YAML field).
     source: str = field(default="", metadata={"yaml": False})
     # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
@@ -440,6 +451,8 @@ def validate(s: Scenario) -> None:
     for kind in ("torque", "torque_rate"):
         for name, value in getattr(s.actuator_limits, kind).items():
             check_positive(src, f"actuator_limits.{kind}.{name}", value)
+    check_positive(src, "divergence.max_joint_speed", s.divergence.max_joint_speed)
+    check_positive(src, "divergence.max_torque", s.divergence.max_torque)
     names = set()
     for i, ob in enumerate(s.obstacles):
         where = f"obstacles[{i}]"
