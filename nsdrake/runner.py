@@ -10,6 +10,7 @@ from pathlib import Path
 import yaml
 from pydrake.geometry import Meshcat
 
+from .checks import check_with_model
 from .diagram import build_diagram, speed_limit_vector
 from .metrics import (
     Metric,
@@ -53,8 +54,9 @@ def default_output_folder(name: str, root: Path = Path("runs")) -> Path:
 
 def check_scenario(scenario: Scenario) -> None:
     """Builds the diagram once, so that every field checked against the model (files,
-    joint and frame names) fails now, before an output folder is made."""
-    build_diagram(scenario)
+    joint and frame names, the task's rank, the sampled loops' stability) fails now,
+    before an output folder is made."""
+    check_with_model(scenario, build_diagram(scenario).station)
 
 
 def scenario_yaml(scenario: Scenario) -> str:
