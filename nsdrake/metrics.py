@@ -305,3 +305,14 @@ def write_metrics(path: Path, metrics: list[Metric], extra: dict | None = None) 
     if extra:
         body.update(extra)
     Path(path).write_text(json.dumps(body, indent=2) + "\n")
+
+
+def contact_events(traces: Traces) -> list[tuple[str, float]]:
+    """("contact", t) and ("lost", t) in time order, from the ``in_contact`` column."""
+    if "in_contact" not in traces or len(traces) == 0:
+        return []
+    c, t = traces["in_contact"], traces["t"]
+    events = [("contact", float(t[0]))] if c[0] else []
+    for k in np.flatnonzero(np.diff(c)):
+        events.append(("contact" if c[k + 1] else "lost", float(t[k + 1])))
+    return events

@@ -14,6 +14,7 @@ from .checks import check_with_model
 from .diagram import build_diagram, speed_limit_vector
 from .metrics import (
     Metric,
+    contact_events,
     fig3_metrics,
     first_contact_index,
     joint_speed_metric,
@@ -135,16 +136,19 @@ def run_to_folder(
             baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
     traces = Traces.read_csv(out / "traces.csv")
     metrics = compute_metrics(scenario, built.station, traces, baseline) if failure is None else []
+    events = contact_events(traces)
     extra = {
         "scenario": scenario.source,
         "duration": scenario.duration,
         "status": "failed" if failure else "ok",
+        "contact_events": [{"event": e, "t": t} for e, t in events],
     }
     if failure:
         extra["failure"] = failure
     write_metrics(out / "metrics.json", metrics, extra)
     plots = write_plots(scenario, built, traces, baseline, out)
-    notes = [picture.note] if picture.note else []
+    notes = [contact_note(events)] if any(e == "lost" for e, _ in events) else []
+    notes += [picture.note] if picture.note else []
     write_report(
         out,
         title=f"nsdrake run {out.resolve().name}",
@@ -158,6 +162,17 @@ def run_to_folder(
         failure=failure,
     )
     return RunResult(out=out, metrics=metrics, notes=notes, failure=failure)
+
+
+def contact_note(events: list[tuple[str, float]]) -> str:
+    """One line: when contact was made, lost and regained."""
+    words = {"contact": "made", "lost": "lost"}
+    parts, seen = [], False
+    for event, t in events:
+        word = "regained" if event == "contact" and seen else words[event]
+        seen = seen or event == "contact"
+        parts.append(f"{word} at t = {t:.3f} s")
+    return "contact " + ", ".join(parts) + " (the force command falls to 0 while contact is lost)"
 
 
 def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | None, out: Path) -> list[Path]:

@@ -100,6 +100,13 @@ class ReferenceConfig:
     step_time: float = 0.0
     # The desired normal force after that step [N].
     step_force: float = 0.0
+    # Contact counts as lost once the normal force has stayed below contact_threshold this long [s].
+    loss_time: float = 0.05
+    # After a loss, the normal reference approaches at most this far beyond the lost surface [m].
+    max_overtravel: float = 0.02
+    # The slide stops where the reference would come closer than this share of the arm's
+    # reach to the edge of its workspace [-].
+    reach_margin: float = 0.05
 
 
 OBSTACLE_SHAPES = {"box": 3, "sphere": 1, "cylinder": 2}  # number of size entries
@@ -391,6 +398,11 @@ def validate(s: Scenario) -> None:
         check_non_negative(src, f"reference.{name}", getattr(r, name))
     check_positive(src, "reference.force", r.force)
     check_positive(src, "reference.contact_threshold", r.contact_threshold)
+    check_positive(src, "reference.loss_time", r.loss_time)
+    check_non_negative(src, "reference.max_overtravel", r.max_overtravel)
+    check_non_negative(src, "reference.reach_margin", r.reach_margin)
+    if r.reach_margin >= 1.0:
+        _fail(src, "reference.reach_margin", f"must be below 1, got {r.reach_margin}")
     check_finite(src, "reference.step_time", r.step_time)
     if r.step_time > 0:
         check_positive(src, "reference.step_force", r.step_force)

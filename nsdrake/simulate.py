@@ -144,6 +144,7 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
     columns["p_obstacle"] = logs["p_obstacle"].data()[0]
     columns["speed_scale"] = logs["speed_scale"].data()[0]
     columns["forbidden_contacts"] = logs["forbidden_contacts"].data()[0]
+    columns["in_contact"] = logs["in_contact"].data()[0]
     columns["tau0_scale"] = logs["saturation"].data()[0]
     columns["saturated_joints"] = logs["saturation"].data()[1]
     return Traces(columns)
