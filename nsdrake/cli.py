@@ -129,6 +129,8 @@ def _run(args) -> int:
         print(f"  {m.name:38s} {m.value:12.6g} {m.unit:9s}{mark}{bound}")
     for note in result.notes:
         print(f"nsdrake: {note}")
+    if result.failure:
+        print(f"nsdrake: error: {scenario.source}: {result.failure}", file=sys.stderr)
     files = ", ".join(sorted(p.name for p in out.iterdir()))
     print(f"nsdrake: wrote {out}/: {files}")
     print(f"nsdrake: report: open {out / 'report.html'} in a browser (works offline)")

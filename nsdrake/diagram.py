@@ -127,6 +127,23 @@ def build_controller(
         raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
 
 
+def arm_reach(station: Station, samples: int = 2000) -> tuple[np.ndarray, float]:
+    """(centre, radius) on the task axes of the disc the tool point can reach: centred on
+    the first joint, radius the farthest tool distance over seeded random poses within
+    the joint limits (and the zero pose). [m]."""
+    plant, arm = station.plant, station.arm_model
+    context = plant.CreateDefaultContext()
+    lower = np.maximum(plant.GetPositionLowerLimits(), -np.pi)
+    upper = np.minimum(plant.GetPositionUpperLimits(), np.pi)
+    centre = arm.joints[0].frame_on_child().CalcPoseInWorld(context).translation()[arm.rows]
+    rng = np.random.default_rng(0)
+    farthest = 0.0
+    for q in np.vstack([np.clip(np.zeros(arm.n), lower, upper), rng.uniform(lower, upper, (samples, arm.n))]):
+        plant.SetPositions(context, q)
+        farthest = max(farthest, float(np.linalg.norm(arm.task_position(context) - centre)))
+    return centre, farthest
+
+
 def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station, sensor) -> SurfaceReference:
     """The task reference the scenario's ``reference.path`` names, fed by the force sensor."""
     r = scenario.reference
@@ -134,6 +151,7 @@ def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station,
         "task_rows": station.arm_model.rows,
         "contact_threshold": r.contact_threshold,
         "period": scenario.control_period,
+        "loss_time": r.loss_time,
     }
     if r.path == "circle":
         system = CircleReference(
@@ -150,10 +168,12 @@ def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station,
                 blend_time=r.blend_time,
                 force=r.force,
                 force_ramp_time=r.force_ramp_time,
+                max_overtravel=r.max_overtravel,
             ),
             **common,
         )
     else:
+        centre, reach = arm_reach(station)
         system = SlideAndPressReference(
             reference=SlideAndPress(
                 x0=initial_task_position(station),
@@ -166,6 +186,9 @@ def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station,
                 force_ramp_time=r.force_ramp_time,
                 step_time=r.step_time if r.step_time > 0 else math.inf,
                 step_force=r.step_force,
+                max_overtravel=r.max_overtravel,
+                centre=centre,
+                reach=(1.0 - r.reach_margin) * reach,
             ),
             **common,
         )
@@ -229,6 +252,7 @@ def add_loggers(builder, station, controller, sensor, reference, monitor, period
         "f_d": reference.GetOutputPort("f_d"),
         "state": station.plant.get_state_output_port(),
         "forbidden_contacts": monitor.get_output_port(),
+        "in_contact": reference.GetOutputPort("in_contact"),
     }
     for name, port in {
         "tau": "generalized_force",

@@ -529,3 +529,14 @@ def self_motion_metrics(
         )
     )
     return metrics + (limit_metrics(traces) if "q_margin1" in traces else [])
+
+
+def contact_events(traces: Traces) -> list[tuple[str, float]]:
+    """("contact", t) and ("lost", t) in time order, from the ``in_contact`` column."""
+    if "in_contact" not in traces or len(traces) == 0:
+        return []
+    c, t = traces["in_contact"], traces["t"]
+    events = [("contact", float(t[0]))] if c[0] else []
+    for k in np.flatnonzero(np.diff(c)):
+        events.append(("contact" if c[k + 1] else "lost", float(t[k + 1])))
+    return events

@@ -21,6 +21,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, Multibody
 from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia, WeldJoint
 from pydrake.systems.framework import DiagramBuilder
 
+from .checks import check_model_file
 from .controller_model import Obstacle
 from .criteria.obstacle import proximity_geometries
 from .dynamics import ArmModel
@@ -108,6 +109,11 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     parser = Parser(plant)
     arm_file = _model_file(scenario, "arm.urdf", scenario.arm.urdf)
     plate_file = _model_file(scenario, "plate.urdf", scenario.plate.urdf)
+    for path in (arm_file, plate_file):
+        try:
+            check_model_file(path)
+        except ScenarioError as e:
+            raise ScenarioError(f"{src}: {e}") from None
     try:
         (arm,) = parser.AddModels(str(arm_file))
         (plate,) = parser.AddModels(str(plate_file))

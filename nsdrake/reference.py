@@ -55,8 +55,32 @@ def smoothstep(u: float) -> float:
 
 
 @dataclass(frozen=True)
+class ContactState:
+    """The reference's view of the contact, from the measured normal force alone."""
+
+    t_contact: float = math.inf  # [s] start of the current (or last) contact; ∞: none yet
+    r_contact: float = math.nan  # [m] normal offset of x_d frozen at that contact
+    t_lost: float = math.inf  # [s] when that contact was declared lost; ∞: not lost
+    t_low: float = math.inf  # [s] since when, in contact, the force has been below the threshold
+
+    @property
+    def in_contact(self) -> bool:
+        return math.isfinite(self.t_contact) and not math.isfinite(self.t_lost)
+
+
+@dataclass(frozen=True)
 class SlideAndPress:
-    """The Fig. 3 reference. m task axes; see the module docstring."""
+    """The Fig. 3 reference. m task axes; see the module docstring.
+
+    Contact loss (the tool slides off the plate, the plate is out of reach): while
+    the normal force stays below the contact threshold for ``loss_time`` the
+    contact is declared lost (:func:`update_contact`); from then on f_d falls to 0
+    over ``force_ramp_time`` (no force is commanded into free space) and the
+    normal reference approaches at most ``max_overtravel`` beyond where the contact
+    was, then holds. When the force returns above the threshold, contact resumes
+    as at the first contact. The ramp along the plate stops where x_d would leave
+    the disc of radius ``reach`` around ``centre`` (the arm's reach, less a margin).
+    """
 
     x0: np.ndarray  # (m,) tool position at t = 0 [m]
     tangent: np.ndarray  # (m,) unit direction of the ramp along the plate
@@ -68,33 +92,91 @@ class SlideAndPress:
     force_ramp_time: float  # [s]
     step_time: float = math.inf  # [s] after contact; ∞: no step
     step_force: float = 0.0  # [N] desired force after the step
+    max_overtravel: float = 0.02  # [m] approach beyond a lost contact's surface, at most
+    centre: np.ndarray | None = None  # (m,) centre of the reachable disc; None: no limit
+    reach: float = math.inf  # [m] its radius
 
-    def at(self, t: float, t_contact: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact)."""
+    def at(
+        self, t: float, t_contact: float = math.inf, state: ContactState | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact)
+        or the whole contact ``state``."""
+        state = state or ContactState(t_contact=t_contact)
         s, sd, sdd = ramp_profile(t, self.tangent_speed, self.blend_time)
-        if t < t_contact:
-            r, rd, rdd = ramp_profile(t, self.approach_speed, self.blend_time)
-            f_d = 0.0
-        else:
-            r = ramp_profile(t_contact, self.approach_speed, self.blend_time)[0]
-            rd = rdd = 0.0
-            if t - t_contact >= self.step_time:
-                f_d = self.step_force
-            elif self.force_ramp_time > 0.0:
-                f_d = self.force * smoothstep((t - t_contact) / self.force_ramp_time)
-            else:
-                f_d = self.force
+        r, rd, rdd = self._normal(t, state)
+        if self.centre is not None:  # first the approach, then the slide, stop at the reach
+            r, rd, rdd = self._within_reach(s * self.tangent, self.normal, r, rd, rdd)
+            s, sd, sdd = self._within_reach(r * self.normal, self.tangent, s, sd, sdd)
+        f_d = self._force(t, state)
         x_d = self.x0 + s * self.tangent + r * self.normal
         xdot_d = sd * self.tangent + rd * self.normal
         xddot_d = sdd * self.tangent + rdd * self.normal
         return x_d, xdot_d, xddot_d, f_d
 
+    def offset(self, t: float, state: ContactState) -> float:
+        """r, the normal offset of x_d from x0 [m]."""
+        return self.at(t, state=state)[0] @ self.normal - self.x0 @ self.normal
 
-def detect_contact(t: float, t_contact: float, f_n: float, threshold: float) -> float:
-    """The contact time: unchanged once set, else t when the normal force reaches ``threshold``."""
-    if math.isfinite(t_contact):
-        return t_contact
-    return t if f_n >= threshold else math.inf
+    def _normal(self, t: float, state: ContactState) -> tuple[float, float, float]:
+        """(r, ṙ, r̈): the normal offset of x_d from x0."""
+        if t < state.t_contact:
+            return ramp_profile(t, self.approach_speed, self.blend_time)
+        r_contact = state.r_contact
+        if math.isnan(r_contact):  # the first contact, given by its time alone
+            r_contact = ramp_profile(state.t_contact, self.approach_speed, self.blend_time)[0]
+        if t < state.t_lost:
+            return r_contact, 0.0, 0.0
+        r, rd, rdd = ramp_profile(t - state.t_lost, self.approach_speed, self.blend_time)
+        if r >= self.max_overtravel:
+            return r_contact + self.max_overtravel, 0.0, 0.0
+        return r_contact + r, rd, rdd
+
+    def _within_reach(self, offset, direction, u, ud, udd) -> tuple[float, float, float]:
+        """(u, u̇, ü) of the motion x0 + offset + u·direction, stopped (u̇ = ü = 0) where it
+        would leave the disc of radius max(reach, |x0 − centre|) around the centre."""
+        if ud == 0.0:
+            return u, ud, udd
+        a = self.x0 + offset - self.centre
+        radius = max(self.reach, float(np.linalg.norm(self.x0 - self.centre)))
+        along = float(a @ direction)
+        root = math.sqrt(max(along * along - float(a @ a) + radius * radius, 0.0))
+        limit = -along + root if ud > 0 else -along - root
+        if (u - limit) * ud >= 0.0:
+            return limit, 0.0, 0.0
+        return u, ud, udd
+
+    def _force(self, t: float, state: ContactState) -> float:
+        if t < state.t_contact:
+            return 0.0
+        f_d = self._pressing(min(t, state.t_lost) - state.t_contact)
+        if t >= state.t_lost and self.force_ramp_time > 0.0:
+            return f_d * (1.0 - smoothstep((t - state.t_lost) / self.force_ramp_time))
+        return 0.0 if t >= state.t_lost else f_d
+
+    def _pressing(self, since_contact: float) -> float:
+        if since_contact >= self.step_time:
+            return self.step_force
+        if self.force_ramp_time > 0.0:
+            return self.force * smoothstep(since_contact / self.force_ramp_time)
+        return self.force
+
+
+def update_contact(
+    state: ContactState, t: float, f_n: float, threshold: float, loss_time: float, r_now: float
+) -> ContactState:
+    """The contact state after a measured normal force f_n at time t: contact begins
+    when f_n reaches ``threshold`` (the normal reference frozen at its current offset
+    ``r_now``), and is lost once f_n has stayed below it for ``loss_time``."""
+    if state.in_contact:
+        if f_n >= threshold:
+            return ContactState(state.t_contact, state.r_contact, math.inf, math.inf)
+        t_low = min(state.t_low, t)
+        if t - t_low + 1e-9 >= loss_time:  # 1 ns of slack for the rounding of sample times
+            return ContactState(state.t_contact, state.r_contact, t, math.inf)
+        return ContactState(state.t_contact, state.r_contact, math.inf, t_low)
+    if f_n >= threshold:
+        return ContactState(t, r_now, math.inf, math.inf)
+    return state
 
 
 def there_and_back(t: float, length: float, speed: float, blend_time: float) -> tuple[float, float, float]:
@@ -115,14 +197,17 @@ def there_and_back(t: float, length: float, speed: float, blend_time: float) -> 
 
 @dataclass(frozen=True)
 class CircleOnSurface:
-    """Approach and press as :class:`SlideAndPress` (without sliding), then a circle on the
-    surface. m = 3 translational task axes; see the module docstring.
+    """Approach and press as :class:`SlideAndPress` without sliding (contact loss handled
+    the same way), then a circle on the surface. m = 3 translational task axes; see the
+    module docstring.
 
     The circle lies in the plane of the unit tangents t₁ and t₂ = t₁ × n (for a plate,
     its x and z axes). It starts at the contact point p_c, at the angle φ₀ =
     ``start_angle`` on the circle (measured from t₁ toward t₂): its centre is
     c = p_c − r u(φ₀), u(φ) = cos φ t₁ + sin φ t₂, and x_d = c + r u(φ₀ + s/r) with s the
-    arc length (:func:`there_and_back`); a negative speed goes round clockwise.
+    arc length (:func:`there_and_back`), from ``delay`` after the *first* contact (a
+    contact lost and regained does not restart it); a negative speed goes round
+    clockwise.
     """
 
     x0: np.ndarray  # (3,) tool position at t = 0 [m]
@@ -132,11 +217,27 @@ class CircleOnSurface:
     laps: float  # times round [-]
     speed: float  # v along the circle; negative: clockwise from t₁ toward −t₂ [m/s]
     start_angle: float  # φ₀ [rad]
-    delay: float  # [s] from contact to the start of the circle
+    delay: float  # [s] from the first contact to the start of the circle
     approach_speed: float  # [m/s]
     blend_time: float  # [s]
     force: float  # [N]
     force_ramp_time: float  # [s]
+    max_overtravel: float = 0.02  # [m] approach beyond a lost contact's surface, at most
+
+    @cached_property
+    def press(self) -> SlideAndPress:
+        """The approach and press: :class:`SlideAndPress` without the slide."""
+        return SlideAndPress(
+            x0=self.x0,
+            tangent=self.tangent,
+            normal=self.normal,
+            tangent_speed=0.0,
+            approach_speed=self.approach_speed,
+            blend_time=self.blend_time,
+            force=self.force,
+            force_ramp_time=self.force_ramp_time,
+            max_overtravel=self.max_overtravel,
+        )
 
     @cached_property
     def tangent2(self) -> np.ndarray:
@@ -156,26 +257,34 @@ class CircleOnSurface:
         """Time from the start of the circle to its end [s]."""
         return 2.0 * math.pi * self.radius * self.laps / abs(self.speed) + self.blend_time
 
-    def at(self, t: float, t_contact: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact)."""
-        n, t1, t2 = self.normal, self.tangent, self.tangent2
-        if t < t_contact:
-            r, rd, rdd = ramp_profile(t, self.approach_speed, self.blend_time)
-            return self.x0 + r * n, rd * n, rdd * n, 0.0
-        r = ramp_profile(t_contact, self.approach_speed, self.blend_time)[0]
-        if self.force_ramp_time > 0.0:
-            f_d = self.force * smoothstep((t - t_contact) / self.force_ramp_time)
-        else:
-            f_d = self.force
+    def at(
+        self,
+        t: float,
+        t_contact: float = math.inf,
+        state: ContactState | None = None,
+        t_first: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact) or
+        the whole contact ``state``, and the first contact's time (default: the state's)."""
+        state = state or ContactState(t_contact=t_contact)
+        x_d, xdot_d, xddot_d, f_d = self.press.at(t, state=state)
+        t_first = state.t_contact if t_first is None else t_first
         u0, length = self._start
-        s, sd, sdd = there_and_back(t - t_contact - self.delay, length, abs(self.speed), self.blend_time)
+        s, sd, sdd = there_and_back(t - t_first - self.delay, length, abs(self.speed), self.blend_time)
+        if s == 0.0 and sd == 0.0:
+            return x_d, xdot_d, xddot_d, f_d
         sign = 1.0 if self.speed >= 0 else -1.0
         s, sd, sdd = sign * s, sign * sd, sign * sdd
         phi = self.start_angle + s / self.radius
-        u = math.cos(phi) * t1 + math.sin(phi) * t2
-        du = -math.sin(phi) * t1 + math.cos(phi) * t2  # du/dφ
-        centre = self.x0 + r * n - self.radius * u0
-        x_d = centre + self.radius * u
-        xdot_d = sd * du
-        xddot_d = sdd * du - (sd * sd / self.radius) * u
-        return x_d, xdot_d, xddot_d, f_d
+        u = math.cos(phi) * self.tangent + math.sin(phi) * self.tangent2
+        du = -math.sin(phi) * self.tangent + math.cos(phi) * self.tangent2  # du/dφ
+        return (
+            x_d + self.radius * (u - u0),
+            xdot_d + sd * du,
+            xddot_d + sdd * du - (sd * sd / self.radius) * u,
+            f_d,
+        )
+
+    def offset(self, t: float, state: ContactState) -> float:
+        """r, the normal offset of x_d from x0 [m]."""
+        return self.press.offset(t, state)

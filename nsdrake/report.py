@@ -108,11 +108,18 @@ def render_report(
     replay: str | None,
     files: Iterable[str],
     notes: Iterable[str] = (),
+    failure: str | None = None,
 ) -> str:
-    """The report page as a string; paths in ``replay`` and ``files`` are relative links."""
+    """The report page as a string; paths in ``replay`` and ``files`` are relative links.
+    ``failure``: why the run stopped early (it is then marked failed)."""
     bounded = [m for m in metrics if m.passed is not None]
     failed = [m for m in bounded if not m.passed]
-    if failed:
+    if failure:
+        banner = (
+            f'<span class="banner fail">run FAILED: {_e(failure)}; '
+            "everything below is up to that moment</span>"
+        )
+    elif failed:
         banner = (
             f'<span class="banner fail">{len(failed)} of {len(bounded)} bounded metrics FAIL: '
             f"{_e(', '.join(m.name for m in failed))}</span>"

@@ -9,10 +9,13 @@ from pathlib import Path
 
 import yaml
 from pydrake.geometry import Meshcat
+from pydrake.systems.framework import DiagramBuilder
 
+from .checks import check_with_model
 from .diagram import build_diagram, speed_limit_vector
 from .metrics import (
     Metric,
+    contact_events,
     fig3_metrics,
     first_contact_index,
     joint_speed_metric,
@@ -21,10 +24,11 @@ from .metrics import (
     self_motion_metrics,
     write_metrics,
 )
+from .plant import add_station
 from .plots import plot_fig3, plot_pose, plot_priority
 from .report import write_report
 from .scenario import Scenario
-from .simulate import run
+from .simulate import DivergenceError, run
 from .traces import Traces
 from .visualization import start_meshcat, write_diagram_picture, write_replay
 
@@ -54,8 +58,11 @@ def default_output_folder(name: str, root: Path = Path("runs")) -> Path:
 
 
 def check_scenario(scenario: Scenario) -> None:
-    """Builds the diagram once, so that every field checked against the model (files,
-    joint and frame names) fails now, before an output folder is made."""
+    """Builds the station, then the diagram, once, so that every field checked against the
+    model (files, joint and frame names, the task's rank at the initial pose, the sampled
+    loops' stability, then what the controller refuses) fails now, before an output
+    folder is made."""
+    check_with_model(scenario, add_station(DiagramBuilder(), scenario))
     build_diagram(scenario)
 
 
@@ -73,10 +80,11 @@ class RunResult:
     out: Path
     metrics: list[Metric]
     notes: list[str] = field(default_factory=list)  # one line each, for the user (e.g. no Graphviz)
+    failure: str | None = None  # why the run stopped early ("diverged at t = … s: …")
 
     @property
     def passed(self) -> bool:
-        return all(m.passed for m in self.metrics if m.passed is not None)
+        return self.failure is None and all(m.passed for m in self.metrics if m.passed is not None)
 
 
 def run_to_folder(
@@ -103,7 +111,9 @@ def run_to_folder(
     - report.html: all of the above on one page.
 
     With a ``meshcat`` (a live viewer), the main run is shown in it as it runs,
-    at real time; the comparison run is never shown nor recorded.
+    at real time; the comparison run is never shown nor recorded. A run that
+    diverges (:class:`nsdrake.simulate.DivergenceError`) writes the same files up
+    to that moment, marked failed, and returns with ``failure`` set.
     """
     out = Path(out)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
@@ -113,28 +123,79 @@ def run_to_folder(
     live = meshcat is not None
     if meshcat is None and replay:
         meshcat = start_meshcat(live=False)
-    traces, built = run(scenario, progress=report(0), meshcat=meshcat, live=live)
+    failure = None
+    try:
+        traces, built = run(scenario, progress=report(0), meshcat=meshcat, live=live)
+    except DivergenceError as e:
+        traces, built, failure = e.traces, e.built, str(e)
+        if built.visualizers is not None:
+            built.visualizers.publish_recording()
     traces.write_csv(out / "traces.csv")
     replay_path = write_replay(meshcat, out / "replay.html") if replay else None
     picture = write_diagram_picture(built.diagram, out)
     baseline = None
-    if compare:
-        baseline_traces, _ = run(scenario, null_space_task=False, progress=report(1))
-        baseline_traces.write_csv(out / "traces_without_null_space_task.csv")
-        baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
+    if compare and failure is None:
+        try:
+            baseline_traces, _ = run(scenario, null_space_task=False, progress=report(1))
+        except DivergenceError as e:
+            failure = f"the comparison run (q̇_dⁿ = 0) {e}"
+        else:
+            baseline_traces.write_csv(out / "traces_without_null_space_task.csv")
+            baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
     traces = Traces.read_csv(out / "traces.csv")
-    metrics = compute_metrics(scenario, built.station, traces, baseline)
-    write_metrics(out / "metrics.json", metrics, {"scenario": scenario.source, "duration": scenario.duration})
+    metrics = compute_metrics(scenario, built.station, traces, baseline) if failure is None else []
+    events = contact_events(traces)
+    extra = {
+        "scenario": scenario.source,
+        "duration": scenario.duration,
+        "status": "failed" if failure else "ok",
+        "contact_events": [{"event": e, "t": t} for e, t in events],
+    }
+    if failure:
+        extra["failure"] = failure
+    write_metrics(out / "metrics.json", metrics, extra)
+    plots = write_plots(scenario, built, traces, baseline, out)
+    notes = [contact_note(events)] if any(e == "lost" for e, _ in events) else []
+    notes += [picture.note] if picture.note else []
+    write_report(
+        out,
+        title=f"nsdrake run {out.resolve().name}",
+        description=f"{scenario.description} (scenario: {scenario.source or 'built in code'})",
+        parameters=yaml.safe_load(scenario_yaml(scenario)),
+        metrics=metrics,
+        plots=plots,
+        diagram=picture,
+        replay=replay_path.name if replay_path else None,
+        notes=notes,
+        failure=failure,
+    )
+    return RunResult(out=out, metrics=metrics, notes=notes, failure=failure)
+
+
+def contact_note(events: list[tuple[str, float]]) -> str:
+    """One line: when contact was made, lost and regained."""
+    words = {"contact": "made", "lost": "lost"}
+    parts, seen = [], False
+    for event, t in events:
+        word = "regained" if event == "contact" and seen else words[event]
+        seen = seen or event == "contact"
+        parts.append(f"{word} at t = {t:.3f} s")
+    return "contact " + ", ".join(parts) + " (the force command falls to 0 while contact is lost)"
+
+
+def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | None, out: Path) -> list[Path]:
+    """fig3.png, priority.png and pose.png, as the scenario's checks ask (none for an empty trace)."""
+    if len(traces) < 2:
+        return []
     k0 = first_contact_index(traces, scenario.reference.contact_threshold)
     contact_time = float(traces["t"][k0]) if k0 is not None else None
-    task_axes = built.station.arm_model.task_axes
     plots = []
     if "fig3" in scenario.report.checks:
         plots.append(out / "fig3.png")
         plot_fig3(
             traces,
             out / "fig3.png",
-            task_axes=task_axes,
+            task_axes=built.station.arm_model.task_axes[: built.station.arm_model.m_t],
             title=scenario.description,
             baseline=baseline,
             contact_time=contact_time,
@@ -149,30 +210,19 @@ def run_to_folder(
             selector=scenario.desired_null_space.selector,
         )
     if {"pose", "self_motion"} & set(scenario.report.checks):
+        arm = built.station.arm_model
         plots.append(out / "pose.png")
         plot_pose(
             traces,
             out / "pose.png",
             normal=built.station.normal,
-            task_axes=task_axes[: built.station.arm_model.m_t],
+            task_axes=arm.task_axes[: arm.m_t],
             title=scenario.description,
             baseline=baseline,
             contact_time=contact_time,
             d_lim=scenario.desired_null_space.selector.d_lim,
         )
-    notes = [picture.note] if picture.note else []
-    write_report(
-        out,
-        title=f"nsdrake run {out.resolve().name}",
-        description=f"{scenario.description} (scenario: {scenario.source or 'built in code'})",
-        parameters=yaml.safe_load(scenario_yaml(scenario)),
-        metrics=metrics,
-        plots=plots,
-        diagram=picture,
-        replay=replay_path.name if replay_path else None,
-        notes=notes,
-    )
-    return RunResult(out=out, metrics=metrics, notes=notes)
+    return plots
 
 
 def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Traces | None) -> list[Metric]:

@@ -124,6 +124,13 @@ class ReferenceConfig:
     # initial pose; perpendicular: that one turned by the smallest rotation that points the
     # tool frame's z axis along the plate's push direction [-].
     orientation: str = "start"
+    # Contact counts as lost once the normal force has stayed below contact_threshold this long [s].
+    loss_time: float = 0.05
+    # After a loss, the normal reference approaches at most this far beyond the lost surface [m].
+    max_overtravel: float = 0.02
+    # The slide stops where the reference would come closer than this share of the arm's
+    # reach to the edge of its workspace [-].
+    reach_margin: float = 0.05
 
 
 OBSTACLE_SHAPES = {"box": 3, "sphere": 1, "cylinder": 2}  # number of size entries
@@ -146,6 +153,16 @@ class ObstacleConfig:
 
 
 REPORT_CHECKS = ("fig3", "priority", "pose", "self_motion")
+
+
+@dataclass
+class DivergenceConfig:
+    """When a run counts as diverged and is stopped (nsdrake/simulate.py)."""
+
+    # Any joint faster than this [rad/s].
+    max_joint_speed: float = 100.0
+    # Any commanded joint torque larger than this [N m].
+    max_torque: float = 1.0e4
 
 
 @dataclass
@@ -194,6 +211,7 @@ class Scenario:
     # Obstacles besides the plate.
     obstacles: list[ObstacleConfig] = field(default_factory=list)
     report: ReportConfig = field(default_factory=ReportConfig)
+    divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     # Where the scenario was read from (set by the loader; not a YAML field).
     source: str = field(default="", metadata={"yaml": False})
     # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
@@ -443,6 +461,11 @@ def validate(s: Scenario) -> None:
         check_non_negative(src, f"reference.{name}", getattr(r, name))
     check_positive(src, "reference.force", r.force)
     check_positive(src, "reference.contact_threshold", r.contact_threshold)
+    check_positive(src, "reference.loss_time", r.loss_time)
+    check_non_negative(src, "reference.max_overtravel", r.max_overtravel)
+    check_non_negative(src, "reference.reach_margin", r.reach_margin)
+    if r.reach_margin >= 1.0:
+        _fail(src, "reference.reach_margin", f"must be below 1, got {r.reach_margin}")
     check_finite(src, "reference.step_time", r.step_time)
     if r.step_time > 0:
         check_positive(src, "reference.step_force", r.step_force)
@@ -513,6 +536,8 @@ def validate(s: Scenario) -> None:
     for kind in ("torque", "torque_rate"):
         for name, value in getattr(s.actuator_limits, kind).items():
             check_positive(src, f"actuator_limits.{kind}.{name}", value)
+    check_positive(src, "divergence.max_joint_speed", s.divergence.max_joint_speed)
+    check_positive(src, "divergence.max_torque", s.divergence.max_torque)
     names = set()
     for i, ob in enumerate(s.obstacles):
         where = f"obstacles[{i}]"

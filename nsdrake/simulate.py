@@ -6,7 +6,8 @@ from collections.abc import Callable
 
 import numpy as np
 from pydrake.geometry import Meshcat
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import Simulator, SimulatorStatus
+from pydrake.systems.framework import EventStatus
 
 from .controller import torque_limits
 from .criteria.obstacle import ObstacleDistances
@@ -14,6 +15,52 @@ from .diagram import ControlledStation, build_diagram, has_joint_limits
 from .orientation import orientation_error
 from .scenario import Scenario
 from .traces import Traces
+
+
+class DivergenceError(RuntimeError):
+    """The simulation left the bounds of a meaningful run (non-finite or out-of-bound
+    state or torque) or Drake could not take a step. Carries the traces up to that
+    moment and the diagram handles."""
+
+    def __init__(self, t: float, reason: str, traces: Traces, built: ControlledStation):
+        self.t, self.reason, self.traces, self.built = t, reason, traces, built
+        super().__init__(f"diverged at t = {t:.4f} s: {reason}")
+
+
+def divergence_monitor(built: ControlledStation, scenario: Scenario):
+    """A Simulator monitor that ends the run, with its reason, at the first step whose
+    state or commanded torque is non-finite or beyond ``scenario.divergence``."""
+    plant, controller = built.station.plant, built.controller
+    limits = scenario.divergence
+    n = built.station.arm_model.n
+    tau_port = controller.GetOutputPort("generalized_force")
+
+    def monitor(root_context):
+        state = plant.get_state_output_port().Eval(plant.GetMyContextFromRoot(root_context))
+        problem = None
+        if not np.all(np.isfinite(state)):
+            problem = "the joint state is not finite"
+        elif np.max(np.abs(state[n:])) > limits.max_joint_speed:
+            speed = np.max(np.abs(state[n:]))
+            problem = f"a joint speed reached {speed:.3g} rad/s (bound {limits.max_joint_speed:g})"
+        else:
+            tau = tau_port.Eval(controller.GetMyContextFromRoot(root_context))
+            if not np.all(np.isfinite(tau)):
+                problem = "the commanded torque is not finite"
+            elif np.max(np.abs(tau)) > limits.max_torque:
+                problem = (
+                    f"a commanded torque reached {np.max(np.abs(tau)):.3g} N m (bound {limits.max_torque:g})"
+                )
+        if problem is None:
+            return EventStatus.Succeeded()
+        return EventStatus.ReachedTermination(built.diagram, problem)
+
+    return monitor
+
+
+def _one_line(text) -> str:
+    line = " ".join(str(text).split())
+    return line if len(line) <= 200 else line[:199] + "…"
 
 
 def run(
@@ -42,14 +89,25 @@ def run(
         built.visualizers.start_recording(live=live)
     if live:
         simulator.set_target_realtime_rate(1.0)
-    simulator.Initialize()
-    if progress is None:
-        simulator.AdvanceTo(scenario.duration)
-    else:
-        chunks = 100
+    simulator.set_monitor(divergence_monitor(built, scenario))
+    chunks = 100 if progress is not None else 1
+    try:
+        simulator.Initialize()
         for k in range(1, chunks + 1):
-            simulator.AdvanceTo(scenario.duration * k / chunks)
-            progress(k / chunks)
+            status = simulator.AdvanceTo(scenario.duration * k / chunks)
+            if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
+                raise DivergenceError(
+                    context.get_time(), status.message(), collect_traces(built, context), built
+                )
+            if progress is not None:
+                progress(k / chunks)
+    except (RuntimeError, ValueError, FloatingPointError) as e:
+        if isinstance(e, DivergenceError):
+            raise
+        # Drake failed inside a step (e.g. its contact solver) or a controller raised.
+        raise DivergenceError(
+            context.get_time(), _one_line(e), collect_traces(built, context), built
+        ) from None
     if built.visualizers is not None:
         built.visualizers.publish_recording()
     return collect_traces(built, context), built
@@ -89,6 +147,7 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
     columns["p_obstacle"] = logs["p_obstacle"].data()[0]
     columns["speed_scale"] = logs["speed_scale"].data()[0]
     columns["forbidden_contacts"] = logs["forbidden_contacts"].data()[0]
+    columns["in_contact"] = logs["in_contact"].data()[0]
     columns["tau0_scale"] = logs["saturation"].data()[0]
     columns["saturated_joints"] = logs["saturation"].data()[1]
     if built.desired_orientation is not None:

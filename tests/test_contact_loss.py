@@ -1,0 +1,127 @@
+"""Defined behaviour when the contact the controller regulates goes away: detected
+from the measured force alone, no force commanded into free space, a bounded
+approach, resumption when contact returns, and a reference that stays in reach."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from nsdrake.reference import ContactState, SlideAndPress, update_contact
+
+THRESHOLD, LOSS = 0.5, 0.05
+
+
+def reference(**kw):
+    base = dict(
+        x0=np.array([0.3, 0.4]),
+        tangent=np.array([1.0, 0.0]),
+        normal=np.array([0.0, 1.0]),
+        tangent_speed=0.05,
+        approach_speed=0.03,
+        blend_time=0.2,
+        force=10.0,
+        force_ramp_time=0.2,
+    )
+    base.update(kw)
+    return SlideAndPress(**base)
+
+
+def test_contact_is_lost_only_after_the_force_stays_low_for_the_loss_time():
+    """A dip shorter than loss_time keeps the contact; a sustained one loses it at
+    t_low + loss_time; the force returning resumes contact at its own offset."""
+    s = update_contact(ContactState(), 1.0, 0.6, THRESHOLD, LOSS, r_now=0.02)
+    assert s.in_contact and s.t_contact == 1.0 and s.r_contact == 0.02
+    s = update_contact(s, 2.0, 0.1, THRESHOLD, LOSS, 0.02)
+    s = update_contact(s, 2.03, 0.1, THRESHOLD, LOSS, 0.02)
+    s = update_contact(s, 2.04, 5.0, THRESHOLD, LOSS, 0.02)  # back before 50 ms
+    assert s.in_contact and math.isinf(s.t_low)
+    for t in (3.0, 3.02, 3.04):
+        s = update_contact(s, t, 0.0, THRESHOLD, LOSS, 0.02)
+        assert s.in_contact
+    s = update_contact(s, 3.05, 0.0, THRESHOLD, LOSS, 0.02)
+    assert not s.in_contact and s.t_lost == 3.05
+    s = update_contact(s, 4.0, 0.7, THRESHOLD, LOSS, 0.035)
+    assert s.in_contact and s.t_contact == 4.0 and s.r_contact == 0.035
+
+
+def test_after_a_loss_no_force_is_commanded_and_the_approach_is_bounded():
+    """f_d falls smoothly to 0 over the force ramp; the normal reference goes at most
+    max_overtravel beyond the lost surface and then holds still."""
+    ref = reference(max_overtravel=0.02)
+    lost = ContactState(t_contact=1.0, r_contact=0.03, t_lost=5.0)
+    assert ref.at(5.0, state=lost)[3] == pytest.approx(10.0)
+    assert ref.at(5.1, state=lost)[3] == pytest.approx(5.0)
+    assert ref.at(5.2, state=lost)[3] == 0.0
+    offsets = [ref.offset(t, lost) for t in np.linspace(5.0, 10.0, 501)]
+    assert offsets[0] == pytest.approx(0.03) and max(offsets) == pytest.approx(0.05)
+    assert np.all(np.diff(offsets) >= 0)
+    x_d, xdot_d, xddot_d, f_d = ref.at(10.0, state=lost)
+    assert xdot_d[1] == 0.0 and xddot_d[1] == 0.0 and f_d == 0.0
+
+
+def test_the_slide_stops_at_the_edge_of_the_reach():
+    """With the arm's reach known, x_d never leaves the disc (the fig3 slide would
+    otherwise carry it off to 1.5 m in 30 s)."""
+    ref = reference(centre=np.zeros(2), reach=0.95)
+    state = ContactState(t_contact=1.0, r_contact=0.2)
+    radii = [np.linalg.norm(ref.at(t, state=state)[0]) for t in np.linspace(0, 60, 601)]
+    assert max(radii) <= 0.95 + 1e-12
+    assert radii[-1] == pytest.approx(0.95)
+    assert np.all(ref.at(60.0, state=state)[1] == 0.0)
+
+
+@pytest.mark.slow
+def test_fig3_for_30_s_slides_off_the_plate_and_finishes(tmp_path):
+    """The issue's run: the tool leaves the plate at about 13.4 s. The run finishes,
+    the contact is reported lost once, no force is commanded after that, the arm
+    stays within reach, nothing is NaN and no link touches the plate."""
+    from nsdrake.runner import run_to_folder
+    from nsdrake.scenario import load_scenario
+    from nsdrake.traces import Traces
+
+    result = run_to_folder(load_scenario("fig3", duration=30.0), tmp_path, replay=False)
+    assert result.failure is None
+    traces = Traces.read_csv(tmp_path / "traces.csv")
+    assert traces["t"][-1] == pytest.approx(30.0, abs=0.003)
+    assert np.all(np.isfinite(traces.data))
+    c, t = traces["in_contact"], traces["t"]
+    lost = t[np.flatnonzero(np.diff(c) < 0) + 1]
+    assert len(lost) == 1 and 13.0 < lost[0] < 14.0
+    assert np.all(traces["f_d"][t > lost[0] + 0.2] == 0.0)
+    assert np.max(np.hypot(traces["x_d"], traces["y_d"])) <= 0.95 + 1e-9
+    assert np.max(traces["forbidden_contacts"]) == 0
+    assert "contact made at t = " in (tmp_path / "report.html").read_text()
+
+
+ROBUSTNESS_RUNS = {
+    "plate out of reach": "plate: {position: [0.0, 1.2, 0.0]}\n",
+    "started at the stretched pose": (
+        "arm: {initial_positions: {joint1: -1.5708, joint2: 0.001, joint3: 0.001, joint4: 0.001}}\n"
+    ),
+    "K_n at 0.9 of its bound": "null_space: {K_n: 900.0}\n",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("overlay", ROBUSTNESS_RUNS.values(), ids=ROBUSTNESS_RUNS.keys())
+def test_hard_settings_finish_with_finite_bounded_traces(tmp_path, overlay):
+    """The issue's acceptance runs besides the 30 s one: each finishes its 5 s with no
+    NaN, torques within the divergence bound (no limits are set on this arm), and a
+    report; out of reach, the tool waits at the edge of the workspace."""
+    from conftest import fig3_with
+
+    from nsdrake.runner import run_to_folder
+    from nsdrake.traces import Traces
+
+    (tmp_path / "run").mkdir()
+    result = run_to_folder(fig3_with(tmp_path, overlay), tmp_path / "run", replay=False)
+    assert result.failure is None
+    traces = Traces.read_csv(tmp_path / "run" / "traces.csv")
+    assert traces["t"][-1] == pytest.approx(5.0, abs=0.003)
+    assert np.all(np.isfinite(traces.data))
+    assert np.max(np.abs(traces.block("tau"))) < 100.0
+    assert np.max(np.hypot(traces["x_d"], traces["y_d"])) <= 1.0 + 1e-9
+    assert (tmp_path / "run" / "report.html").exists()
