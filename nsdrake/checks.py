@@ -16,8 +16,9 @@ held over the step, so along one direction with stiffness K and damping D
     v' = v + T (−D v − K x),   x' = x + T v'
 
 whose matrix must have spectral radius < 1 (:func:`sampled_loop_radius`). This is
-checked along the plate (K_p,t, K_v,t) and normal to it in free motion (K_p,n,
-K_v,n). The null-space loop ėⁿ = −K_n eⁿ sampled at T needs K_n T < 2.
+checked along the plate (K_p,t, K_v,t), normal to it in free motion (K_p,n,
+K_v,n) and, for a pose task, on the rotational rows (K_p,r, K_v,r: ω̇ = ω̇_c there
+too). The null-space loop ėⁿ = −K_n eⁿ sampled at T needs K_n T < 2.
 
 In contact, the force loop adds the stiffness K_f k_c (k_c: the tool's and the
 plate's point stiffnesses in series). Drake's discrete contact is implicit, so
@@ -133,13 +134,17 @@ def check_with_model(scenario: Scenario, station) -> None:
     T = scenario.control_period
     if T < SHORTEST_PERIOD:
         _fail(f"{src}: control_period", f"{T:g} s is shorter than {SHORTEST_PERIOD:g} s")
-    check_storage(scenario, columns=8 * station.arm_model.n + 4 * station.arm_model.m + 16)
+    # joint columns, task columns, scalars, and an arm with limits' margins and distances
+    check_storage(scenario, columns=11 * station.arm_model.n + 4 * station.arm_model.m + 24)
     _check_rank(scenario, station, src)
     imp = scenario.impedance
-    for where, K, D in (
+    loops = [
         ("K_p_tangent, K_v_tangent", imp.K_p_tangent, imp.K_v_tangent),
         ("K_p_normal, K_v_normal", imp.K_p_normal, imp.K_v_normal),
-    ):
+    ]
+    if station.arm_model.m_r:  # a pose task's rotational rows: ω̇ = ω̇_c, the same sampled loop
+        loops.append(("K_p_rotation, K_v_rotation", imp.K_p_rotation, imp.K_v_rotation))
+    for where, K, D in loops:
         radius = sampled_loop_radius(K, D, T)
         if radius >= 1.0:
             _fail(

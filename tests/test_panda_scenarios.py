@@ -277,3 +277,16 @@ def test_panda_self_motion_sweeps_the_elbow_while_the_tool_holds():
     assert values["swivel_range"] >= 0.5
     swivel = traces["swivel"]
     assert abs(swivel[-1] - swivel[0]) < 0.1 * values["swivel_range"]  # and back
+
+
+def test_unstable_rotational_gains_are_refused(tmp_path):
+    """A pose task's rotational gains are checked for the sampled loop's stability like the
+    translational ones (k_p,r = 4e6 /s² at 1 ms is unstable), with one line naming them.
+    Catches a check that only looks at the translational rows."""
+    from nsdrake.runner import check_scenario
+
+    path = tmp_path / "stiff.yaml"
+    path.write_text("impedance: {K_p_rotation: 4000000.0}\n")
+    with pytest.raises(ScenarioError, match="impedance.K_p_rotation, K_v_rotation") as error:
+        check_scenario(load_scenario("panda_wipe", config=path))
+    assert "\n" not in str(error.value)
