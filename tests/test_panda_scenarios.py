@@ -87,6 +87,27 @@ def test_circle_geometry_press_and_return():
     assert s == pytest.approx(0.5) and sd == pytest.approx(0.05) and sdd == 0.0
 
 
+def test_circle_keeps_its_clock_through_a_contact_loss():
+    """Contact lost during the circle: f_d ramps to 0 and the normal reference moves on at
+    most max_overtravel (as SlideAndPress), while the path along the surface keeps the
+    first contact's clock: a contact regained later (a new t_contact) does not send x_d
+    back to the start of the circle. Catches a circle timed from the latest contact."""
+    from nsdrake.reference import ContactState
+
+    ref = circle()
+    t_first, t = 1.0, 8.0
+    lost = ContactState(t_contact=t_first, r_contact=0.02, t_lost=7.0)
+    x_lost, _, _, f_lost = ref.at(t, state=lost, t_first=t_first)
+    assert f_lost == 0.0
+    assert (x_lost - ref.x0) @ ref.normal <= 0.02 + ref.max_overtravel + 1e-12
+    regained = ContactState(t_contact=7.9, r_contact=0.03)
+    along = np.eye(3) - np.outer(ref.normal, ref.normal)
+    x_first = ref.at(t, state=ContactState(t_contact=t_first, r_contact=0.02), t_first=t_first)[0]
+    x_again = ref.at(t, state=regained, t_first=t_first)[0]
+    assert np.allclose(along @ x_again, along @ x_first, atol=1e-15)
+    assert np.linalg.norm(along @ (ref.at(t, state=regained)[0] - x_first)) > 0.05  # the mistake
+
+
 # ---------------------------------------------------------------- scenarios and station
 
 
