@@ -29,11 +29,20 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from .dynamics import ArmModel
 from .metrics import first_contact_index, torque_steps
-from .scenario import Scenario, ScenarioError, _one_line, check_shape, load_scenario, read_yaml
+from .scenario import (
+    Scenario,
+    ScenarioError,
+    _cut,
+    _name,
+    _show,
+    check_shape,
+    load_scenario,
+    normalised_yaml,
+    read_yaml,
+)
 from .traces import Traces
 
 FAMILY_DIR = Path(__file__).resolve().parent / "families"
@@ -70,10 +79,10 @@ def load_family(name: str) -> Family:
         raise ScenarioError(f"{path}: must be a mapping with description, scenario, measure, variants")
     unknown = set(data) - {"description", "scenario", "measure", "variants"}
     if unknown:
-        raise ScenarioError(f"{path}: {sorted(unknown)[0]}: unknown field")
+        raise ScenarioError(f"{path}: {_name(sorted(unknown, key=str)[0])}: unknown field")
     if data.get("measure") not in MEASURES:
         raise ScenarioError(
-            f"{path}: measure: must be one of {', '.join(MEASURES)}, got {data.get('measure')!r}"
+            f"{path}: measure: must be one of {', '.join(MEASURES)}, got {_show(data.get('measure'))}"
         )
     variants = []
     for i, v in enumerate(data.get("variants") or []):
@@ -111,9 +120,9 @@ def variant_scenario(family: Family, index: int, config: Path | None, duration: 
     base = load_scenario(family.scenario, config=config, duration=duration)
     variant = family.variants[index]
     try:
-        scenario = yaml_load_typed(schema=Scenario, data=yaml.safe_dump(variant.overrides), defaults=base)
+        scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(variant.overrides), defaults=base)
     except Exception as e:
-        raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_one_line(e)}") from None
+        raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_cut(e)}") from None
     if duration is not None:
         scenario = dataclasses.replace(scenario, duration=duration)
     scenario.source = f"{family.source} [{variant.name}]"
