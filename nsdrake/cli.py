@@ -144,16 +144,23 @@ def _compare(args) -> int:
     out = args.out if args.out is not None else default_output_folder(f"compare-{args.family}")
     out = prepare_output_folder(out, overwrite=args.overwrite)
     print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
-    run_family(
+    result = run_family(
         family,
         out,
         config=args.config,
         duration=args.duration,
         jobs=args.jobs,
+        isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
         progress=_Progress(args.family),
     )
     print((out / "table.md").read_text())
-    print(f"nsdrake: wrote {out}/: table.md, table.csv, compare.png, variants/*/traces.csv")
+    files = ", ".join(name for name in ("table.md", "table.csv", "compare.png") if (out / name).exists())
+    print(f"nsdrake: wrote {out}/: {files}, variants/*/traces.csv")
+    for name, reason in result.failures.items():
+        print(f"nsdrake: variant '{name}' {reason}", file=sys.stderr)
+    if result.failures:
+        print(f"nsdrake: {len(result.failures)} of {len(family.variants)} variants failed", file=sys.stderr)
+        return 1
     return 0
 
 
