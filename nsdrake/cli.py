@@ -19,13 +19,8 @@ import time
 from pathlib import Path
 
 from .compare import load_family, run_family, shipped_families, variant_scenario
-from .runner import (
-    OutputFolderError,
-    check_scenario,
-    default_output_folder,
-    prepare_output_folder,
-    run_to_folder,
-)
+from .output import OutputFolderError, default_output_folder, prepare_output_folder
+from .runner import check_scenario, run_to_folder
 from .scenario import ScenarioError, load_scenario, shipped_scenarios
 from .visualization import start_meshcat
 
@@ -112,8 +107,7 @@ class _Progress:
 def _run(args) -> int:
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     check_scenario(scenario)  # model files, joint names: fail before anything is written
-    out = args.out if args.out is not None else default_output_folder(args.scenario)
-    out = prepare_output_folder(out, overwrite=args.overwrite)
+    out = claim_output_folder(args.out, args.scenario, overwrite=args.overwrite)
     try:
         meshcat = _live_meshcat() if args.meshcat else None
     except RuntimeError as e:  # e.g. no free port in Meshcat's range
@@ -141,8 +135,7 @@ def _compare(args) -> int:
     family = load_family(args.family)
     for i in range(len(family.variants)):  # every input error before any folder or simulation
         variant_scenario(family, i, args.config, args.duration)
-    out = args.out if args.out is not None else default_output_folder(f"compare-{args.family}")
-    out = prepare_output_folder(out, overwrite=args.overwrite)
+    out = claim_output_folder(args.out, f"compare-{args.family}", overwrite=args.overwrite)
     print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
     result = run_family(
         family,
@@ -162,6 +155,13 @@ def _compare(args) -> int:
         print(f"nsdrake: {len(result.failures)} of {len(family.variants)} variants failed", file=sys.stderr)
         return 1
     return 0
+
+
+def claim_output_folder(out: Path | None, default_name: str, *, overwrite: bool) -> Path:
+    """``--out``, claimed (see nsdrake/output.py), or without it the first free runs/NAME[-k]."""
+    if out is None:
+        return default_output_folder(default_name)
+    return prepare_output_folder(out, overwrite=overwrite)
 
 
 BROWSER_WAIT = 60.0  # [s] how long --meshcat waits for a browser on a terminal
@@ -193,6 +193,9 @@ def main(argv: list[str] | None = None) -> int:
         return _run(args)
     except (ScenarioError, OutputFolderError) as e:
         print(f"nsdrake: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # e.g. the disk filled up while writing: one line, not a traceback
+        print(f"nsdrake: error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
 
 

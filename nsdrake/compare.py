@@ -35,6 +35,7 @@ import numpy as np
 
 from .dynamics import ArmModel
 from .metrics import first_contact_index, torque_steps
+from .output import record_written
 from .scenario import (
     Scenario,
     ScenarioError,
@@ -404,6 +405,13 @@ def run_family(
     for i in range(len(family.variants)):
         variant_scenario(family, i, config, duration)  # every input error before any simulation
     folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
+    try:
+        return _run_family(family, out, folders, config, duration, jobs, isolate, progress)
+    finally:  # done or failed: the manifest lists what the run wrote, for a later --overwrite
+        record_written(out)
+
+
+def _run_family(family, out, folders, config, duration, jobs, isolate, progress) -> FamilyResult:
     tasks = [_Task(family, i, config, duration, folders[i]) for i in range(len(family.variants))]
     rows: dict[int, dict] = {}
 

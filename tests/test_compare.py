@@ -95,6 +95,10 @@ def test_compare_command_line(tmp_path, capsys):
     assert main(["compare", "lyapunov", "--duration", "0.3", "--out", str(out), "--jobs", "1"]) == 0
     assert "| full law |" in capsys.readouterr().out
     assert len(list((out / "variants").iterdir())) == 3
+    listed = (out / ".nsdrake-run").read_text().splitlines()
+    assert {"table.md", "table.csv", "compare.png", "variants/", "variants/00-full-law/traces.csv"} <= set(
+        listed
+    )
 
 
 @pytest.mark.parametrize(
