@@ -50,7 +50,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
     run.add_argument("--out", type=Path, help="output folder (default: runs/SCENARIO, never overwritten)")
     run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
-    run.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out folder")
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the files an earlier nsdrake run wrote in --out (never others)",
+    )
     run.add_argument(
         "--meshcat", action="store_true", help="show the run live in Meshcat on localhost (prints the URL)"
     )
@@ -66,7 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--duration", type=_duration, help="simulated time of every variant [s]")
     compare.add_argument("--jobs", type=_jobs, default=min(2, os.cpu_count() or 1), help="parallel processes")
     compare.add_argument(
-        "--overwrite", action="store_true", help="allow writing into a non-empty --out folder"
+        "--overwrite",
+        action="store_true",
+        help="replace the files an earlier nsdrake run wrote in --out (never others)",
     )
     sub.add_parser("list", help="list the shipped scenarios and families")
     return parser
