@@ -19,13 +19,8 @@ import time
 from pathlib import Path
 
 from .compare import load_family, run_family, shipped_families, variant_scenario
-from .runner import (
-    OutputFolderError,
-    check_scenario,
-    default_output_folder,
-    prepare_output_folder,
-    run_to_folder,
-)
+from .output import OutputFolderError, default_output_folder, prepare_output_folder
+from .runner import check_scenario, run_to_folder
 from .scenario import ScenarioError, load_scenario, shipped_scenarios
 from .visualization import start_meshcat
 
@@ -55,7 +50,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
     run.add_argument("--out", type=Path, help="output folder (default: runs/SCENARIO, never overwritten)")
     run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
-    run.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out folder")
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the files an earlier nsdrake run wrote in --out (never others)",
+    )
     run.add_argument(
         "--meshcat", action="store_true", help="show the run live in Meshcat on localhost (prints the URL)"
     )
@@ -71,7 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--duration", type=_duration, help="simulated time of every variant [s]")
     compare.add_argument("--jobs", type=_jobs, default=min(2, os.cpu_count() or 1), help="parallel processes")
     compare.add_argument(
-        "--overwrite", action="store_true", help="allow writing into a non-empty --out folder"
+        "--overwrite",
+        action="store_true",
+        help="replace the files an earlier nsdrake run wrote in --out (never others)",
     )
     sub.add_parser("list", help="list the shipped scenarios and families")
     return parser
@@ -112,8 +113,7 @@ class _Progress:
 def _run(args) -> int:
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     check_scenario(scenario)  # model files, joint names: fail before anything is written
-    out = args.out if args.out is not None else default_output_folder(args.scenario)
-    out = prepare_output_folder(out, overwrite=args.overwrite)
+    out = claim_output_folder(args.out, args.scenario, overwrite=args.overwrite)
     try:
         meshcat = _live_meshcat() if args.meshcat else None
     except RuntimeError as e:  # e.g. no free port in Meshcat's range
@@ -143,20 +143,33 @@ def _compare(args) -> int:
     family = load_family(args.family)
     for i in range(len(family.variants)):  # every input error before any folder or simulation
         variant_scenario(family, i, args.config, args.duration)
-    out = args.out if args.out is not None else default_output_folder(f"compare-{args.family}")
-    out = prepare_output_folder(out, overwrite=args.overwrite)
+    out = claim_output_folder(args.out, f"compare-{args.family}", overwrite=args.overwrite)
     print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
-    run_family(
+    result = run_family(
         family,
         out,
         config=args.config,
         duration=args.duration,
         jobs=args.jobs,
+        isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
         progress=_Progress(args.family),
     )
     print((out / "table.md").read_text())
-    print(f"nsdrake: wrote {out}/: table.md, table.csv, compare.png, variants/*/traces.csv")
+    files = ", ".join(name for name in ("table.md", "table.csv", "compare.png") if (out / name).exists())
+    print(f"nsdrake: wrote {out}/: {files}, variants/*/traces.csv")
+    for name, reason in result.failures.items():
+        print(f"nsdrake: variant '{name}' {reason}", file=sys.stderr)
+    if result.failures:
+        print(f"nsdrake: {len(result.failures)} of {len(family.variants)} variants failed", file=sys.stderr)
+        return 1
     return 0
+
+
+def claim_output_folder(out: Path | None, default_name: str, *, overwrite: bool) -> Path:
+    """``--out``, claimed (see nsdrake/output.py), or without it the first free runs/NAME[-k]."""
+    if out is None:
+        return default_output_folder(default_name)
+    return prepare_output_folder(out, overwrite=overwrite)
 
 
 BROWSER_WAIT = 60.0  # [s] how long --meshcat waits for a browser on a terminal
@@ -188,6 +201,9 @@ def main(argv: list[str] | None = None) -> int:
         return _run(args)
     except (ScenarioError, OutputFolderError) as e:
         print(f"nsdrake: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # e.g. the disk filled up while writing: one line, not a traceback
+        print(f"nsdrake: error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
 
 

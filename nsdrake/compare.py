@@ -23,17 +23,30 @@ import csv
 import dataclasses
 import math
 import multiprocessing
+import multiprocessing.connection
+import os
 import re
+import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from .dynamics import ArmModel
 from .metrics import first_contact_index, torque_steps
-from .scenario import Scenario, ScenarioError, _one_line, check_shape, load_scenario, read_yaml
+from .output import record_written
+from .scenario import (
+    Scenario,
+    ScenarioError,
+    _cut,
+    _name,
+    _show,
+    check_shape,
+    load_scenario,
+    normalised_yaml,
+    read_yaml,
+)
 from .traces import Traces
 
 FAMILY_DIR = Path(__file__).resolve().parent / "families"
@@ -70,10 +83,10 @@ def load_family(name: str) -> Family:
         raise ScenarioError(f"{path}: must be a mapping with description, scenario, measure, variants")
     unknown = set(data) - {"description", "scenario", "measure", "variants"}
     if unknown:
-        raise ScenarioError(f"{path}: {sorted(unknown)[0]}: unknown field")
+        raise ScenarioError(f"{path}: {_name(sorted(unknown, key=str)[0])}: unknown field")
     if data.get("measure") not in MEASURES:
         raise ScenarioError(
-            f"{path}: measure: must be one of {', '.join(MEASURES)}, got {data.get('measure')!r}"
+            f"{path}: measure: must be one of {', '.join(MEASURES)}, got {_show(data.get('measure'))}"
         )
     variants = []
     for i, v in enumerate(data.get("variants") or []):
@@ -111,9 +124,9 @@ def variant_scenario(family: Family, index: int, config: Path | None, duration: 
     base = load_scenario(family.scenario, config=config, duration=duration)
     variant = family.variants[index]
     try:
-        scenario = yaml_load_typed(schema=Scenario, data=yaml.safe_dump(variant.overrides), defaults=base)
+        scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(variant.overrides), defaults=base)
     except Exception as e:
-        raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_one_line(e)}") from None
+        raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_cut(e)}") from None
     if duration is not None:
         scenario = dataclasses.replace(scenario, duration=duration)
     scenario.source = f"{family.source} [{variant.name}]"
@@ -267,19 +280,97 @@ MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
 # --- running ------------------------------------------------------------------------
 
 
-def _run_variant(args) -> tuple[int, dict]:
-    """Worker: simulate one variant, write its traces, measure them (from the file)."""
-    family_name, index, config, duration, folder = args
+@dataclass(frozen=True)
+class _Task:
+    family: Family
+    index: int
+    config: Path | None
+    duration: float | None
+    folder: Path
+
+
+FAULT_VARIABLE = "NSDRAKE_TEST_FAULT"
+
+
+def _injected_fault(index: int) -> None:
+    """Test hook: with NSDRAKE_TEST_FAULT=INDEX:exit (or INDEX:raise) in the environment,
+    variant INDEX dies as a segfault would, leaving no result (or raises). The tests use it
+    to check that ``nsdrake compare`` survives a crashing variant; unset, it does nothing."""
+    spec = os.environ.get(FAULT_VARIABLE, "")
+    if spec.partition(":")[0] != str(index):
+        return
+    if spec.partition(":")[2] == "exit":
+        os._exit(70)
+    raise RuntimeError(f"{FAULT_VARIABLE} asked variant {index} to fail")
+
+
+def _run_variant(task: _Task) -> dict:
+    """Simulates one variant, writes its traces and measures them (from the file)."""
     from .simulate import run
 
-    family = load_family(family_name)
-    scenario = variant_scenario(family, index, config, duration)
+    _injected_fault(task.index)
+    scenario = variant_scenario(task.family, task.index, task.config, task.duration)
     traces, built = run(scenario)
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    traces.write_csv(folder / "traces.csv")
-    traces = Traces.read_csv(folder / "traces.csv")
-    return index, MEASURES[family.measure](traces, RunFacts(scenario=scenario, station=built.station))
+    task.folder.mkdir(parents=True, exist_ok=True)
+    traces.write_csv(task.folder / "traces.csv")
+    traces = Traces.read_csv(task.folder / "traces.csv")
+    return MEASURES[task.family.measure](traces, RunFacts(scenario=scenario, station=built.station))
+
+
+def _failure(e: BaseException) -> str:
+    return f"failed: {type(e).__name__}: {_cut(e, 200)}"
+
+
+def _variant_process(task: _Task, conn) -> None:
+    """Worker process: one variant; sends ("ok", row) or ("failed", reason), then exits."""
+    try:
+        message = ("ok", _run_variant(task))
+    except BaseException as e:  # every failure, Ctrl-C included, becomes the variant's row
+        message = ("failed", _failure(e))
+    conn.send(message)
+    conn.close()
+
+
+def _crash(exitcode: int | None) -> str:
+    """Why a worker that sent nothing ended."""
+    if exitcode is not None and exitcode < 0:
+        try:
+            return f"crashed: killed by signal {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"crashed: killed by signal {-exitcode}"
+    return f"crashed: the process exited with status {exitcode} without a result"
+
+
+def _run_in_processes(tasks: list[_Task], jobs: int, done: Callable[[int, str, object], None]) -> None:
+    """Runs each task in a process of its own, ``jobs`` at a time. A worker reports through
+    a pipe; one that dies without reporting (segfault, os._exit, killed) closes its pipe, so
+    the wait always ends and the variant is reported as crashed."""
+    ctx = multiprocessing.get_context("spawn")
+    pending = list(tasks)
+    running: dict = {}  # receiving end of the pipe -> (variant index, process)
+    try:
+        while pending or running:
+            while pending and len(running) < jobs:
+                task = pending.pop(0)
+                receive, send = ctx.Pipe(duplex=False)
+                process = ctx.Process(target=_variant_process, args=(task, send), daemon=True)
+                process.start()
+                send.close()  # the worker holds the only writing end: its death means EOF here
+                running[receive] = (task.index, process)
+            for receive in multiprocessing.connection.wait(list(running)):
+                index, process = running.pop(receive)
+                try:
+                    status, value = receive.recv()
+                except (EOFError, OSError):
+                    status, value = "failed", None
+                receive.close()
+                process.join()
+                done(index, status, value if value is not None else _crash(process.exitcode))
+    finally:  # on Ctrl-C or an error here: no worker outlives the command
+        for _, process in running.values():
+            process.terminate()
+        for _, process in running.values():
+            process.join()
 
 
 @dataclass
@@ -287,6 +378,11 @@ class FamilyResult:
     family: Family
     rows: list[dict]  # one per variant, in the family's order, with "variant" first
     out: Path
+
+    @property
+    def failures(self) -> dict[str, str]:
+        """Variant name -> why it has no figures (its row's "error")."""
+        return {row["variant"]: row["error"] for row in self.rows if "error" in row}
 
 
 def run_family(
@@ -296,30 +392,55 @@ def run_family(
     config: Path | None = None,
     duration: float | None = None,
     jobs: int = 1,
+    isolate: bool | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> FamilyResult:
-    """Runs every variant (``jobs`` processes), writes the table and the overlay plot."""
+    """Runs every variant, writes the table and the overlay plot.
+
+    With ``isolate`` (the default when ``jobs`` > 1) each variant runs in a process of its
+    own, ``jobs`` at a time; otherwise one after the other in this process. A variant that
+    raises, or whose process dies, becomes a row with its reason under "error"; the others
+    run on, and the table is written with every row.
+    """
     for i in range(len(family.variants)):
         variant_scenario(family, i, config, duration)  # every input error before any simulation
     folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
-    tasks = [(family.name, i, config, duration, str(folders[i])) for i in range(len(family.variants))]
+    try:
+        return _run_family(family, out, folders, config, duration, jobs, isolate, progress)
+    finally:  # done or failed: the manifest lists what the run wrote, for a later --overwrite
+        record_written(out)
+
+
+def _run_family(family, out, folders, config, duration, jobs, isolate, progress) -> FamilyResult:
+    tasks = [_Task(family, i, config, duration, folders[i]) for i in range(len(family.variants))]
     rows: dict[int, dict] = {}
-    if jobs > 1 and len(tasks) > 1:
-        with multiprocessing.get_context("spawn").Pool(min(jobs, len(tasks))) as pool:
-            for done, (i, row) in enumerate(pool.imap_unordered(_run_variant, tasks), start=1):
-                rows[i] = row
-                if progress:
-                    progress(done / len(tasks))
+
+    def done(index: int, status: str, value) -> None:
+        rows[index] = value if status == "ok" else {"error": value}
+        if progress:
+            progress(len(rows) / len(tasks))
+
+    if isolate or (isolate is None and jobs > 1):
+        _run_in_processes(tasks, max(1, jobs), done)
     else:
-        for done, task in enumerate(tasks, start=1):
-            i, row = _run_variant(task)
-            rows[i] = row
-            if progress:
-                progress(done / len(tasks))
+        for task in tasks:
+            try:
+                row = _run_variant(task)
+            except Exception as e:  # the variant's row says why; the others still run
+                done(task.index, "failed", _failure(e))
+            else:
+                done(task.index, "ok", row)
     table = [{"variant": family.variants[i].name, **rows[i]} for i in range(len(tasks))]
     _add_ratios(family, table)
     write_table(out, family, table)
-    plot_family(out / "compare.png", family, [Traces.read_csv(f / "traces.csv") for f in folders])
+    ran = [(v, f) for v, f, row in zip(family.variants, folders, table, strict=True) if "error" not in row]
+    if ran:
+        plot_family(
+            out / "compare.png",
+            family,
+            [v for v, _ in ran],
+            [Traces.read_csv(f / "traces.csv") for _, f in ran],
+        )
     return FamilyResult(family=family, rows=table, out=out)
 
 
@@ -348,12 +469,15 @@ def _format(value) -> str:
         return str(value)
     if isinstance(value, float):
         return f"{value:.4g}"
-    return str(value)
+    return " ".join(str(value).split()).replace("|", "\\|")  # one table cell
 
 
 def write_table(out: Path, family: Family, table: list[dict]) -> None:
     """table.csv (full precision) and table.md (4 significant digits)."""
     columns = list(dict.fromkeys(key for row in table for key in row))
+    if "error" in columns:  # why a variant has no figures, next to its name
+        columns.remove("error")
+        columns.insert(1, "error")
     with (out / "table.csv").open("w", newline="") as f:
         writer = csv.DictWriter(f, columns)
         writer.writeheader()
@@ -367,15 +491,16 @@ def write_table(out: Path, family: Family, table: list[dict]) -> None:
     (out / "table.md").write_text("\n".join(lines) + "\n")
 
 
-def plot_family(path: Path, family: Family, traces: list[Traces]) -> None:
-    """Overlays the variants: normal force, position error, ‖eⁿ‖ and ν over time."""
+def plot_family(path: Path, family: Family, variants: list[Variant], traces: list[Traces]) -> None:
+    """Overlays ``variants`` (those of ``family`` that ran): normal force, position error,
+    ‖eⁿ‖ and ν over time."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(4, 1, figsize=(9, 10), sharex=True, constrained_layout=True)
-    for variant, tr in zip(family.variants, traces, strict=True):
+    for variant, tr in zip(variants, traces, strict=True):
         t = tr["t"]
         axes[0].plot(t, tr["f_n"], label=variant.name, lw=1)
         error = np.sqrt(sum((tr[a] - tr[f"{a}_d"]) ** 2 for a in tr.task_axes))

@@ -200,6 +200,8 @@ def write_report(out: Path, **kwargs) -> Path:
     out = Path(out)
     path = out / "report.html"
     if "files" not in kwargs:
-        kwargs["files"] = sorted(p.name for p in out.iterdir() if p.is_file() and p.name != "report.html")
+        kwargs["files"] = sorted(
+            p.name for p in out.iterdir() if p.is_file() and p.name != "report.html" and p.name[0] != "."
+        )
     path.write_text(render_report(**kwargs), encoding="utf-8")
     return path

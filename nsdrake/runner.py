@@ -1,5 +1,8 @@
 """One run of a scenario into an output folder: traces, metrics, plots, the
-diagram's picture, the 3D replay and the HTML report."""
+diagram's picture, the 3D replay and the HTML report.
+
+(The output folder rules are in nsdrake/output.py; their names are re-exported here.)
+"""
 
 from __future__ import annotations
 
@@ -24,6 +27,12 @@ from .metrics import (
     self_motion_metrics,
     write_metrics,
 )
+from .output import (  # noqa: F401 (re-exported: diagrams/fig3.py, the CLI)
+    OutputFolderError,
+    default_output_folder,
+    prepare_output_folder,
+    record_written,
+)
 from .plant import add_station
 from .plots import plot_fig3, plot_pose, plot_priority
 from .report import write_report
@@ -31,30 +40,6 @@ from .scenario import Scenario
 from .simulate import DivergenceError, run
 from .traces import Traces
 from .visualization import start_meshcat, write_diagram_picture, write_replay
-
-
-class OutputFolderError(ValueError):
-    """The output folder cannot be used without losing what is in it."""
-
-
-def prepare_output_folder(out: Path, *, overwrite: bool) -> Path:
-    """Creates ``out``; refuses a non-empty folder unless ``overwrite``."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise OutputFolderError(f"{out}: exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise OutputFolderError(f"{out}: folder is not empty; choose another --out or pass --overwrite")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
-
-
-def default_output_folder(name: str, root: Path = Path("runs")) -> Path:
-    """runs/NAME, or runs/NAME-2, -3, … : the first that does not exist or is empty."""
-    candidate, k = root / name, 1
-    while candidate.exists() and (not candidate.is_dir() or any(candidate.iterdir())):
-        k += 1
-        candidate = root / f"{name}-{k}"
-    return candidate
 
 
 def check_scenario(scenario: Scenario) -> None:
@@ -113,9 +98,18 @@ def run_to_folder(
     With a ``meshcat`` (a live viewer), the main run is shown in it as it runs,
     at real time; the comparison run is never shown nor recorded. A run that
     diverges (:class:`nsdrake.simulate.DivergenceError`) writes the same files up
-    to that moment, marked failed, and returns with ``failure`` set.
+    to that moment, marked failed, and returns with ``failure`` set. In a folder
+    claimed by prepare_output_folder or default_output_folder, the manifest then
+    lists these files.
     """
     out = Path(out)
+    try:
+        return _run_to_folder(scenario, out, progress=progress, replay=replay, meshcat=meshcat)
+    finally:  # done or failed: the manifest lists what the run wrote, for a later --overwrite
+        record_written(out)
+
+
+def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, meshcat) -> RunResult:
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
     compare = scenario.report.compare_without_null_space_task
     stages = 2 if compare else 1

@@ -12,6 +12,7 @@ names the file and the field.
 
 import dataclasses
 import math
+import re
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -230,22 +231,137 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+SHOW_LENGTH = 80  # [characters] longest echo of a user's value in an error message
+
+
+def _show(value) -> str:
+    """``repr(value)`` on one line, cut to SHOW_LENGTH characters with "…"."""
+    text = _one_line(repr(value))
+    return text if len(text) <= SHOW_LENGTH else text[: SHOW_LENGTH - 1] + "…"
+
+
+def _cut(text, length: int = 4 * SHOW_LENGTH) -> str:
+    """A message from elsewhere (Drake, the OS) on one line, cut to ``length`` characters."""
+    text = _one_line(text)
+    return text if len(text) <= length else text[: length - 1] + "…"
+
+
+def _name(key) -> str:
+    """A mapping key (a field or joint name) for a path in an error message, cut like _show."""
+    text = _one_line(key)
+    return text if len(text) <= SHOW_LENGTH else text[: SHOW_LENGTH - 1] + "…"
+
+
+# Limits of the YAML reader. A scenario or family file holds a few hundred values at
+# most, nested 8 deep; these refuse anything far beyond, before it costs time or memory.
+MAX_DEPTH = 32  # nesting of lists and mappings, aliases expanded
+MAX_VALUES = 10_000  # values (scalars, lists, mappings) in one file, each alias counted expanded
+MAX_BYTES = 1_000_000  # size of one file
+
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
+class _Refused(yaml.YAMLError):
+    """Something the strict reader refuses (not a syntax error): one problem at one line."""
+
+    def __init__(self, mark, problem: str):
+        super().__init__(problem)
+        self.line = mark.line + 1
+        self.problem = problem
+
+    def __str__(self) -> str:
+        return f"line {self.line}: {self.problem}"
+
+
 class _StrictLoader(yaml.SafeLoader):
-    """A YAML loader that refuses duplicate keys instead of keeping the last one."""
+    """A safe YAML loader for scenario and family files that refuses, with the line:
+
+    - duplicate keys (PyYAML keeps the last one);
+    - keys that are not names (a list, a mapping, a number, true/false, null);
+    - merge keys (``<<: *base``);
+    - nesting deeper than MAX_DEPTH, and more than MAX_VALUES values with every alias
+      expanded (a "billion laughs" file is a few lines that expand to 10⁹ values);
+    - an alias inside the node it names (a recursive structure).
+
+    It reads YAML 1.2 floats such as ``1e3`` and ``-2E-3`` as numbers (YAML 1.1, and so
+    PyYAML, needs a dot and a signed exponent: ``1.0e+3``).
+    """
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+        self._extent: dict[int, tuple[int, int]] = {}  # id(node) -> (values, height), expanded
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if self._depth >= MAX_DEPTH:
+            raise _Refused(event.start_mark, f"nested deeper than {MAX_DEPTH} levels")
+        self._depth += 1
+        try:
+            node = super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+        if isinstance(event, yaml.AliasEvent):
+            if id(node) not in self._extent:
+                raise _Refused(event.start_mark, f"alias *{event.anchor} is inside the value it names")
+            return node
+        if isinstance(node, yaml.ScalarNode):
+            children = []
+        elif isinstance(node, yaml.SequenceNode):
+            children = node.value
+        else:
+            children = [n for pair in node.value for n in pair]
+        values, height = 1, 1
+        for child in children:
+            v, h = self._extent[id(child)]
+            values, height = values + v, max(height, h + 1)
+        if height > MAX_DEPTH:
+            raise _Refused(event.start_mark, f"nested deeper than {MAX_DEPTH} levels with aliases expanded")
+        if values > MAX_VALUES:
+            raise _Refused(
+                event.start_mark,
+                f"more than {MAX_VALUES} values once aliases are expanded; nsdrake refuses files this large",
+            )
+        self._extent[id(node)] = (values, height)
+        return node
 
 
-def _no_duplicates(loader, node, deep=False):
+def _strict_mapping(loader, node):
     seen = set()
     for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=deep)
+        mark = key_node.start_mark
+        if key_node.tag == _MERGE_TAG:
+            raise _Refused(mark, "merge keys (<<) are not supported; write the fields out")
+        if not isinstance(key_node, yaml.ScalarNode):
+            kind = "a list" if isinstance(key_node, yaml.SequenceNode) else "a mapping"
+            raise _Refused(mark, f"a key must be a name, got {kind}")
+        key = loader.construct_object(key_node)
+        if not isinstance(key, str):
+            raise _Refused(mark, f"a key must be a name, got {_show(key)}; quote it if it is one")
         if key in seen:
-            line = key_node.start_mark.line + 1
-            raise yaml.constructor.ConstructorError(None, None, f"line {line}: duplicate key '{key}'")
+            raise _Refused(mark, f"duplicate key '{_name(key)}'")
         seen.add(key)
-    return loader.construct_mapping(node, deep=deep)
+    return loader.construct_mapping(node)
 
 
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _no_duplicates)
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _strict_mapping)
+# YAML 1.2 floats that YAML 1.1 reads as strings: an exponent without a dot or without a sign.
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
+
+
+def normalised_yaml(data) -> str:
+    """``data`` (as read by read_yaml) as plain YAML for Drake's ``yaml_load_typed``:
+    aliases expanded, floats in a form every YAML reader takes."""
+
+    class _Plain(yaml.SafeDumper):
+        def ignore_aliases(self, data):
+            return True
+
+    return yaml.dump(data, Dumper=_Plain, sort_keys=False, allow_unicode=True, width=float("inf"))
 
 
 def _kind(t) -> str:
@@ -263,11 +379,11 @@ def check_shape(data, schema, where: str) -> str | None:
     """The first place where ``data`` (parsed YAML) does not fit ``schema``, as "path: problem"."""
     if dataclasses.is_dataclass(schema):
         if not isinstance(data, dict):
-            return f"{where or 'the file'}: must be {_kind(schema)}, got {data!r}"
+            return f"{where or 'the file'}: must be {_kind(schema)}, got {_show(data)}"
         hints = typing.get_type_hints(schema)
         fields = {f.name: f for f in dataclasses.fields(schema) if f.metadata.get("yaml", True)}
         for key, value in data.items():
-            path = f"{where}.{key}" if where else str(key)
+            path = f"{where}.{_name(key)}" if where else _name(key)
             if key not in fields:
                 return f"{path}: unknown field; valid fields here are {', '.join(fields)}"
             problem = check_shape(value, hints[key], path)
@@ -277,15 +393,15 @@ def check_shape(data, schema, where: str) -> str | None:
     origin, args = typing.get_origin(schema), typing.get_args(schema)
     if origin is dict:
         if not isinstance(data, dict):
-            return f"{where}: must be {_kind(schema)}, got {data!r}"
+            return f"{where}: must be {_kind(schema)}, got {_show(data)}"
         for key, value in data.items():
-            problem = check_shape(value, args[1], f"{where}.{key}")
+            problem = check_shape(value, args[1], f"{where}.{_name(key)}")
             if problem:
                 return problem
         return None
     if origin is list:
         if not isinstance(data, list):
-            return f"{where}: must be {_kind(schema)}, got {data!r}"
+            return f"{where}: must be {_kind(schema)}, got {_show(data)}"
         for i, value in enumerate(data):
             problem = check_shape(value, args[0], f"{where}[{i}]")
             if problem:
@@ -298,26 +414,36 @@ def check_shape(data, schema, where: str) -> str | None:
         str: lambda x: isinstance(x, str),
     }[schema]
     if not ok(data):
-        return f"{where}: must be {_kind(schema)}, got {data!r}"
+        return f"{where}: must be {_kind(schema)}, got {_show(data)}"
     return None
 
 
 def read_yaml(path: Path, kind: str = "scenario") -> tuple[str, object]:
-    """(text, parsed data) of a YAML file, with duplicate keys refused; every problem
-    (missing, unreadable, malformed, empty) is a one-line ScenarioError naming the file."""
+    """(the data as plain YAML text, the parsed data) of a YAML file read by _StrictLoader.
+
+    Every problem (missing, unreadable, too large, malformed, refused, empty) is a
+    one-line ScenarioError naming the file (and the line, where there is one). Pass the
+    returned text, not the file's, to ``yaml_load_typed``: it has the aliases expanded
+    and the floats the strict reader took (``1e3``) written so that Drake takes them too.
+    """
     if not path.is_file():
         raise ScenarioError(f"{path}: no such {kind} file")
     try:
+        size = path.stat().st_size
+        if size > MAX_BYTES:
+            raise ScenarioError(f"{path}: {size} bytes; nsdrake refuses {kind} files over {MAX_BYTES} bytes")
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as e:
-        raise ScenarioError(f"{path}: cannot read: {_one_line(e)}") from None
+        raise ScenarioError(f"{path}: cannot read: {_cut(e)}") from None
     try:
         data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+    except _Refused as e:
+        raise ScenarioError(f"{path}: {e}") from None
     except yaml.YAMLError as e:
-        raise ScenarioError(f"{path}: malformed YAML: {_one_line(e)}") from None
+        raise ScenarioError(f"{path}: malformed YAML: {_cut(e)}") from None
     if data is None:
         raise ScenarioError(f"{path}: the file is empty")
-    return text, data
+    return normalised_yaml(data), data
 
 
 def _read(path: Path, defaults: Scenario | None) -> Scenario:
@@ -328,7 +454,7 @@ def _read(path: Path, defaults: Scenario | None) -> Scenario:
     try:
         return yaml_load_typed(schema=Scenario, data=text, defaults=defaults or Scenario())
     except Exception as e:  # anything the shape check missed
-        raise ScenarioError(f"{path}: {_one_line(e)}") from None
+        raise ScenarioError(f"{path}: {_cut(e)}") from None
 
 
 def load_scenario(name: str, config: str | Path | None = None, duration: float | None = None) -> Scenario:
@@ -338,7 +464,7 @@ def load_scenario(name: str, config: str | Path | None = None, duration: float |
     """
     known = shipped_scenarios()
     if name not in known:
-        raise ScenarioError(f"unknown scenario '{name}'; the shipped scenarios are {', '.join(known)}")
+        raise ScenarioError(f"unknown scenario '{_name(name)}'; the shipped scenarios are {', '.join(known)}")
     path = SCENARIO_DIR / f"{name}.yaml"
     scenario = _read(path, None)
     scenario.source, scenario.base_dir = str(path), str(path.parent)
@@ -368,24 +494,24 @@ def _fail(source: str, where: str, problem: str):
 
 def check_finite(source: str, where: str, value) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        _fail(source, where, f"must be a finite number, got {value!r}")
+        _fail(source, where, f"must be a finite number, got {_show(value)}")
 
 
 def check_positive(source: str, where: str, value) -> None:
     check_finite(source, where, value)
     if value <= 0:
-        _fail(source, where, f"must be > 0, got {value!r}")
+        _fail(source, where, f"must be > 0, got {_show(value)}")
 
 
 def check_non_negative(source: str, where: str, value) -> None:
     check_finite(source, where, value)
     if value < 0:
-        _fail(source, where, f"must be >= 0, got {value!r}")
+        _fail(source, where, f"must be >= 0, got {_show(value)}")
 
 
 def check_choice(source: str, where: str, value, choices) -> None:
     if value not in choices:
-        _fail(source, where, f"must be one of {', '.join(choices)}, got {value!r}")
+        _fail(source, where, f"must be one of {', '.join(choices)}, got {_show(value)}")
 
 
 def validate(s: Scenario) -> None:
@@ -397,13 +523,13 @@ def validate(s: Scenario) -> None:
         _fail(src, "control_period", f"{s.control_period} s is longer than the duration {s.duration} s")
     check_choice(src, "plane", s.plane, PLANES)
     for name, value in s.arm.initial_positions.items():
-        check_finite(src, f"arm.initial_positions.{name}", value)
+        check_finite(src, f"arm.initial_positions.{_name(name)}", value)
     for name, value in s.arm.initial_velocities.items():
-        check_finite(src, f"arm.initial_velocities.{name}", value)
+        check_finite(src, f"arm.initial_velocities.{_name(name)}", value)
     if not s.arm.initial_positions:
         _fail(src, "arm.initial_positions", "must give a position for every joint")
     if len(s.plate.position) != 3:
-        _fail(src, "plate.position", f"must be [x, y, z], got {s.plate.position!r}")
+        _fail(src, "plate.position", f"must be [x, y, z], got {_show(s.plate.position)}")
     for i, value in enumerate(s.plate.position):
         check_finite(src, f"plate.position[{i}]", value)
     for name in ("yaw", "roll", "pitch"):
@@ -416,24 +542,28 @@ def validate(s: Scenario) -> None:
         check_choice(src, f"report.checks[{i}]", check, REPORT_CHECKS)
     for i, m in enumerate(s.report.required_modes):
         if m not in (0, 1, 2, 3, 4):
-            _fail(src, f"report.required_modes[{i}]", f"must be a mode 0-4, got {m!r}")
+            _fail(src, f"report.required_modes[{i}]", f"must be a mode 0-4, got {_show(m)}")
     check_choice(src, "contact.approximation", s.contact.approximation, CONTACT_APPROXIMATIONS)
     check_choice(src, "contact.model", s.contact.model, CONTACT_MODELS)
     axes = s.task.axes
     for i, a in enumerate(axes):
         check_choice(src, f"task.axes[{i}]", a, AXIS_NAMES + ROTATION_AXIS_NAMES)
     if not axes or len(set(axes)) != len(axes):
-        _fail(src, "task.axes", f"must be distinct axes, got {axes!r}")
+        _fail(src, "task.axes", f"must be distinct axes, got {_show(axes)}")
     try:
         rows, _ = parse_task_axes(axes)
     except ValueError as e:
         _fail(src, "task.axes", _one_line(e))
     if s.report.swivel_frames and len(s.report.swivel_frames) != 3:
-        _fail(src, "report.swivel_frames", f"must name three frames or none, got {s.report.swivel_frames!r}")
+        _fail(
+            src,
+            "report.swivel_frames",
+            f"must name three frames or none, got {_show(s.report.swivel_frames)}",
+        )
     for name in ("camera_position", "camera_target"):
         value = getattr(s.report, name)
         if value and (len(value) != 3 or not all(math.isfinite(v) for v in value)):
-            _fail(src, f"report.{name}", f"must be [x, y, z] or empty, got {value!r}")
+            _fail(src, f"report.{name}", f"must be [x, y, z] or empty, got {_show(value)}")
     r = s.reference
     check_choice(src, "reference.path", r.path, REFERENCE_PATHS)
     check_choice(src, "reference.orientation", r.orientation, ORIENTATIONS)
@@ -490,7 +620,7 @@ def validate(s: Scenario) -> None:
     d = s.desired_null_space
     check_choice(src, "desired_null_space.source", d.source, NULL_SPACE_SOURCES)
     for name, value in d.sweep.direction.items():
-        check_finite(src, f"desired_null_space.sweep.direction.{name}", value)
+        check_finite(src, f"desired_null_space.sweep.direction.{_name(name)}", value)
     check_non_negative(src, "desired_null_space.sweep.amplitude", d.sweep.amplitude)
     check_non_negative(src, "desired_null_space.sweep.frequency", d.sweep.frequency)
     check_non_negative(src, "desired_null_space.sweep.start_time", d.sweep.start_time)
@@ -529,7 +659,7 @@ def validate(s: Scenario) -> None:
             f"{sel.d_lim + sel.d_band} m, or obstacle avoidance would have no gradient when it takes level 2",
         )
     for name, value in d.joint_speed_limits.items():
-        check_positive(src, f"desired_null_space.joint_speed_limits.{name}", value)
+        check_positive(src, f"desired_null_space.joint_speed_limits.{_name(name)}", value)
     check_non_negative(src, "desired_null_space.speed_headroom", d.speed_headroom)
     if d.speed_headroom >= 1.0:
         _fail(src, "desired_null_space.speed_headroom", f"must be below 1, got {d.speed_headroom}")
@@ -544,25 +674,26 @@ def validate(s: Scenario) -> None:
         if not ob.name:
             _fail(src, f"{where}.name", "every obstacle needs a name")
         if ob.name in names:
-            _fail(src, f"{where}.name", f"duplicate obstacle name '{ob.name}'")
+            _fail(src, f"{where}.name", f"duplicate obstacle name '{_name(ob.name)}'")
         names.add(ob.name)
         if not ob.shape:
             _fail(
                 src,
                 where,
-                f"obstacle '{ob.name}' has no geometry: give shape ({', '.join(OBSTACLE_SHAPES)}) and size",
+                f"obstacle '{_name(ob.name)}' has no geometry: "
+                f"give shape ({', '.join(OBSTACLE_SHAPES)}) and size",
             )
         check_choice(src, f"{where}.shape", ob.shape, tuple(OBSTACLE_SHAPES))
         if len(ob.size) != OBSTACLE_SHAPES[ob.shape]:
             _fail(
                 src,
                 f"{where}.size",
-                f"a {ob.shape} needs {OBSTACLE_SHAPES[ob.shape]} size entries, got {ob.size!r}",
+                f"a {ob.shape} needs {OBSTACLE_SHAPES[ob.shape]} size entries, got {_show(ob.size)}",
             )
         for k, value in enumerate(ob.size):
             check_positive(src, f"{where}.size[{k}]", value)
         if len(ob.position) != 3:
-            _fail(src, f"{where}.position", f"must be [x, y, z], got {ob.position!r}")
+            _fail(src, f"{where}.position", f"must be [x, y, z], got {_show(ob.position)}")
         for k, value in enumerate(ob.position):
             check_finite(src, f"{where}.position[{k}]", value)
         check_finite(src, f"{where}.yaw", ob.yaw)
@@ -583,7 +714,7 @@ def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:
     for where, table in tables.items():
         for name in table:
             if name not in joint_names:
-                _fail(src, f"{where}.{name}", f"unknown joint; the arm's joints are {valid}")
+                _fail(src, f"{where}.{_name(name)}", f"unknown joint; the arm's joints are {valid}")
     missing = [j for j in joint_names if j not in s.arm.initial_positions]
     if missing:
         _fail(src, "arm.initial_positions", f"no position for joint(s) {', '.join(missing)}")

@@ -6,10 +6,13 @@ import json
 import re
 import subprocess
 import sys
+import threading
+from pathlib import Path
 
 import pytest
 
 from nsdrake.cli import _Progress, main
+from nsdrake.output import OutputFolderError, default_output_folder, prepare_output_folder
 from nsdrake.traces import Traces
 
 REQUIRED_COLUMNS = (
@@ -76,17 +79,137 @@ def test_written_scenario_reloads_to_the_same_run(tmp_path):
     assert again.duration == 0.2
 
 
-def test_non_empty_output_folder_is_refused_without_overwrite(tmp_path, capsys):
+def test_non_empty_output_folder_is_refused_even_with_overwrite(tmp_path, capsys):
+    """Catches --overwrite writing into (and so mixing with) a folder of the user's."""
     out = tmp_path / "mine"
     out.mkdir()
     (out / "notes.txt").write_text("keep me")
     assert main(["run", "fig3", "--duration", "0.1", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not empty" in err
+    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--overwrite refused: the folder has no .nsdrake-run" in err
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
     assert (out / "notes.txt").read_text() == "keep me"
-    assert not (out / "traces.csv").exists()
-    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--overwrite"]) in (0, 1)
-    assert (out / "traces.csv").exists() and (out / "notes.txt").read_text() == "keep me"
+
+
+def test_overwrite_replaces_exactly_an_earlier_runs_files(tmp_path):
+    """Catches --overwrite leaving an earlier run's files beside the new ones (replay.html
+    of a run with replay, after a run without), and a manifest that misses files."""
+    out = tmp_path / "run"
+    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out)]) in (0, 1)
+    assert (out / "replay.html").is_file()
+    listed = (out / ".nsdrake-run").read_text().splitlines()
+    assert sorted(p.name for p in out.iterdir() if p.name != ".nsdrake-run") == sorted(
+        line for line in listed if not line.startswith("#")
+    )
+    assert main(["run", "fig3", "--duration", "0.2", "--out", str(out), "--overwrite", "--no-replay"]) in (
+        0,
+        1,
+    )
+    assert not (out / "replay.html").exists()
+    assert len(Traces.read_csv(out / "traces.csv")) == 101
+    assert "replay.html" not in (out / ".nsdrake-run").read_text()
+
+
+@pytest.mark.parametrize("where", ["notes.txt", "sub/notes.txt"])
+def test_overwrite_refuses_a_file_nsdrake_did_not_write(tmp_path, capsys, where):
+    """Catches --overwrite deleting (or writing beside) a file the user put into an
+    nsdrake run's folder."""
+    out = tmp_path / "run"
+    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--no-replay"]) in (0, 1)
+    before = (out / "traces.csv").read_bytes()
+    (out / where).parent.mkdir(exist_ok=True)
+    (out / where).write_text("keep me")
+    assert main(["run", "fig3", "--duration", "0.2", "--out", str(out), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    first = "sub/" if "/" in where else where  # the new folder is the first thing nsdrake did not write
+    assert err.count("\n") == 1 and f"--overwrite refused: nsdrake did not write {first}" in err
+    assert (out / where).read_text() == "keep me"
+    assert (out / "traces.csv").read_bytes() == before  # nothing removed
+
+
+def test_concurrent_claims_never_share_a_folder(tmp_path):
+    """Catches a check-then-create race: runs that choose their default folder at the same
+    moment all picked runs/fig3 (it did not exist yet when each looked)."""
+    barrier = threading.Barrier(8)
+    claimed, errors = [], []
+
+    def claim():
+        barrier.wait()
+        try:
+            claimed.append(default_output_folder("fig3", tmp_path / "runs"))
+        except Exception as e:  # noqa: BLE001 (reported below)
+            errors.append(e)
+
+    threads = [threading.Thread(target=claim) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    assert len(set(claimed)) == 8
+    assert all((folder / ".nsdrake-run").is_file() for folder in claimed)
+
+    same = tmp_path / "same"
+    results = []
+
+    def prepare():
+        barrier.wait()
+        try:
+            results.append(prepare_output_folder(same, overwrite=False))
+        except OutputFolderError as e:
+            results.append(e)
+
+    threads = [threading.Thread(target=prepare) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sum(isinstance(r, Path) for r in results) == 1, results
+
+
+def test_two_runs_started_together_write_two_complete_folders(tmp_path):
+    """Catches two concurrent `nsdrake run fig3` (default folder) writing into one folder."""
+    command = [sys.executable, "-m", "nsdrake.cli", "run", "fig3", "--duration", "0.1", "--no-replay"]
+    runs = [
+        subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE) for _ in "ab"
+    ]
+    for p in runs:
+        p.communicate(timeout=300)
+        assert p.returncode in (0, 1)
+    folders = sorted((tmp_path / "runs").iterdir())
+    assert [f.name for f in folders] == ["fig3", "fig3-2"]
+    for folder in folders:
+        assert len(Traces.read_csv(folder / "traces.csv")) == 51
+        assert (folder / "report.html").is_file() and (folder / "metrics.json").is_file()
+        assert "traces.csv" in (folder / ".nsdrake-run").read_text().splitlines()
+
+
+@pytest.mark.parametrize(
+    ("setup", "args", "message"),
+    [
+        ("file", ["--out", "file.txt/run"], "file.txt/run: file.txt is a file, not a folder"),
+        ("file", ["--out", "file.txt/a/b"], "file.txt/a/b: file.txt is a file, not a folder"),
+        ("file", ["--out", "file.txt"], "file.txt: exists and is not a folder"),
+        ("runs", [], "runs: exists and is not a folder"),
+        ("runs", ["--out", "runs/x"], "runs/x: runs is a file, not a folder"),
+    ],
+)
+def test_output_paths_that_cannot_be_folders_fail_with_one_line(
+    tmp_path, monkeypatch, capsys, setup, args, message
+):
+    """Catches a traceback (FileExistsError, NotADirectoryError) or a simulation started
+    when the output folder cannot be made. (Permission denied cannot be made here: the
+    tests run as root; it takes the same path, "cannot create the folder: Permission denied".)"""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / ("file.txt" if setup == "file" else "runs")).write_text("mine")
+    assert main(["run", "fig3", "--duration", "0.1", *args]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == f"nsdrake: error: {message}\n"
+    assert "running" not in captured.out
+    assert sorted(p.name for p in tmp_path.iterdir()) == [("file.txt" if setup == "file" else "runs")]
 
 
 def test_default_output_folder_never_overwrites(tmp_path, monkeypatch):

@@ -6,13 +6,16 @@ claim of the paper with the figure the table reports.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
+import signal
+import sys
 
 import pytest
 
 from nsdrake.cli import main
-from nsdrake.compare import load_family, run_family, shipped_families, variant_scenario
+from nsdrake.compare import load_family, run_family, shipped_families, slug, variant_scenario
 from nsdrake.scenario import ScenarioError
 
 
@@ -96,6 +99,10 @@ def test_compare_command_line(tmp_path, capsys):
     assert main(["compare", "lyapunov", "--duration", "0.3", "--out", str(out), "--jobs", "1"]) == 0
     assert "| full law |" in capsys.readouterr().out
     assert len(list((out / "variants").iterdir())) == 3
+    listed = (out / ".nsdrake-run").read_text().splitlines()
+    assert {"table.md", "table.csv", "compare.png", "variants/", "variants/00-full-law/traces.csv"} <= set(
+        listed
+    )
 
 
 @pytest.mark.parametrize(
@@ -145,3 +152,68 @@ def test_malformed_family_files_are_refused(tmp_path, monkeypatch):
         with pytest.raises(ScenarioError) as info:
             load_family(name)
         assert message in str(info.value) and "\n" not in str(info.value)
+
+
+@contextlib.contextmanager
+def deadline(seconds: int):
+    """Fails the test with TimeoutError instead of hanging past ``seconds``."""
+
+    def expire(signum, frame):
+        raise TimeoutError(f"still running after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@pytest.mark.parametrize(
+    ("fault", "jobs", "reason"),
+    [
+        ("exit", "2", "crashed: the process exited with status 70 without a result"),
+        ("raise", "1", "failed: RuntimeError: NSDRAKE_TEST_FAULT asked variant 1 to fail"),
+    ],
+    ids=["hard crash, 2 jobs", "exception, 1 job"],
+)
+def test_a_crashing_variant_is_a_failed_row_and_the_others_finish(
+    tmp_path, monkeypatch, capsys, fault, jobs, reason
+):
+    """Catches compare waiting forever for a worker that died (multiprocessing.Pool loses
+    the task of a worker killed by os._exit or a segfault), an exception ending the whole
+    command with a traceback and no table, a progress bar left unfinished, and exit
+    status 0 with a variant missing."""
+    monkeypatch.setenv("NSDRAKE_TEST_FAULT", f"1:{fault}")  # read by the worker processes too
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)  # draw the progress bar
+    out = tmp_path / "lyap"
+    with deadline(180):
+        code = main(["compare", "lyapunov", "--duration", "0.2", "--out", str(out), "--jobs", jobs])
+    assert code == 1
+    with (out / "table.csv").open() as f:
+        rows = {row["variant"]: row for row in csv.DictReader(f)}
+    assert list(rows) == ["full law", "no Coriolis compensation", "no compensation at all"]
+    assert rows["no Coriolis compensation"]["error"] == reason
+    assert rows["no Coriolis compensation"]["nu_final"] == ""
+    for name in ("full law", "no compensation at all"):
+        assert rows[name]["error"] == "" and float(rows[name]["nu_final"]) > 0
+        assert (
+            out / "variants" / f"{'00' if name == 'full law' else '02'}-{slug(name)}" / "traces.csv"
+        ).is_file()
+    assert f"| no Coriolis compensation | {reason} |" in (out / "table.md").read_text()
+    assert (out / "compare.png").is_file()
+    err = capsys.readouterr().err
+    assert "100%" in err and err.rstrip(" ").endswith("\n")
+    assert f"nsdrake: variant 'no Coriolis compensation' {reason}" in err
+    assert "1 of 3 variants failed" in err
+
+
+def test_subset_of_a_family_runs_its_own_variants_in_worker_processes(tmp_path):
+    """Catches a worker that reloads the family by name and runs variant i of the full
+    family, not of the family it was handed (subset(…, 0, 2) ran variants 0 and 1)."""
+    full = run_family(load_family("lyapunov"), tmp_path / "full", duration=0.1, jobs=1).rows
+    rows = run_family(subset("lyapunov", 0, 2), tmp_path / "subset", duration=0.1, jobs=2).rows
+    assert [row["variant"] for row in rows] == ["full law", "no compensation at all"]
+    assert full[1]["nu_final"] != full[2]["nu_final"]  # the test can tell the two apart
+    assert rows[1]["nu_final"] == full[2]["nu_final"]

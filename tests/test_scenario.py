@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 from conftest import fig3_with
 
@@ -127,3 +129,122 @@ def test_overrides_keep_the_other_fields(tmp_path):
     assert s.impedance.K_p_tangent == base.impedance.K_p_tangent
     assert s.arm.initial_positions == base.arm.initial_positions  # maps merge, not replace
     assert s.arm.initial_velocities == {"joint2": 0.1}
+
+
+# --- the strict YAML reader (issue 9): limits, keys, YAML 1.2 floats, short echoes -----
+
+
+def _laughs(levels: int) -> str:
+    """A "billion laughs" value for task.axes: each level lists the previous one 10 times
+    (levels=7: 10⁷ strings from a few hundred bytes), all inside one field."""
+    anchors = "&l0 [x, x, x, x, x, x, x, x, x, x]"
+    for k in range(1, levels):
+        anchors = f"&l{k} [{anchors}, " + ", ".join([f"*l{k - 1}"] * 9) + "]"
+    return f"task:\n  axes: [{anchors}]\n"
+
+
+def test_alias_expansion_is_bounded_and_fails_fast(tmp_path):
+    """Catches a reader that expands aliases without a bound: the shape check and the
+    error's echo of the value walk all 10⁷ strings (seconds and hundreds of MB here, minutes
+    and GBs at 10⁹) before any error."""
+    start = time.perf_counter()
+    with pytest.raises(ScenarioError) as info:
+        fig3_with(tmp_path, _laughs(7))
+    elapsed = time.perf_counter() - start
+    message = str(info.value)
+    assert "overrides.yaml: line 2: more than 10000 values once aliases are expanded" in message
+    assert "\n" not in message and len(message) < 200
+    assert elapsed < 0.5, f"{elapsed:.2f} s"
+
+
+def test_small_aliases_are_read(tmp_path):
+    """Catches a bound so tight (or a refusal of aliases) that reusing a value is refused."""
+    s = fig3_with(
+        tmp_path,
+        "plate: {position: &p [0.0, 0.6, 0.0]}\n"
+        "obstacles: [{name: post, shape: sphere, size: [0.05], position: *p}]",
+    )
+    assert s.obstacles[0].position == [0.0, 0.6, 0.0]
+
+
+def test_recursive_alias_is_refused(tmp_path):
+    """Catches a recursive value (an alias inside the list it names) reaching the shape
+    check, where it recursed until RecursionError."""
+    with pytest.raises(
+        ScenarioError, match=r"overrides.yaml: line 1: alias \*a is inside the value it names"
+    ):
+        fig3_with(tmp_path, "task: {axes: &a [*a]}")
+
+
+def test_deep_nesting_is_refused_on_one_line(tmp_path):
+    """Catches unbounded nesting: 1000 nested lists raised RecursionError in PyYAML's composer."""
+    with pytest.raises(ScenarioError) as info:
+        fig3_with(tmp_path, "duration: " + "[" * 1000 + "]" * 1000)
+    assert str(info.value).endswith("overrides.yaml: line 1: nested deeper than 32 levels")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("arm: {initial_positions: {[joint1]: 0.1}}", "line 1: a key must be a name, got a list"),
+        ("impedance:\n  ? {K_f: 1}\n  : 2", "line 2: a key must be a name, got a mapping"),
+        ("impedance: {1: 2}", "line 1: a key must be a name, got 1; quote it if it is one"),
+        ("arm: {initial_velocities: {on: 0.1}}", "line 1: a key must be a name, got True"),
+    ],
+)
+def test_keys_that_are_not_names_are_refused(tmp_path, text, message):
+    """Catches a list or mapping key escaping as TypeError (unhashable) and a number or
+    true/false key passing for a name ("impedance.1: unknown field", or a joint called True)."""
+    with pytest.raises(ScenarioError) as info:
+        fig3_with(tmp_path, text)
+    assert f"overrides.yaml: {message}" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_yaml_1_2_floats_are_numbers(tmp_path):
+    """Catches PyYAML's YAML 1.1 reading: 1e3 and -2E-3 were strings ("must be a number")."""
+    s = fig3_with(tmp_path, "duration: 1e3\ncontrol_period: 1.0e-3\nreference: {tangent_speed: -2E-3}")
+    assert s.duration == 1000.0 and isinstance(s.duration, float)
+    assert s.control_period == 0.001
+    assert s.reference.tangent_speed == -0.002
+
+
+def test_merge_keys_are_refused_by_name(tmp_path):
+    """Catches a merge key reported as "malformed YAML" (it is valid YAML 1.1 that nsdrake
+    does not take), or silently taken."""
+    with pytest.raises(ScenarioError) as info:
+        fig3_with(
+            tmp_path,
+            "obstacles:\n  - &o {name: a, shape: sphere, size: [0.1]}\n  - {<<: *o, name: b}",
+        )
+    message = str(info.value)
+    assert "overrides.yaml: line 3: merge keys (<<) are not supported" in message
+    assert "malformed" not in message
+
+
+@pytest.mark.parametrize(
+    ("text", "start"),
+    [
+        ("duration: '" + "9" * 5000 + "'", "duration: must be a number, got '999"),
+        ("x" * 1000 + ": 1", "xxx"),  # YAML keys end at 1024 characters
+        ("plane: " + "y" * 5000, "plane: must be one of horizontal, vertical, got 'yyy"),
+        ("duration: [" + ", ".join(["1"] * 3000) + "]", "duration: must be a number, got [1, 1"),
+    ],
+    ids=["long string", "long key", "long choice", "long list"],
+)
+def test_long_values_are_cut_in_messages(tmp_path, text, start):
+    """Catches an error message that echoes a user's value in full (here 1000 to 5000 characters)."""
+    with pytest.raises(ScenarioError) as info:
+        fig3_with(tmp_path, text)
+    message = str(info.value)
+    assert start in message and "…" in message
+    assert len(message) < 400, len(message)
+
+
+def test_oversized_file_is_refused(tmp_path):
+    """Catches a reader that reads a file of any size (a scenario is a few kB)."""
+    text = "description: '" + "z" * 1_200_000 + "'\n"
+    with pytest.raises(ScenarioError) as info:
+        fig3_with(tmp_path, text)
+    assert str(info.value).endswith(
+        f"overrides.yaml: {len(text)} bytes; nsdrake refuses scenario files over 1000000 bytes"
+    )
