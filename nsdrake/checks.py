@@ -184,7 +184,7 @@ def contact_stiffness(station) -> float:
 
 def _check_rank(scenario: Scenario, station, src: str) -> None:
     arm = station.arm_model
-    T = arm.terms(station.plant.CreateDefaultContext(), station.q0, np.zeros(arm.n), False)
+    T = arm.terms(arm.plant.CreateDefaultContext(), station.q0, np.zeros(arm.n), False)
     singular_values = np.linalg.svd(T.J, compute_uv=False)
     rank = int(np.sum(singular_values > 1e-6 * max(singular_values[0], 1e-12)))
     if rank < arm.m:

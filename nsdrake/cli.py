@@ -155,7 +155,8 @@ def _compare(args) -> int:
         progress=_Progress(args.family),
     )
     print((out / "table.md").read_text())
-    print(f"nsdrake: wrote {out}/: table.md, table.csv, compare.png, variants/*/traces.csv")
+    plots = ", ".join(p.name for p in sorted(out.glob("*.png")))
+    print(f"nsdrake: wrote {out}/: table.md, table.csv, {plots}, variants/*/traces.csv")
     return 0
 
 
