@@ -110,9 +110,14 @@ class BeltConfig:
     enabled: bool = False
     # Gear ratio N between motor and joint (paper, Section 4: "low gear ratios (6)") [-].
     gear_ratio: float = 6.0
-    # Rotor inertia of each motor I_m, on the motor shaft: choice, a 1 kg cm² AC servo
-    # (the 400–750 W class); the joint sees N² I_m = 3.6e-3 kg m² [kg m²].
-    rotor_inertia: float = 1.0e-4
+    # Rotor inertia of each motor I_m, on the motor shaft; the joint sees N² I_m. Choice
+    # forced by stability, not a datasheet: 3e-3 kg m² (0.108 kg m² reflected) is the
+    # lightest of 1e-4, 2e-4, 4e-4, 1e-3, 1.5e-3, 3e-3 with which fig3's controller stays
+    # stable with every other rung on (1.5e-3 without the delay). A real 400–750 W AC
+    # servo's rotor, ~1e-4 (1 kg cm²), makes it diverge within 20 ms: the belt leaves the
+    # rotor alone at high frequency, and the velocity gains, computed with the link
+    # inertia H, then give T K H / (N² I_m) > 2 on it [kg m²].
+    rotor_inertia: float = 3.0e-3
     # Torsional stiffness of each belt, at the joint: choice, a timing belt of some
     # 0.5 m span (specific stiffness ~3e5 N) on a 3 cm pulley, 2 c/L r² ≈ 1e3 [N m/rad].
     stiffness: float = 1000.0

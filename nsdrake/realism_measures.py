@@ -1,7 +1,8 @@
 """Figures for the realism ladder and the gradient-projection family, from traces alone.
 
 - :func:`force_oscillation`: how the normal force oscillates around the desired one
-  once in contact (dominant frequency, RMS and peak-to-peak of the detrended error),
+  once in contact (dominant frequency, RMS and peak-to-peak of the error's part
+  faster than 5 Hz, by a Butterworth high-pass),
   the figures of the paper's "rather noisy and oscillates around the desired force".
 - :func:`wrong_way_share`: in how many control periods a criterion moved against
   the sign of its gain while it was the active level-2 criterion (Section 3.4's claim
@@ -22,28 +23,32 @@ from .criteria.manipulability import manipulability
 from .dynamics import ArmModel
 from .traces import Traces
 
-MIN_OSCILLATION_FREQUENCY = 2.0  # [Hz] slower changes count as drift, not oscillation
+OSCILLATION_CUTOFF = 5.0  # [Hz] slower changes of the force error count as drift, not oscillation
 # Modes of Fig. 1 (nsdrake.priority.Mode) and the trace column of their criterion.
 MODE_CRITERION = {1: "p_obstacle", 2: "p_tau", 3: "w"}
 MODE_NAME = {1: "obstacle", 2: "joint_torque", 3: "manipulability"}
 
 
-def force_oscillation(t: np.ndarray, error: np.ndarray, min_frequency: float = MIN_OSCILLATION_FREQUENCY):
-    """(frequency [Hz], RMS, peak-to-peak) of a force error e(t) sampled at regular
-    times ``t`` once its mean and linear trend are removed. The frequency is the
-    largest peak of the Hann-windowed amplitude spectrum at or above
-    ``min_frequency`` (nan with fewer than 8 samples)."""
+def force_oscillation(t: np.ndarray, error: np.ndarray, cutoff: float = OSCILLATION_CUTOFF):
+    """(frequency [Hz], RMS, peak-to-peak) of the oscillating part of a force error e(t)
+    sampled at regular times ``t``: e through a zero-phase 4th-order Butterworth
+    high-pass at ``cutoff`` (drift slower than that removed). The frequency is the
+    largest peak of that part's Hann-windowed amplitude spectrum at or above
+    ``cutoff`` (nan for fewer than 32 samples)."""
+    from scipy.signal import butter, sosfiltfilt
+
     t = np.asarray(t, dtype=float)
     e = np.asarray(error, dtype=float)
-    if len(e) < 8:
+    if len(e) < 32:
         return math.nan, math.nan, math.nan
-    detrended = e - np.polyval(np.polyfit(t - t[0], e, 1), t - t[0])
     dt = float(np.median(np.diff(t)))
-    spectrum = np.abs(np.fft.rfft(detrended * np.hanning(len(e))))
-    frequencies = np.fft.rfftfreq(len(e), dt)
-    band = frequencies >= min_frequency
-    frequency = float(frequencies[band][np.argmax(spectrum[band])]) if band.any() else math.nan
-    return frequency, float(np.sqrt(np.mean(detrended**2))), float(np.ptp(detrended))
+    sos = butter(4, cutoff, btype="highpass", fs=1.0 / dt, output="sos")
+    fast = sosfiltfilt(sos, e - e.mean())
+    spectrum = np.abs(np.fft.rfft(fast * np.hanning(len(fast))))
+    frequencies = np.fft.rfftfreq(len(fast), dt)
+    band = frequencies >= cutoff
+    frequency = float(frequencies[band][np.argmax(spectrum[band])])
+    return frequency, float(np.sqrt(np.mean(fast**2))), float(np.ptp(fast))
 
 
 def wrong_way_share(
