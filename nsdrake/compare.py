@@ -304,7 +304,9 @@ def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
     logged value moved against the sign of its gain (task motion included), the share
     in which the commanded step alone, Φᵀ q̇_dⁿ, points the wrong way (the paper's
     claim; joint torque and manipulability, Φ recomputed from q), and its value at
-    the start and the end of the run."""
+    the start and the end of the run; and the smallest link–obstacle distance and the
+    most contacts of links with obstacles (a criterion can improve by driving a link
+    into the plate when nothing guards it)."""
     s = ctx.scenario
     d = s.desired_null_space
     gains = {1: d.criteria.obstacle.gain, 2: d.criteria.joint_torque.gain, 3: d.criteria.manipulability.gain}
@@ -326,6 +328,9 @@ def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
             row[f"{name}_commanded_step_wrong_share"] = float(wrong[:-1].sum()) / periods
         row[f"{name}_start"] = float(values[0])
         row[f"{name}_end"] = float(values[-1])
+    # Whether the criterion's optimum was reached by pushing a link into an obstacle.
+    row["d_min_min"] = float(traces["d_min"].min())
+    row["forbidden_contacts_max"] = int(traces["forbidden_contacts"].max())
     return row
 
 
