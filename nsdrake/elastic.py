@@ -202,6 +202,6 @@ class ElasticMap:
         return x
 
     def static_deflection(self, tau_g: np.ndarray) -> np.ndarray:
-        """δ at which each belt holds the generalized gravity force τ_g (the rigid arm's,
-        joint order): the spring's −k δ balances τ_g, δ = τ_g / k [rad]."""
+        """δ at which each belt holds the gravity force τ_g on its coordinate (arm joint
+        order): the spring's −k δ balances τ_g, δ = τ_g / k [rad]."""
         return np.asarray(tau_g, dtype=float) / self.stiffness

@@ -165,9 +165,11 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     elastic, plant_q0, plant_v0 = None, q0, v0
     if belt.enabled:
         elastic = ElasticMap.build(plant, arm, names, belt.stiffness)
-        context = arm_model.plant.CreateDefaultContext()
-        arm_model.plant.SetPositions(context, q0)  # belts preloaded by gravity: the arm starts at rest
-        tau_g = arm_model.plant.CalcGravityGeneralizedForces(context)
+        # Belts preloaded by gravity, so that the arm starts at rest: the gravity torque on
+        # each belt coordinate (links and rotors beyond it) does not depend on δ at fixed q.
+        context = plant.CreateDefaultContext()
+        plant.SetPositions(context, elastic.plant_positions(q0))
+        tau_g = plant.CalcGravityGeneralizedForces(context)[elastic.belt_v]
         plant_q0 = elastic.plant_positions(q0, elastic.static_deflection(tau_g))
         plant_v0 = elastic.plant_velocities(v0)
     plant.SetDefaultPositions(plant_q0)  # survives context resets (DRAKE_NOTES)

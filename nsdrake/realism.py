@@ -82,9 +82,11 @@ class FrictionConfig:
     """Gear friction in every joint, τ_f = −(τ_c tanh(v/v_s) + b v) (:mod:`nsdrake.friction`).
 
     Acting at the gear output: on the joint of the rigid arm, on the motor side of
-    the belt with ``belt`` on. The numbers are choices for a light arm with
-    low-ratio gears (the paper gives none): τ_c is a few percent of the ≈ 3 N m the
-    joints carry in fig3 while pressing 10 N.
+    the belt with ``belt`` on. The plant then steps at least ``min_substeps`` times
+    per control period (friction needs it; finer physics alone changes fig3's figures
+    by less than 0.005 N, see the README's table). The numbers are choices for a light arm with
+    low-ratio gears (the paper gives none): τ_c is 3–6% of the 1.6–2.9 N m joints 1–3
+    carry in fig3 while pressing 10 N (a quarter of joint 4's 0.4 N m).
     """
 
     enabled: bool = False
@@ -92,9 +94,17 @@ class FrictionConfig:
     coulomb: float = 0.1
     # Viscous friction coefficient b [N m s/rad].
     viscous: float = 0.02
-    # Speed v_s over which the Coulomb torque changes sign (tanh); it bounds the
-    # friction's slope τ_c/v_s, which the discrete plant applies explicitly [rad/s].
-    smoothing_speed: float = 0.05
+    # Speed v_s over which the Coulomb torque changes sign (tanh). It sets the friction's
+    # slope τ_c/v_s + b at rest, which the discrete plant applies explicitly, from the
+    # state at the start of its step: without chatter only while (τ_c/v_s + b) h max λ(H⁻¹)
+    # < 1. For fig3's arm max λ(H⁻¹) ≈ 1.1e3 /(kg m²) over all poses, so at h = 0.5 ms:
+    # v_s = 0.08 gives 0.70 (0.05 would give 1.12) [rad/s].
+    smoothing_speed: float = 0.08
+    # The plant steps at least this many times per control period while friction is on
+    # (a power of two): 2 ms is too coarse for any v_s that leaves friction Coulomb-like
+    # (at 2 ms the joints chatter as they break away from rest, measured). The margin is
+    # checked against the model before a run [-].
+    min_substeps: int = 4
 
 
 @dataclass
@@ -169,8 +179,10 @@ RUNGS = ("physics", "force_sensor", "friction", "belt", "delay", "model_error")
 
 
 def substeps(realism: RealismConfig) -> int:
-    """Plant steps per control period (1 without the physics rung)."""
-    return realism.physics.substeps if realism.physics.enabled else 1
+    """Plant steps per control period: the physics rung's, at least the friction rung's
+    minimum, else 1."""
+    k = realism.physics.substeps if realism.physics.enabled else 1
+    return max(k, realism.friction.min_substeps) if realism.friction.enabled else k
 
 
 def is_power_of_two(k: int) -> bool:
@@ -212,6 +224,8 @@ def realism_problems(realism: RealismConfig, control_period: float):
             yield f"friction.{name}", f"must be a finite number >= 0, got {value!r}"
     if not _finite(f.smoothing_speed) or f.smoothing_speed <= 0:
         yield "friction.smoothing_speed", f"must be > 0, got {f.smoothing_speed!r}"
+    if isinstance(f.min_substeps, bool) or not is_power_of_two(f.min_substeps):
+        yield "friction.min_substeps", f"must be a power of two >= 1 (1, 2, 4, 8, …), got {f.min_substeps!r}"
     b = realism.belt
     for name in ("gear_ratio", "rotor_inertia", "stiffness"):
         value = getattr(b, name)
