@@ -496,8 +496,11 @@ def plot_force_panels(path: Path, family: Family, traces: list[Traces]) -> None:
         k, 1, figsize=(9, 1.6 * k + 0.8), sharex=True, squeeze=False, constrained_layout=True
     )
     top = max(float(np.nanmax(tr["f_d"])) for tr in traces) * 1.6
+    t_end = max(float(tr["t"][-1]) for tr in traces)
     for ax, variant, tr in zip(axes[:, 0], family.variants, traces, strict=True):
         t = tr["t"]
+        if t[-1] < 0.99 * t_end:  # the run stopped early (diverged)
+            ax.text(0.5, 0.5, f"diverged at t = {t[-1]:.3g} s", transform=ax.transAxes, ha="center")
         if "f_n_true" in tr and np.any(tr["f_n_true"] != tr["f_n"]):
             ax.plot(t, tr["f_n_true"], color="0.6", lw=0.6, label="true contact force")
         ax.plot(t, tr["f_n"], lw=0.7, label="measured $f_n$")
