@@ -87,8 +87,10 @@ def run(
     plant_context = station.plant.GetMyMutableContextFromRoot(context)
     if scenario.realism.force_sensor.enabled:  # seeds the sensor's noise (same seed, same traces)
         built.diagram.SetRandomContext(context, RandomGenerator(scenario.realism.force_sensor.seed))
-    station.plant.SetPositions(plant_context, station.plant_q0)
-    station.plant.SetVelocities(plant_context, station.plant_v0)
+    q0 = station.q0 if station.plant_q0 is None else station.plant_q0  # (elastic plants differ)
+    v0 = station.v0 if station.plant_v0 is None else station.plant_v0
+    station.plant.SetPositions(plant_context, q0)
+    station.plant.SetVelocities(plant_context, v0)
     if built.visualizers is not None:
         built.visualizers.start_recording(live=live)
     if live:
