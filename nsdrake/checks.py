@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .friction import explicit_friction_margin, friction_slope, largest_inverse_inertia
 from .scenario import Scenario, ScenarioError
 
 CONTACT_OMEGA_T = 2.5  # [-] largest ω T of the force loop in contact (module docstring)
@@ -152,6 +153,7 @@ def check_with_model(scenario: Scenario, station) -> None:
                 f"({K:g}, {D:g}) sampled every {T:g} s is unstable (spectral radius {radius:.3g} ≥ 1); "
                 "lower the gains or the period",
             )
+    _check_friction_step(scenario, station, src)
     K_n = scenario.null_space.K_n
     if K_n * T >= 2.0:
         _fail(
@@ -189,7 +191,7 @@ def contact_stiffness(station) -> float:
 
 def _check_rank(scenario: Scenario, station, src: str) -> None:
     arm = station.arm_model
-    T = arm.terms(station.plant.CreateDefaultContext(), station.q0, np.zeros(arm.n), False)
+    T = arm.terms(arm.plant.CreateDefaultContext(), station.q0, np.zeros(arm.n), False)
     singular_values = np.linalg.svd(T.J, compute_uv=False)
     rank = int(np.sum(singular_values > 1e-6 * max(singular_values[0], 1e-12)))
     if rank < arm.m:
@@ -197,4 +199,25 @@ def _check_rank(scenario: Scenario, station, src: str) -> None:
             f"{src}: task.axes",
             f"{list(arm.task_axes)}: at the initial pose the arm's Jacobian has rank {rank} < {arm.m}, "
             "it cannot move its tool along every task axis",
+        )
+
+
+def _check_friction_step(scenario: Scenario, station, src: str) -> None:
+    """The friction rung's explicit friction must be resolved by the plant's step."""
+    f = scenario.realism.friction
+    if not f.enabled:
+        return
+    plant = station.plant
+    if station.elastic is not None:
+        dofs = station.elastic.motor_v
+    else:
+        dofs = [j.velocity_start() for j in station.arm_model.joints]
+    slope = friction_slope(f.coulomb, f.viscous, f.smoothing_speed)
+    margin = explicit_friction_margin(slope, plant.time_step(), largest_inverse_inertia(plant, dofs))
+    if margin >= 1.0:
+        _fail(
+            f"{src}: realism.friction",
+            f"slope τ_c/v_s + b = {slope:.3g} N m s/rad × plant step {plant.time_step():g} s × max λ(H⁻¹) "
+            f"= {margin:.3g} ≥ 1: the plant would chatter at zero speed; raise friction.min_substeps "
+            "or friction.smoothing_speed",
         )

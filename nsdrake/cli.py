@@ -155,7 +155,8 @@ def _compare(args) -> int:
         progress=_Progress(args.family),
     )
     print((out / "table.md").read_text())
-    files = ", ".join(name for name in ("table.md", "table.csv", "compare.png") if (out / name).exists())
+    listed = [name for name in ("table.md", "table.csv") if (out / name).exists()]
+    files = ", ".join(listed + [p.name for p in sorted(out.glob("*.png"))])
     print(f"nsdrake: wrote {out}/: {files}, variants/*/traces.csv")
     for name, reason in result.failures.items():
         print(f"nsdrake: variant '{name}' {reason}", file=sys.stderr)

@@ -34,8 +34,15 @@ from pathlib import Path
 import numpy as np
 
 from .dynamics import ArmModel
-from .metrics import first_contact_index, torque_steps
+from .metrics import SETTLE_TIME, first_contact_index, torque_steps
 from .output import record_written
+from .realism_measures import (
+    MODE_CRITERION,
+    MODE_NAME,
+    commanded_step_rates,
+    force_oscillation,
+    wrong_way_share,
+)
 from .scenario import (
     Scenario,
     ScenarioError,
@@ -269,11 +276,84 @@ def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
     return row
 
 
+def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
+    """The realism ladder (nsdrake/realism.py), in the fig3 window (from 0.5 s after first
+    contact to the end): the measured normal force's error (what the controller and the
+    paper's Fig. 3 see) and the true contact force's, how the force oscillates around
+    f_d (:func:`nsdrake.realism_measures.force_oscillation`), the tangential position
+    error, ‖eⁿ‖ and ν."""
+    s = ctx.scenario
+    t = traces["t"]
+    row: dict = {}
+    k0 = first_contact_index(traces, s.reference.contact_threshold)
+    if k0 is None:
+        return {**row, "first_contact_time": math.inf}
+    window = t >= t[k0] + SETTLE_TIME
+    row["first_contact_time"] = float(t[k0])
+    if window.sum() < 8:
+        return row
+    error = (traces["f_n"] - traces["f_d"])[window]
+    row["force_error_rms"] = _rms(error)
+    row["force_error_peak"] = float(np.abs(error).max())
+    row["force_error_mean"] = float(error.mean())
+    true = traces["f_n_true"] if "f_n_true" in traces else traces["f_n"]
+    true_error = (true - traces["f_d"])[window]
+    row["true_force_error_rms"] = _rms(true_error)
+    row["true_force_error_mean"] = float(true_error.mean())
+    frequency, rms, p2p = force_oscillation(t[window], error)
+    row["force_oscillation_frequency"] = frequency
+    row["force_oscillation_rms"] = rms
+    row["force_oscillation_p2p"] = p2p
+    pos_err = np.column_stack([traces[a] - traces[f"{a}_d"] for a in ctx.arm.task_axes])[window]
+    row["tangential_position_error_rms"] = _rms(pos_err @ ctx.tangent)
+    row["en_rms"] = _rms(_norms(traces, "en")[window])
+    row["nu_rms"] = _rms(traces["nu"][window])
+    return row
+
+
+def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
+    """Section 3.4 in closed loop. For each criterion while it is the active level-2
+    criterion (Fig. 1's mode) and q̇_dⁿ ≠ 0: the share of control periods in which its
+    logged value moved against the sign of its gain (task motion included), the share
+    in which the commanded step alone, Φᵀ q̇_dⁿ, points the wrong way (the paper's
+    claim; joint torque and manipulability, Φ recomputed from q), and its value at
+    the start and the end of the run; and the smallest link–obstacle distance and the
+    most contacts of links with obstacles (a criterion can improve by driving a link
+    into the plate when nothing guards it)."""
+    s = ctx.scenario
+    d = s.desired_null_space
+    gains = {1: d.criteria.obstacle.gain, 2: d.criteria.joint_torque.gain, 3: d.criteria.manipulability.gain}
+    mode = traces["mode"]
+    commanded = _norms(traces, "qns") > 0.0
+    row: dict = {"pseudo_inverse": s.null_space.pseudo_inverse, "rotate_gradient": d.rotate_gradient}
+    for m, column in MODE_CRITERION.items():
+        active = (mode == m) & commanded
+        if not active[:-1].any() or gains[m] == 0.0:
+            continue
+        name = MODE_NAME[m]
+        values = traces[column]
+        share, periods = wrong_way_share(values, gains[m], active)
+        row[f"{name}_active_periods"] = periods
+        row[f"{name}_wrong_way_share"] = share
+        if m in (2, 3):
+            rates = commanded_step_rates(traces, ctx.arm, m, s.reference.force * ctx.normal)
+            wrong = (np.sign(rates) == -np.sign(gains[m])) & active
+            row[f"{name}_commanded_step_wrong_share"] = float(wrong[:-1].sum()) / periods
+        row[f"{name}_start"] = float(values[0])
+        row[f"{name}_end"] = float(values[-1])
+    # Whether the criterion's optimum was reached by pushing a link into an obstacle.
+    row["d_min_min"] = float(traces["d_min"].min())
+    row["forbidden_contacts_max"] = int(traces["forbidden_contacts"].max())
+    return row
+
+
 MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
     "contact_force_into_null_space": measure_contact_force_into_null_space,
     "null_space_motion_into_task": measure_null_space_motion_into_task,
     "lyapunov": measure_lyapunov,
     "fig3": measure_fig3,
+    "realism": measure_realism,
+    "gradient_projection": measure_gradient_projection,
 }
 
 
@@ -306,15 +386,20 @@ def _injected_fault(index: int) -> None:
 
 def _run_variant(task: _Task) -> dict:
     """Simulates one variant, writes its traces and measures them (from the file)."""
-    from .simulate import run
+    from .simulate import DivergenceError, run
 
     _injected_fault(task.index)
     scenario = variant_scenario(task.family, task.index, task.config, task.duration)
-    traces, built = run(scenario)
+    diverged = None
+    try:
+        traces, built = run(scenario)
+    except DivergenceError as e:  # a row that says so, with what it measured up to then
+        traces, built, diverged = e.traces, e.built, f"{e.t:.4g} s: {e.reason}"
     task.folder.mkdir(parents=True, exist_ok=True)
     traces.write_csv(task.folder / "traces.csv")
     traces = Traces.read_csv(task.folder / "traces.csv")
-    return MEASURES[task.family.measure](traces, RunFacts(scenario=scenario, station=built.station))
+    row = MEASURES[task.family.measure](traces, RunFacts(scenario=scenario, station=built.station))
+    return {"diverged_at": diverged, **row} if diverged else row
 
 
 def _failure(e: BaseException) -> str:
@@ -441,6 +526,8 @@ def _run_family(family, out, folders, config, duration, jobs, isolate, progress)
             [v for v, _ in ran],
             [Traces.read_csv(f / "traces.csv") for _, f in ran],
         )
+        if family.measure == "realism" and len(ran) == len(folders):
+            plot_force_panels(out / "force.png", family, [Traces.read_csv(f / "traces.csv") for f in folders])
     return FamilyResult(family=family, rows=table, out=out)
 
 
@@ -515,5 +602,38 @@ def plot_family(path: Path, family: Family, variants: list[Variant], traces: lis
     axes[3].set_ylabel(r"$\nu$ [J]")
     axes[3].set_xlabel("time [s]")
     fig.suptitle(f"{family.name}: {family.description}", fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_force_panels(path: Path, family: Family, traces: list[Traces]) -> None:
+    """Fig. 3's force plot once per variant, stacked on a shared time axis and force
+    scale: the measured normal force and f_d (and the true contact force, where the
+    sensor model makes them differ)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    k = len(traces)
+    fig, axes = plt.subplots(
+        k, 1, figsize=(9, 1.6 * k + 0.8), sharex=True, squeeze=False, constrained_layout=True
+    )
+    top = max(float(np.nanmax(tr["f_d"])) for tr in traces) * 1.6
+    t_end = max(float(tr["t"][-1]) for tr in traces)
+    for ax, variant, tr in zip(axes[:, 0], family.variants, traces, strict=True):
+        t = tr["t"]
+        if t[-1] < 0.99 * t_end:  # the run stopped early (diverged)
+            ax.text(0.5, 0.5, f"diverged at t = {t[-1]:.3g} s", transform=ax.transAxes, ha="center")
+        if "f_n_true" in tr and np.any(tr["f_n_true"] != tr["f_n"]):
+            ax.plot(t, tr["f_n_true"], color="0.6", lw=0.6, label="true contact force")
+        ax.plot(t, tr["f_n"], lw=0.7, label="measured $f_n$")
+        ax.plot(t, tr["f_d"], "k--", lw=0.7, label="$f_d$")
+        ax.set_ylim(-0.1 * top, top)
+        ax.set_ylabel("[N]")
+        ax.set_title(variant.name, fontsize=8, loc="left")
+    axes[0, 0].legend(fontsize=7, loc="upper left", ncol=3)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"{family.name}: normal force in the style of Fig. 3", fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat
@@ -33,8 +34,10 @@ from .config import ControllerConfig
 from .controller import ControllerConfigError, NullSpaceImpedanceController, without_null_space_task
 from .controller_model import ControllerModel
 from .dynamics import ArmModel
+from .model_error import scale_urdf_masses
 from .orientation import rotation_to_quaternion
 from .plant import Station, add_station, desired_tool_orientation, station_obstacles
+from .realism_diagram import add_force_sensor_model, add_realism_loggers, connect_realistic_controller
 from .reference import CircleOnSurface, SlideAndPress
 from .scenario import Scenario, ScenarioError
 from .systems import CircleReference, ContactMonitor, ForceSensor, SlideAndPressReference, SurfaceReference
@@ -63,8 +66,9 @@ class ControlledStation:
 
 def initial_task_position(station: Station) -> np.ndarray:
     """x = p(q0), the tool's task position at the initial pose. (m,) [m]."""
-    context = station.plant.CreateDefaultContext()
-    station.plant.SetPositions(context, station.q0)
+    plant = station.arm_model.plant  # the station's plant, or the rigid arm's beside an elastic one
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, station.q0)
     return station.arm_model.task_position(context)
 
 
@@ -101,9 +105,13 @@ def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> Co
 
 def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
     """The controller's own model: the arm's URDF, the gravity of the scenario, and the
-    plate and obstacles where the station put them."""
+    plate and obstacles where the station put them. With ``realism.model_error``, the
+    URDF's link and tool masses (and inertias) scaled by (1 + mass_error)."""
+    urdf = station.arm_file
+    if scenario.realism.model_error.enabled:
+        urdf = scale_urdf_masses(Path(urdf).read_text(), 1.0 + scenario.realism.model_error.mass_error)
     return ControllerModel.from_urdf(
-        station.arm_file,
+        urdf,
         tool_frame=scenario.arm.tool_frame,
         task_axes=scenario.task.axes,
         gravity=station.gravity,
@@ -131,7 +139,8 @@ def arm_reach(station: Station, samples: int = 2000) -> tuple[np.ndarray, float]
     """(centre, radius) on the task axes of the disc the tool point can reach: centred on
     the first joint, radius the farthest tool distance over seeded random poses within
     the joint limits (and the zero pose). [m]."""
-    plant, arm = station.plant, station.arm_model
+    arm = station.arm_model
+    plant = arm.plant
     context = plant.CreateDefaultContext()
     lower = np.maximum(plant.GetPositionLowerLimits(), -np.pi)
     upper = np.minimum(plant.GetPositionUpperLimits(), np.pi)
@@ -232,6 +241,14 @@ def connect_controller(builder, station: Station, controller, sensor, reference)
     plant = station.plant
     builder.Connect(plant.get_state_output_port(), controller.GetInputPort("estimated_state"))
     builder.Connect(sensor.GetOutputPort("wrench"), controller.GetInputPort("measured_wrench"))
+    connect_reference(builder, controller, reference)
+    # τ = B u with B the plant's actuation matrix (a permutation here): u = Bᵀ τ.
+    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(plant.MakeActuationMatrix().T))
+    builder.Connect(controller.GetOutputPort("generalized_force"), actuation.get_input_port())
+    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
+
+
+def connect_reference(builder, controller, reference) -> None:
     for port, ref in (
         ("desired_position", "x_d"),
         ("desired_velocity", "xdot_d"),
@@ -239,18 +256,17 @@ def connect_controller(builder, station: Station, controller, sensor, reference)
         ("desired_force", "f_d"),
     ):
         builder.Connect(reference.GetOutputPort(ref), controller.GetInputPort(port))
-    # τ = B u with B the plant's actuation matrix (a permutation here): u = Bᵀ τ.
-    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(plant.MakeActuationMatrix().T))
-    builder.Connect(controller.GetOutputPort("generalized_force"), actuation.get_input_port())
-    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
 
 
-def add_loggers(builder, station, controller, sensor, reference, monitor, period) -> dict[str, VectorLogSink]:
+def add_loggers(
+    builder, station, controller, sensor, reference, monitor, period, state_port=None
+) -> dict[str, VectorLogSink]:
+    """``state_port``: the arm's [q; q̇] when the plant's state is not (the belt rung)."""
     signals = {
         "x_d": reference.GetOutputPort("x_d"),
         "f": sensor.GetOutputPort("force"),
         "f_d": reference.GetOutputPort("f_d"),
-        "state": station.plant.get_state_output_port(),
+        "state": state_port if state_port is not None else station.plant.get_state_output_port(),
         "forbidden_contacts": monitor.get_output_port(),
         "in_contact": reference.GetOutputPort("in_contact"),
     }
@@ -290,15 +306,30 @@ def build_diagram(
     builder = DiagramBuilder()
     station = add_station(builder, scenario)
     sensor, monitor = add_sensing(builder, station)
-    reference = add_reference(builder, scenario, station, sensor)
+    realism = scenario.realism
+    # What the controller and the reference read: the ideal sensor, or its realistic model.
+    measured = (
+        add_force_sensor_model(builder, scenario, station, sensor) if realism.force_sensor.enabled else sensor
+    )
+    reference = add_reference(builder, scenario, station, measured)
     controller = build_controller(scenario, station, sensor.p_WSo, null_space_task=null_space_task)
     builder.AddSystem(controller)
-    connect_controller(builder, station, controller, sensor, reference)
+    state_port = None
+    if realism.any:
+        state_port = connect_realistic_controller(
+            builder, scenario, station, controller, measured, reference, connect_reference
+        )
+    else:
+        connect_controller(builder, station, controller, sensor, reference)
     R_d = None
     if station.arm_model.m_r:
         R_d = desired_tool_orientation(station, scenario.reference.orientation)
         add_orientation_reference(builder, controller, R_d)
-    loggers = add_loggers(builder, station, controller, sensor, reference, monitor, scenario.control_period)
+    loggers = add_loggers(
+        builder, station, controller, measured, reference, monitor, scenario.control_period, state_port
+    )
+    if realism.any:
+        loggers.update(add_realism_loggers(builder, station, sensor, scenario.control_period))
     visualizers = None
     if meshcat is not None:
         visualizers = add_visualizers(

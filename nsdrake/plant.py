@@ -25,7 +25,9 @@ from .checks import check_model_file
 from .controller_model import Obstacle
 from .criteria.obstacle import proximity_geometries
 from .dynamics import ArmModel
+from .elastic import ElasticMap, add_elastic_arm, rigid_arm_plant
 from .models import resolve_model
+from .realism import substeps
 from .scenario import Scenario, ScenarioError, check_against_plant
 
 SENSOR_JOINT = "force_sensor"
@@ -57,10 +59,18 @@ class Station:
     obstacle_geometries: list = field(default_factory=list)
     # Pose of the plate frame in the world (its +y is the push direction).
     X_WP: RigidTransform | None = None
+    # With the belt rung (nsdrake/elastic.py): the plant has motor and belt coordinates,
+    # arm_model is the rigid arm on a plant of its own (link coordinates), and this maps
+    # between them. None: the plant's state is the arm's [q; q̇].
+    elastic: ElasticMap | None = None
+    # The plant's initial positions and velocities (q0, v0 unless elastic).
+    plant_q0: np.ndarray | None = None
+    plant_v0: np.ndarray | None = None
 
     @property
     def tool_body(self):
-        return self.arm_model.tool_frame.body()
+        """The tool's body in the simulated plant."""
+        return self.plant.GetFrameByName(self.arm_model.tool_frame.name(), self.arm).body()
 
 
 def gravity_vector(scenario: Scenario) -> np.ndarray:
@@ -99,7 +109,7 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     """Adds the plant and scene graph for ``scenario`` to ``builder``; finalizes the plant."""
     src = scenario.source or "scenario"
     config = MultibodyPlantConfig(
-        time_step=scenario.control_period,
+        time_step=scenario.control_period / substeps(scenario.realism),
         contact_model=scenario.contact.model,
         discrete_contact_approximation=scenario.contact.approximation,
     )
@@ -114,8 +124,13 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
             check_model_file(path)
         except ScenarioError as e:
             raise ScenarioError(f"{src}: {e}") from None
+    belt = scenario.realism.belt
     try:
-        (arm,) = parser.AddModels(str(arm_file))
+        (arm,) = (
+            add_elastic_arm(plant, parser, arm_file, belt)
+            if belt.enabled
+            else parser.AddModels(str(arm_file))
+        )
         (plate,) = parser.AddModels(str(plate_file))
     except Exception as e:
         raise ScenarioError(f"{src}: cannot parse a model: {' '.join(str(e).split())}") from None
@@ -134,8 +149,11 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     if not plant.HasFrameNamed(scenario.arm.tool_frame, arm):
         raise ScenarioError(f"{src}: arm.tool_frame: no frame '{scenario.arm.tool_frame}' in {arm_file.name}")
     tool = plant.GetFrameByName(scenario.arm.tool_frame, arm)
+    if belt.enabled:  # the link coordinates' kinematics and dynamics: the rigid arm alone
+        rigid = rigid_arm_plant(arm_file, gravity)
+        tool = rigid.GetFrameByName(scenario.arm.tool_frame)
     try:
-        arm_model = ArmModel(plant, tool, scenario.task.axes)
+        arm_model = ArmModel(tool.GetParentPlant(), tool, scenario.task.axes)
     except ValueError as e:
         raise ScenarioError(f"{src}: arm.urdf: {e}") from None
     check_against_plant(scenario, arm_model.joint_names)
@@ -150,7 +168,17 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     names = arm_model.joint_names
     q0 = np.array([scenario.arm.initial_positions[j] for j in names])
     v0 = np.array([scenario.arm.initial_velocities.get(j, 0.0) for j in names])
-    plant.SetDefaultPositions(q0)  # survives context resets (DRAKE_NOTES)
+    elastic, plant_q0, plant_v0 = None, q0, v0
+    if belt.enabled:
+        elastic = ElasticMap.build(plant, arm, names, belt.stiffness)
+        # Belts preloaded by gravity, so that the arm starts at rest: the gravity torque on
+        # each belt coordinate (links and rotors beyond it) does not depend on δ at fixed q.
+        context = plant.CreateDefaultContext()
+        plant.SetPositions(context, elastic.plant_positions(q0))
+        tau_g = plant.CalcGravityGeneralizedForces(context)[elastic.belt_v]
+        plant_q0 = elastic.plant_positions(q0, elastic.static_deflection(tau_g))
+        plant_v0 = elastic.plant_velocities(v0)
+    plant.SetDefaultPositions(plant_q0)  # survives context resets (DRAKE_NOTES)
 
     try:
         normal, tangent = surface_directions(X_WP.rotation().matrix(), arm_model.rows)
@@ -159,7 +187,7 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
     if scenario.reference.path == "circle" and np.linalg.norm(tangent) < 0.99:
         raise ScenarioError(f"{src}: plate: the plate's x axis leaves the task axes {scenario.task.axes}")
     inspector = scene_graph.model_inspector()
-    tool = arm_model.tool_frame.body().index()
+    tool = plant.GetFrameByName(scenario.arm.tool_frame, arm).body().index()
     arm_bodies = [b for b in plant.GetBodyIndices(arm) if b != tool]
     obstacle_indices = [plate_body.index(), *(b.index() for b in obstacle_bodies)]
     return Station(
@@ -179,6 +207,9 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
         link_geometries=proximity_geometries(inspector, plant, arm_bodies),
         obstacle_geometries=proximity_geometries(inspector, plant, obstacle_indices),
         X_WP=X_WP,
+        elastic=elastic,
+        plant_q0=plant_q0,
+        plant_v0=plant_v0,
     )
 
 

@@ -29,6 +29,7 @@ from .config import (
 )
 from .dynamics import AXIS_NAMES, ROTATION_AXIS_NAMES, parse_task_axes
 from .pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from .realism import RealismConfig, realism_problems
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -213,6 +214,8 @@ class Scenario:
     obstacles: list[ObstacleConfig] = field(default_factory=list)
     report: ReportConfig = field(default_factory=ReportConfig)
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
+    # Effects of the real robot, each off by default (nsdrake/realism.py: the realism ladder).
+    realism: RealismConfig = field(default_factory=RealismConfig)
     # Where the scenario was read from (set by the loader; not a YAML field).
     source: str = field(default="", metadata={"yaml": False})
     # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
@@ -668,6 +671,8 @@ def validate(s: Scenario) -> None:
             check_positive(src, f"actuator_limits.{kind}.{name}", value)
     check_positive(src, "divergence.max_joint_speed", s.divergence.max_joint_speed)
     check_positive(src, "divergence.max_torque", s.divergence.max_torque)
+    for where, problem in realism_problems(s.realism, s.control_period):
+        _fail(src, f"realism.{where}", problem)
     names = set()
     for i, ob in enumerate(s.obstacles):
         where = f"obstacles[{i}]"

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from pydrake.common import RandomGenerator
 from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import Simulator, SimulatorStatus
 from pydrake.systems.framework import EventStatus
@@ -13,6 +14,7 @@ from .controller import torque_limits
 from .criteria.obstacle import ObstacleDistances
 from .diagram import ControlledStation, build_diagram, has_joint_limits
 from .orientation import orientation_error
+from .realism_diagram import add_realism_columns
 from .scenario import Scenario
 from .traces import Traces
 
@@ -30,10 +32,13 @@ class DivergenceError(RuntimeError):
 def divergence_monitor(built: ControlledStation, scenario: Scenario):
     """A Simulator monitor that ends the run, with its reason, at the first step whose
     state or commanded torque is non-finite or beyond ``scenario.divergence``."""
-    plant, controller = built.station.plant, built.controller
+    plant = built.station.plant
     limits = scenario.divergence
-    n = built.station.arm_model.n
-    tau_port = controller.GetOutputPort("generalized_force")
+    n = plant.num_positions()
+    # What the plant receives: between control instants of a plant stepping finer than
+    # the controller (realism.physics) it is the held torque, and reading it does not
+    # evaluate the controller at every plant step.
+    actuation = built.diagram.GetSubsystemByName("actuation_map")
 
     def monitor(root_context):
         state = plant.get_state_output_port().Eval(plant.GetMyContextFromRoot(root_context))
@@ -44,7 +49,7 @@ def divergence_monitor(built: ControlledStation, scenario: Scenario):
             speed = np.max(np.abs(state[n:]))
             problem = f"a joint speed reached {speed:.3g} rad/s (bound {limits.max_joint_speed:g})"
         else:
-            tau = tau_port.Eval(controller.GetMyContextFromRoot(root_context))
+            tau = actuation.get_output_port().Eval(actuation.GetMyContextFromRoot(root_context))
             if not np.all(np.isfinite(tau)):
                 problem = "the commanded torque is not finite"
             elif np.max(np.abs(tau)) > limits.max_torque:
@@ -83,8 +88,12 @@ def run(
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     plant_context = station.plant.GetMyMutableContextFromRoot(context)
-    station.plant.SetPositions(plant_context, station.q0)
-    station.plant.SetVelocities(plant_context, station.v0)
+    if scenario.realism.force_sensor.enabled:  # seeds the sensor's noise (same seed, same traces)
+        built.diagram.SetRandomContext(context, RandomGenerator(scenario.realism.force_sensor.seed))
+    q0 = station.q0 if station.plant_q0 is None else station.plant_q0  # (elastic plants differ)
+    v0 = station.v0 if station.plant_v0 is None else station.plant_v0
+    station.plant.SetPositions(plant_context, q0)
+    station.plant.SetVelocities(plant_context, v0)
     if built.visualizers is not None:
         built.visualizers.start_recording(live=live)
     if live:
@@ -162,12 +171,14 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
             columns[f"d_{name}"] = d
     if built.scenario.report.swivel_frames:
         columns["swivel"] = swivel_angles(built, state[:n], built.scenario.report.swivel_frames)
+    add_realism_columns(built, logs, columns)
     return Traces(columns)
 
 
 def task_positions(built: ControlledStation, q: np.ndarray) -> np.ndarray:
     """x = p(q) (Eq. 1), the translational task axes, for each column of ``q`` (n, k). (m_t, k) [m]."""
-    plant, arm = built.station.plant, built.station.arm_model
+    arm = built.station.arm_model
+    plant = arm.plant
     context = plant.CreateDefaultContext()
     out = np.empty((arm.m_t, q.shape[1]))
     for k in range(q.shape[1]):

@@ -1,0 +1,69 @@
+"""Section 3.4's claim in closed loop (``nsdrake compare gradient_projection``): with the
+dynamically consistent J̄, Eq. 28's unrotated gradient step can worsen the criterion,
+Eq. 30's H⁻¹-rotated one cannot, and neither can Eq. 28 with the Moore–Penrose inverse.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import paper_arm
+
+from nsdrake.compare import load_family, run_family, variant_scenario
+from nsdrake.criteria.joint_torque import joint_torque_criterion
+from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+
+Q0_FIG3 = np.array([0.401, 0.972, 1.012, 0.614])  # fig3's initial pose [rad]
+F_D = np.array([0.0, 10.0])  # fig3's desired force, along the plate's normal +y [N]
+
+
+def test_at_fig3s_start_the_unrotated_step_with_j_bar_makes_the_torque_worse():
+    """Φᵀ(I − J̄J)Φ = −330 < 0 at fig3's initial pose (the family's description quotes
+    it), while Φᵀ(I − J̄J)H⁻¹Φ > 0 and Φᵀ(I − J⁺J)Φ > 0: with K < 0, only Eq. 28's
+    unrotated step with J̄ raises the joint-torque criterion. Catches a family whose
+    base pose cannot show the claim, or a description that misstates it."""
+    arm = paper_arm()
+    terms = arm.terms(arm.plant.CreateDefaultContext(), Q0_FIG3, np.zeros(4), coriolis=False)
+    _, Phi = joint_torque_criterion(terms.J, terms.dJ_dq, F_D)
+    N_dc = GeneralizedInverse().at(terms).N
+    N_mp = GeneralizedInverse(PseudoInverseKind.moore_penrose).at(terms).N
+    assert Phi @ N_dc @ Phi == pytest.approx(-330, abs=1)
+    assert Phi @ N_dc @ terms.H_inv @ Phi > 0
+    assert Phi @ N_mp @ Phi > 0
+
+
+def test_the_family_gives_every_variant_the_same_first_step():
+    """The gains are set so that the unscaled q̇_dⁿ has the same size at the initial pose
+    in every variant (1.96 rad/s): the rows compare directions, not gains. Catches a
+    gain edited in one row only."""
+    arm = paper_arm()
+    terms = arm.terms(arm.plant.CreateDefaultContext(), Q0_FIG3, np.zeros(4), coriolis=False)
+    _, Phi = joint_torque_criterion(terms.J, terms.dJ_dq, F_D)
+    family = load_family("gradient_projection")
+    sizes = []
+    for i in range(len(family.variants)):
+        s = variant_scenario(family, i, None, None)
+        d = s.desired_null_space
+        assert d.criteria.obstacle.gain == 0.0 and d.criteria.manipulability.gain == 0.0
+        kind = PseudoInverseKind(s.null_space.pseudo_inverse)
+        N = GeneralizedInverse(kind).at(terms).N
+        W_inv = terms.H_inv if d.rotate_gradient else np.eye(4)
+        sizes.append(abs(d.criteria.joint_torque.gain) * np.linalg.norm(N @ W_inv @ Phi))
+    np.testing.assert_allclose(sizes, 1.96, rtol=0.02)
+
+
+@pytest.mark.slow
+def test_eq30_never_moves_the_criterion_the_wrong_way_and_eq28_with_j_bar_does(tmp_path):
+    """2 s of the family: the commanded step Φᵀ q̇_dⁿ never points the wrong way with
+    Eq. 30 or with Moore–Penrose, and does in a large share of periods with Eq. 28's
+    unrotated step and J̄, which ends with a higher criterion than Eq. 30. Catches a
+    rotation applied in every variant (or in none)."""
+    result = run_family(load_family("gradient_projection"), tmp_path, duration=2.0, jobs=2)
+    eq30, eq28_dc, mp = result.rows
+    assert eq30["rotate_gradient"] and not eq28_dc["rotate_gradient"]
+    assert eq30["joint_torque_active_periods"] > 900
+    assert eq30["joint_torque_commanded_step_wrong_share"] == 0.0
+    assert eq30["joint_torque_wrong_way_share"] == 0.0
+    assert mp["joint_torque_commanded_step_wrong_share"] == 0.0
+    assert eq28_dc["joint_torque_commanded_step_wrong_share"] > 0.3
+    assert eq28_dc["joint_torque_end"] > 1.5 * eq30["joint_torque_end"]
