@@ -50,6 +50,7 @@ import yaml
 from .metrics import D_MIN_AFTER
 from .runner import OutputFolderError, scenario_yaml
 from .scenario import (
+    REPORT_CHECKS,
     Scenario,
     ScenarioError,
     _kind,
@@ -65,7 +66,8 @@ SWEEP_DIR = Path(__file__).resolve().parent / "sweeps"
 SPEC_FIELDS = ("description", "base", "config", "duration", "seed", "axes", "metrics")
 
 # The figures `nsdrake run` computes (nsdrake.runner.compute_metrics), with the check of
-# report.checks each needs; a sweep computes the checks its metrics need.
+# report.checks each belongs to. A sweep's run computes every check (so that a spec whose
+# metrics change re-tabulates without simulating again).
 FIG3_METRICS = (
     "first_contact_time",
     "window_start",
@@ -147,7 +149,7 @@ class Run:
             "source": self.scenario.source,
             "base_dir": self.scenario.base_dir,
             "seed": self.seed,
-            "checks": sorted({METRICS[m] for m in spec.metrics if METRICS[m]}),
+            "hash": self.hash,
             "baseline": BASELINE_METRIC in spec.metrics,
         }
 
@@ -399,7 +401,7 @@ def simulate_run(task: dict) -> dict:
     try:
         scenario = yaml_load_typed(schema=Scenario, data=task["scenario_yaml"], defaults=Scenario())
         scenario.source, scenario.base_dir = task["source"], task["base_dir"]
-        checks = list(dict.fromkeys([*scenario.report.checks, *task["checks"]]))
+        checks = list(REPORT_CHECKS)
         measured = dataclasses.replace(scenario, report=dataclasses.replace(scenario.report, checks=checks))
         try:
             traces, built = run(scenario)
@@ -495,19 +497,22 @@ def run_folder(out: Path, index: int) -> Path:
     return Path(out) / "runs" / f"{index:04d}"
 
 
-def finished(out: Path, run: Run) -> dict | None:
+def finished(out: Path, run: Run, spec: SweepSpec) -> dict | None:
     """The stored result of ``run`` if it finished with these parameters (a worker that
-    died is tried again), else None."""
+    died is tried again, and so is a run without the comparison run a metric now needs),
+    else None."""
     try:
         record = json.loads((run_folder(out, run.index) / "result.json").read_text())
     except (OSError, ValueError):
         return None
     if record.get("hash") != run.hash or record.get("crashed"):
         return None
+    if BASELINE_METRIC in spec.metrics and not record.get("baseline"):
+        return None
     return record
 
 
-def store(out: Path, run: Run, result: dict) -> dict:
+def store(out: Path, run: Run, result: dict, baseline: bool) -> dict:
     """Writes the run's traces, then its result.json (so a result always has its traces);
     returns the record as it reads back from the file."""
     folder = run_folder(out, run.index)
@@ -522,6 +527,7 @@ def store(out: Path, run: Run, result: dict) -> dict:
         "status": result["status"],
         "reason": result["reason"],
         "crashed": bool(result.get("crashed", False)),
+        "baseline": baseline,  # the comparison run (q̇_dⁿ = 0) was simulated
         "metrics": result["metrics"],
         "wall_time_s": result.get("wall_time_s"),
     }
@@ -684,7 +690,7 @@ def run_sweep(
 
     out = Path(out)
     prepare_sweep_folder(out, spec, runs, overwrite=overwrite)
-    records = {r.index: rec for r in runs if (rec := finished(out, r)) is not None}
+    records = {r.index: rec for r in runs if (rec := finished(out, r, spec)) is not None}
     write_results(out, spec, records)
     todo = [r for r in runs if r.index not in records]
     by_index = {r.index: r for r in runs}
@@ -693,7 +699,7 @@ def run_sweep(
         progress(len(records), sum(1 for r in records.values() if r["status"] != "ok"))
     for result in results([r.task(spec) for r in todo], engine=engine, jobs=jobs, scheduler=scheduler):
         run = by_index[result["index"]]
-        records[run.index] = store(out, run, result)
+        records[run.index] = store(out, run, result, BASELINE_METRIC in spec.metrics)
         simulated.append(run.index)
         write_results(out, spec, records)
         if progress:
@@ -730,7 +736,7 @@ def sweep_command(args) -> int:
             progress=SweepProgress(len(runs)),
         )
     except KeyboardInterrupt:
-        kept = sum(1 for r in runs if finished(out, r) is not None)
+        kept = sum(1 for r in runs if finished(out, r, spec) is not None)
         print(f"\nnsdrake: interrupted; {kept} of {len(runs)} runs are kept in {out}/; resume with: {resume}",
               file=sys.stderr)  # fmt: skip
         return 130

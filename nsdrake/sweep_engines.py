@@ -160,7 +160,9 @@ def _dask(tasks: list[dict], jobs: int, scheduler: str | None) -> Iterator[dict]
         client = Client(cluster if cluster is not None else scheduler)
     try:
         futures = {
-            client.submit(_dask_task, task, key=f"nsdrake-sweep-run-{task['index']:04d}", pure=False): task
+            # The key names the run's scenario and seed: two sweeps sharing a scheduler
+            # share only runs that are the same simulation.
+            client.submit(_dask_task, task, key=f"nsdrake-sweep-{task['hash']}", pure=False): task
             for task in tasks
         }
         for future in as_completed(futures):
