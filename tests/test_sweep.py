@@ -252,6 +252,30 @@ def test_resume_simulates_only_the_missing_run_and_rebuilds_the_same_table(refer
     assert run_files(out) == run_files(serial)
 
 
+def test_a_sweep_killed_mid_run_resumes_and_loses_nothing(reference, tmp_path):
+    """Catches a kill (SIGKILL: no clean-up runs) leaving a half-written result.json or
+    traces.csv that a resumed sweep trusts, or a finished run lost: resumed, the table
+    has the bytes of an uninterrupted sweep."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    spec, serial = reference
+    out = tmp_path / "killed"
+    command = [sys.executable, "-m", "nsdrake.cli", "sweep", str(spec), "--out", str(out), "--jobs", "1"]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not (out / "runs/0000/result.json").exists() and process.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
+    assert (out / "results.csv").read_bytes() == (serial / "results.csv").read_bytes()
+    assert run_files(out) == run_files(serial)
+
+
 def test_a_changed_spec_is_refused_in_the_old_folder_unless_overwrite(reference, tmp_path, capsys):
     """Catches a changed spec silently mixing its runs with the old ones in one table, or
     replacing them without --overwrite; and --overwrite re-simulating runs that did not
