@@ -3,6 +3,7 @@
     nsdrake run SCENARIO [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--overwrite]
                           [--meshcat] [--no-replay]
     nsdrake compare FAMILY [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--jobs N] [--overwrite]
+    nsdrake sweep SPEC [--out DIR] [--jobs N] [--engine process|dask] [--scheduler ADDRESS] [--overwrite]
     nsdrake list
 
 Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
@@ -22,6 +23,8 @@ from .compare import load_family, run_family, shipped_families, variant_scenario
 from .output import OutputFolderError, default_output_folder, prepare_output_folder
 from .runner import check_scenario, run_to_folder
 from .scenario import ScenarioError, load_scenario, shipped_scenarios
+from .sweep import shipped_sweeps, sweep_command
+from .sweep_engines import ENGINES
 from .visualization import start_meshcat
 
 
@@ -74,7 +77,16 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="replace the files an earlier nsdrake run wrote in --out (never others)",
     )
-    sub.add_parser("list", help="list the shipped scenarios and families")
+    sweep = sub.add_parser("sweep", help="run a scenario over a grid or random samples of its fields")
+    sweep.add_argument("spec", help=f"a shipped sweep ({', '.join(shipped_sweeps())}) or a spec file")
+    sweep.add_argument(
+        "--out", type=Path, help="output folder (default: runs/sweep-NAME); reuse it to resume"
+    )
+    sweep.add_argument("--jobs", type=_jobs, default=min(2, os.cpu_count() or 1), help="parallel runs")
+    sweep.add_argument("--engine", choices=ENGINES, default="process", help="local processes, or Dask")
+    sweep.add_argument("--scheduler", help="address of a Dask scheduler (default: a local cluster)")
+    sweep.add_argument("--overwrite", action="store_true", help="replace the runs of another sweep in --out")
+    sub.add_parser("list", help="list the shipped scenarios, families and sweeps")
     return parser
 
 
@@ -196,9 +208,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "list":
             print("scenarios (nsdrake run):  " + ", ".join(shipped_scenarios()))
             print("families (nsdrake compare): " + ", ".join(shipped_families()))
+            print("sweeps (nsdrake sweep):    " + ", ".join(shipped_sweeps()))
             return 0
         if args.command == "compare":
             return _compare(args)
+        if args.command == "sweep":
+            return sweep_command(args)
         return _run(args)
     except (ScenarioError, OutputFolderError) as e:
         print(f"nsdrake: error: {e}", file=sys.stderr)
