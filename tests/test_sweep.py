@@ -155,7 +155,7 @@ def test_the_shipped_sweep_loads_and_every_run_passes_the_checks(capsys):
     from nsdrake.sweep import plan_runs
 
     spec = load_sweep("robustness")
-    assert len(plan_runs(spec)) == 9
+    assert len(plan_runs(spec)) == 18
     assert main(["list"]) == 0
     assert "sweeps (nsdrake sweep):    robustness" in capsys.readouterr().out
 
