@@ -2,8 +2,8 @@
 
     python bench/bench_sweep.py [--repeats N] [--duration SECONDS] [--spec SPEC]
 
-Runs the shipped ``robustness`` sweep (9 runs of 2 s of fig3; ``--duration`` shortens
-them) into a fresh folder each time, interleaved so that every engine sees the same
+Runs the shipped ``robustness`` sweep (18 runs of 3.5 s of fig3; ``--duration``
+shortens them) into a fresh folder each time, interleaved so that every engine sees the same
 machine load: ``--jobs 1`` (in this process), ``--jobs 2`` (two spawned processes),
 and ``--engine dask --jobs 2`` (a LocalCluster of two single-threaded workers, started
 and stopped within the timing, as ``nsdrake sweep`` does). Every timing is a whole
