@@ -170,16 +170,7 @@ def fig3_metrics(
         metrics.append(
             Metric(f"d_min_after_{D_MIN_AFTER:g}s", d_late, "m", f"> d_lim = {d_lim:g} m", d_late > d_lim)
         )
-    forbidden = float(traces["forbidden_contacts"].max())
-    metrics.append(
-        Metric(
-            "forbidden_contacts_max",
-            forbidden,
-            "contacts",
-            "0 (only the tool touches the plate)",
-            forbidden == 0,
-        )
-    )
+    metrics.append(forbidden_contacts_metric(traces))
 
     p_end = float(traces["p_tau"][-1])
     if p_tau_without_null_space_task is None:
@@ -518,16 +509,7 @@ def self_motion_metrics(
     )
     metrics += [m for m in _force_metrics(traces, window) if m.name != "force_error_max"]
     metrics += _orientation_metrics(traces, window)
-    forbidden = float(traces["forbidden_contacts"].max())
-    metrics.append(
-        Metric(
-            "forbidden_contacts_max",
-            forbidden,
-            "contacts",
-            "0 (only the tool touches the plate)",
-            forbidden == 0,
-        )
-    )
+    metrics.append(forbidden_contacts_metric(traces))
     return metrics + (limit_metrics(traces) if "q_margin1" in traces else [])
 
 
@@ -540,3 +522,12 @@ def contact_events(traces: Traces) -> list[tuple[str, float]]:
     for k in np.flatnonzero(np.diff(c)):
         events.append(("contact" if c[k + 1] else "lost", float(t[k + 1])))
     return events
+
+
+def forbidden_contacts_metric(traces: Traces) -> Metric:
+    """The largest number of contacts between the plate or an obstacle and any body but
+    the tool; bound 0."""
+    forbidden = float(traces["forbidden_contacts"].max())
+    return Metric(
+        "forbidden_contacts_max", forbidden, "contacts", "0 (only the tool touches the plate)", forbidden == 0
+    )
