@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer
 
 from .config import ControllerConfig
 from .controller_model import ControllerModel
@@ -28,6 +28,7 @@ from .systems import (
     RobotTermsSystem,
     SelfMotionSweep,
 )
+from .systems.criteria import pack_criterion
 
 
 class ControllerConfigError(ValueError):
@@ -191,20 +192,7 @@ class NullSpaceImpedanceController(Diagram):
             builder, terms, config, task_normal, model, model_terms
         )
         null_space = _add_null_space(builder, terms, qdot_ns, config, model_terms)
-        torque = builder.AddNamedSystem(
-            "actuator_limits",
-            ActuatorLimitsSystem(
-                torque_limits=torque_limits(config, model),
-                rate_limits=np.array(
-                    [config.actuator_limits.torque_rate.get(j, np.inf) for j in model.joint_names]
-                ),
-                period=config.period,
-            ),
-        )
-        builder.Connect(impedance.get_output_port(), torque.GetInputPort("task_torque"))
-        builder.Connect(
-            null_space.GetOutputPort("generalized_force"), torque.GetInputPort("null_space_torque")
-        )
+        limits = _add_actuator_limits(builder, impedance, null_space["generalized_force"], config, model)
         builder.ExportInput(terms.GetInputPort("estimated_state"), "estimated_state")
         builder.ExportInput(impedance.GetInputPort("measured_wrench"), "measured_wrench")
         for name, port in (
@@ -221,12 +209,10 @@ class NullSpaceImpedanceController(Diagram):
                 ("desired_angular_acceleration", "omegadot_d"),
             ):
                 builder.ExportInput(impedance.GetInputPort(port), name)
-        builder.ExportOutput(torque.GetOutputPort("generalized_force"), "generalized_force")
-        builder.ExportOutput(torque.GetOutputPort("saturation"), "saturation")
-        builder.ExportOutput(
-            null_space.GetOutputPort("null_space_velocity_error"), "null_space_velocity_error"
-        )
-        builder.ExportOutput(null_space.GetOutputPort("lyapunov"), "lyapunov")
+        builder.ExportOutput(limits["generalized_force"], "generalized_force")
+        builder.ExportOutput(limits["saturation"], "saturation")
+        builder.ExportOutput(null_space["null_space_velocity_error"], "null_space_velocity_error")
+        builder.ExportOutput(null_space["lyapunov"], "lyapunov")
         builder.ExportOutput(qdot_ns, "desired_null_space_velocity")
         for name, port in diagnostics.items():
             builder.ExportOutput(port, name)
@@ -394,12 +380,27 @@ def _add_criteria(builder, terms_port, config, normal, model, model_terms) -> di
     return added
 
 
+def _split(builder, name: str, port, sizes: dict[str, int]) -> dict:
+    """A packed port's parts as named ports, through Drake's (C++) Demultiplexer."""
+    demux = builder.AddNamedSystem(name, Demultiplexer(list(sizes.values())))
+    builder.Connect(port, demux.get_input_port())
+    return {part: demux.get_output_port(k) for k, part in enumerate(sizes)}
+
+
 def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
     """Criteria → priority selector (or a prescribed sweep) → q̇_dⁿ; returns its port and
     the diagnostic ports to export."""
     d = config.desired_null_space
+    n = model.n
     terms_port = terms.GetOutputPort("robot_terms")
-    criteria = _add_criteria(builder, terms_port, config, normal, model, model_terms)
+    criteria = {
+        c: system.GetOutputPort("criterion")
+        for c, system in _add_criteria(builder, terms_port, config, normal, model, model_terms).items()
+    }
+    if Criterion.obstacle not in criteria:  # no geometry: no obstacle in reach, d_min = ∞
+        criteria[Criterion.obstacle] = builder.AddNamedSystem(
+            "no_obstacle", ConstantVectorSource(pack_criterion(np.zeros(n), 0.0, np.inf, 0.0))
+        ).get_output_port()
     gains = {
         Criterion.obstacle: d.criteria.obstacle.gain,
         Criterion.joint_torque: d.criteria.joint_torque.gain,
@@ -429,42 +430,29 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
         ),
     )
     builder.Connect(terms_port, selector.GetInputPort("robot_terms"))
-    for c in (Criterion.joint_torque, Criterion.manipulability, Criterion.joint_limits):
-        builder.Connect(criteria[c].GetOutputPort("gradient"), selector.GetInputPort(f"{c.value}_gradient"))
-    joint_limits = criteria[Criterion.joint_limits]
-    builder.Connect(joint_limits.GetOutputPort("margin"), selector.GetInputPort("joint_limit_margin"))
-    builder.Connect(
-        joint_limits.GetOutputPort("activation"), selector.GetInputPort("joint_limits_activation")
+    parts = {}
+    for c, port in criteria.items():
+        builder.Connect(port, selector.GetInputPort(c.value))
+        parts[c] = _split(
+            builder, f"{c.value}_parts", port, {"gradient": n, "value": 1, "switching": 1, "activation": 1}
+        )
+    selection = _split(
+        builder,
+        "selection_parts",
+        selector.GetOutputPort("selection"),
+        {"desired_null_space_velocity": n, "mode": 1, "speed_scale": 1},
     )
-    manipulability = criteria[Criterion.manipulability]
-    builder.Connect(manipulability.GetOutputPort("value"), selector.GetInputPort("manipulability"))
     diagnostics = {
-        "mode": selector.GetOutputPort("mode"),
-        "speed_scale": selector.GetOutputPort("speed_scale"),
-        "manipulability": manipulability.GetOutputPort("value"),
-        "joint_torque_criterion": criteria[Criterion.joint_torque].GetOutputPort("value"),
-        "joint_limits_criterion": joint_limits.GetOutputPort("value"),
-        "joint_limit_margin": joint_limits.GetOutputPort("margin"),
+        "mode": selection["mode"],
+        "speed_scale": selection["speed_scale"],
+        "manipulability": parts[Criterion.manipulability]["value"],
+        "joint_torque_criterion": parts[Criterion.joint_torque]["value"],
+        "joint_limits_criterion": parts[Criterion.joint_limits]["value"],
+        "joint_limit_margin": parts[Criterion.joint_limits]["switching"],
+        "d_min": parts[Criterion.obstacle]["switching"],
+        "obstacle_potential": parts[Criterion.obstacle]["value"],
     }
-    if Criterion.obstacle in criteria:
-        obstacle = criteria[Criterion.obstacle]
-        ports = {name: obstacle.GetOutputPort(name) for name in ("gradient", "d_min", "activation", "value")}
-    else:  # no geometry: no obstacle in reach, d_min = ∞
-        ports = {
-            name: builder.AddNamedSystem(f"no_obstacle_{name}", ConstantVectorSource(value)).get_output_port()
-            for name, value in (
-                ("gradient", np.zeros(model.n)),
-                ("d_min", [np.inf]),
-                ("activation", [0.0]),
-                ("value", [0.0]),
-            )
-        }
-    builder.Connect(ports["gradient"], selector.GetInputPort("obstacle_gradient"))
-    builder.Connect(ports["d_min"], selector.GetInputPort("d_min"))
-    builder.Connect(ports["activation"], selector.GetInputPort("obstacle_activation"))
-    diagnostics["d_min"] = ports["d_min"]
-    diagnostics["obstacle_potential"] = ports["value"]
-    command = selector.GetOutputPort("desired_null_space_velocity")
+    command = selection["desired_null_space_velocity"]
     if d.source == "sweep":
         sw = d.sweep
         sweep = builder.AddNamedSystem(
@@ -484,7 +472,9 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
     return command, diagnostics
 
 
-def _add_actuator_limits(builder, impedance, null_space, config, model):
+def _add_actuator_limits(builder, impedance, null_space_torque, config, model) -> dict:
+    """τ = τ_task + s τ₀ within the actuator limits; returns the generalized_force and
+    saturation ports."""
     rates = config.actuator_limits.torque_rate
     limits = builder.AddNamedSystem(
         "actuator_limits",
@@ -495,11 +485,17 @@ def _add_actuator_limits(builder, impedance, null_space, config, model):
         ),
     )
     builder.Connect(impedance.get_output_port(), limits.GetInputPort("task_torque"))
-    builder.Connect(null_space.GetOutputPort("generalized_force"), limits.GetInputPort("null_space_torque"))
-    return limits
+    builder.Connect(null_space_torque, limits.GetInputPort("null_space_torque"))
+    return _split(
+        builder,
+        "limited_parts",
+        limits.GetOutputPort("limited"),
+        {"generalized_force": model.n, "saturation": 2},
+    )
 
 
-def _add_null_space(builder, terms, qdot_ns, config, model_terms):
+def _add_null_space(builder, terms, qdot_ns, config, model_terms) -> dict:
+    """The null-space controller; returns its τ₀, eⁿ and ν ports."""
     ns = config.null_space
     null_space = builder.AddNamedSystem(
         "null_space_controller",
@@ -515,4 +511,10 @@ def _add_null_space(builder, terms, qdot_ns, config, model_terms):
     )
     builder.Connect(terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
     builder.Connect(qdot_ns, null_space.GetInputPort("desired_null_space_velocity"))
-    return null_space
+    n = model_terms.n
+    return _split(
+        builder,
+        "null_space_parts",
+        null_space.GetOutputPort("null_space"),
+        {"generalized_force": n, "null_space_velocity_error": n, "lyapunov": 1},
+    )

@@ -28,7 +28,12 @@ from pathlib import Path
 import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, MatrixGain, VectorLogSink
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    LogVectorOutput,
+    MatrixGain,
+    VectorLogSink,
+)
 
 from .config import ControllerConfig
 from .controller import ControllerConfigError, NullSpaceImpedanceController, without_null_space_task
@@ -40,7 +45,7 @@ from .plant import Station, add_station, desired_tool_orientation, station_obsta
 from .realism_diagram import add_force_sensor_model, add_realism_loggers, connect_realistic_controller
 from .reference import CircleOnSurface, SlideAndPress
 from .scenario import Scenario, ScenarioError
-from .systems import CircleReference, ContactMonitor, ForceSensor, SlideAndPressReference, SurfaceReference
+from .systems import ContactMonitor, ForceSensor, SurfaceReference
 from .visualization import Visualizers, add_visualizers, visualizer_period
 
 
@@ -163,46 +168,40 @@ def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station,
         "loss_time": r.loss_time,
     }
     if r.path == "circle":
-        system = CircleReference(
-            reference=CircleOnSurface(
-                x0=initial_task_position(station),
-                tangent=station.tangent,
-                normal=station.normal,
-                radius=r.radius,
-                laps=r.laps,
-                speed=r.tangent_speed,
-                start_angle=r.start_angle,
-                delay=r.delay,
-                approach_speed=r.approach_speed,
-                blend_time=r.blend_time,
-                force=r.force,
-                force_ramp_time=r.force_ramp_time,
-                max_overtravel=r.max_overtravel,
-            ),
-            **common,
+        path = CircleOnSurface(
+            x0=initial_task_position(station),
+            tangent=station.tangent,
+            normal=station.normal,
+            radius=r.radius,
+            laps=r.laps,
+            speed=r.tangent_speed,
+            start_angle=r.start_angle,
+            delay=r.delay,
+            approach_speed=r.approach_speed,
+            blend_time=r.blend_time,
+            force=r.force,
+            force_ramp_time=r.force_ramp_time,
+            max_overtravel=r.max_overtravel,
         )
     else:
         centre, reach = arm_reach(station)
-        system = SlideAndPressReference(
-            reference=SlideAndPress(
-                x0=initial_task_position(station),
-                tangent=station.tangent,
-                normal=station.normal,
-                tangent_speed=r.tangent_speed,
-                approach_speed=r.approach_speed,
-                blend_time=r.blend_time,
-                force=r.force,
-                force_ramp_time=r.force_ramp_time,
-                step_time=r.step_time if r.step_time > 0 else math.inf,
-                step_force=r.step_force,
-                max_overtravel=r.max_overtravel,
-                centre=centre,
-                reach=(1.0 - r.reach_margin) * reach,
-            ),
-            **common,
+        path = SlideAndPress(
+            x0=initial_task_position(station),
+            tangent=station.tangent,
+            normal=station.normal,
+            tangent_speed=r.tangent_speed,
+            approach_speed=r.approach_speed,
+            blend_time=r.blend_time,
+            force=r.force,
+            force_ramp_time=r.force_ramp_time,
+            step_time=r.step_time if r.step_time > 0 else math.inf,
+            step_force=r.step_force,
+            max_overtravel=r.max_overtravel,
+            centre=centre,
+            reach=(1.0 - r.reach_margin) * reach,
         )
-    reference = builder.AddNamedSystem("reference", system)
-    builder.Connect(sensor.GetOutputPort("force"), reference.GetInputPort("measured_force"))
+    reference = builder.AddNamedSystem("reference", SurfaceReference(reference=path, **common))
+    builder.Connect(sensor.GetOutputPort("wrench"), reference.GetInputPort("measured_wrench"))
     return reference
 
 
@@ -264,7 +263,7 @@ def add_loggers(
     """``state_port``: the arm's [q; q̇] when the plant's state is not (the belt rung)."""
     signals = {
         "x_d": reference.GetOutputPort("x_d"),
-        "f": sensor.GetOutputPort("force"),
+        "wrench": sensor.GetOutputPort("wrench"),
         "f_d": reference.GetOutputPort("f_d"),
         "state": state_port if state_port is not None else station.plant.get_state_output_port(),
         "forbidden_contacts": monitor.get_output_port(),

@@ -185,6 +185,34 @@ def stacked_prioritized_velocity(N, W, W_inv, gradients, gains, activations, rot
     return qdot
 
 
+@njit(cache=True)
+def _ordering_velocity(N, W, W_inv, gradients, gains, activations, rows, rotate, rank_damping):
+    """One ordering's q̇_dⁿ: the levels ``rows`` of the stacked criteria, in that order."""
+    if rows.shape[0] == 0:
+        return np.zeros(N.shape[0])
+    return stacked_prioritized_velocity(
+        N, W, W_inv, gradients[rows], gains[rows], activations[rows], rotate, rank_damping
+    )
+
+
+@njit(cache=True)
+def selected_velocity(
+    N, W, W_inv, gradients, gains, activations, rows, previous_rows, sigma, rotate, task_part, limits
+):
+    """(q̇_dⁿ, s): the ordering ``rows`` of the stacked criteria (gradients (k, n), gains and
+    activations (k,)), blended with the ordering ``previous_rows`` by σ (σ new + (1 − σ)
+    old, while σ < 1), then scaled by s = :func:`joint_speed_scale` for the task part
+    J^# J q̇ and the joint-speed ``limits``."""
+    qdot = _ordering_velocity(N, W, W_inv, gradients, gains, activations, rows, rotate, RANK_DAMPING)
+    if sigma < 1.0:
+        old = _ordering_velocity(
+            N, W, W_inv, gradients, gains, activations, previous_rows, rotate, RANK_DAMPING
+        )
+        qdot = sigma * qdot + (1.0 - sigma) * old
+    scale = joint_speed_scale(task_part, qdot, limits)
+    return qdot * scale, scale
+
+
 SPEED_SCALE_SMOOTHNESS = 8  # the p of the p-norm soft minimum in joint_speed_scale
 
 

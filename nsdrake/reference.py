@@ -97,10 +97,15 @@ class SlideAndPress:
     reach: float = math.inf  # [m] its radius
 
     def at(
-        self, t: float, t_contact: float = math.inf, state: ContactState | None = None
+        self,
+        t: float,
+        t_contact: float = math.inf,
+        state: ContactState | None = None,
+        t_first: float | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """(x_d, ẋ_d, ẍ_d, f_d) at time t, given the contact time (∞ before contact)
-        or the whole contact ``state``."""
+        or the whole contact ``state``. (``t_first``, the first contact's time, is
+        :class:`CircleOnSurface`'s; the slide is timed from t = 0.)"""
         state = state or ContactState(t_contact=t_contact)
         s, sd, sdd = ramp_profile(t, self.tangent_speed, self.blend_time)
         r, rd, rdd = self._normal(t, state)
@@ -112,10 +117,6 @@ class SlideAndPress:
         xdot_d = sd * self.tangent + rd * self.normal
         xddot_d = sdd * self.tangent + rdd * self.normal
         return x_d, xdot_d, xddot_d, f_d
-
-    def offset(self, t: float, state: ContactState) -> float:
-        """r, the normal offset of x_d from x0 [m]."""
-        return self.at(t, state=state)[0] @ self.normal - self.x0 @ self.normal
 
     def _normal(self, t: float, state: ContactState) -> tuple[float, float, float]:
         """(r, ṙ, r̈): the normal offset of x_d from x0."""
@@ -284,7 +285,3 @@ class CircleOnSurface:
             xddot_d + sdd * du - (sd * sd / self.radius) * u,
             f_d,
         )
-
-    def offset(self, t: float, state: ContactState) -> float:
-        """r, the normal offset of x_d from x0 [m]."""
-        return self.press.offset(t, state)

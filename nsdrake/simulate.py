@@ -138,7 +138,7 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
     state = logs["state"].data()
     add("", task_positions(built, state[:n]), axes)
     add("", logs["x_d"].data(), [f"{a}_d" for a in axes])
-    force = logs["f"].data()[arm.rows]
+    force = logs["wrench"].data()[3:][arm.rows]
     add("f_", force, axes)
     columns["f_n"] = built.station.normal @ force
     columns["f_d"] = logs["f_d"].data()[0]

@@ -26,6 +26,7 @@ from nsdrake.priority import ORDERINGS, Criterion, Level, Mode, prioritized_velo
 from nsdrake.reference import SlideAndPress
 from nsdrake.scenario import load_scenario
 from nsdrake.systems import ForceSensor
+from nsdrake.systems.criteria import unpack_criterion
 
 TOL = 1e-10
 ROOT = Path(__file__).resolve().parents[1]
@@ -200,10 +201,8 @@ def test_selector_blends_from_the_old_ordering_after_a_switch():
     levels = {}
     for c in Criterion:
         system = controller.GetSubsystemByName(f"{c.value}_criterion")
-        gradient = system.GetOutputPort("gradient").Eval(system.GetMyContextFromRoot(context))
-        a = 1.0
-        if c in (Criterion.obstacle, Criterion.joint_limits):
-            a = system.GetOutputPort("activation").Eval(system.GetMyContextFromRoot(context))[0]
+        packed = system.GetOutputPort("criterion").Eval(system.GetMyContextFromRoot(context))
+        gradient, _, _, a = unpack_criterion(packed)
         levels[c] = Level(gradient, gains[c], a if gains[c] else 0.0)
 
     def ordering(mode):
@@ -234,8 +233,8 @@ def test_obstacle_activation_fades_in_between_the_influence_distance_and_its_hal
 
 
 def test_controller_reports_the_obstacle_activation_it_uses():
-    """The obstacle criterion's activation port is the fade of its own d_min, and an
-    inactive obstacle level leaves the lower levels' projection untouched."""
+    """The obstacle criterion's activation is the fade of its own d_min, and the controller's
+    d_min port is that same distance."""
     from nsdrake.criteria.obstacle import activation
 
     scenario = load_scenario("fig3")
@@ -246,9 +245,9 @@ def test_controller_reports_the_obstacle_activation_it_uses():
     influence = scenario.desired_null_space.criteria.obstacle.influence_distance
     for q in (station.q0, station.q0 + [0.0, 0.3, 0.3, 0.3]):
         controller.GetInputPort("estimated_state").FixValue(context, np.concatenate([q, np.zeros(4)]))
-        d_min = obstacle.GetOutputPort("d_min").Eval(sub)[0]
-        got = obstacle.GetOutputPort("activation").Eval(sub)[0]
+        _, _, d_min, got = unpack_criterion(obstacle.GetOutputPort("criterion").Eval(sub))
         assert got == activation(d_min, influence)
+        assert controller.GetOutputPort("d_min").Eval(context)[0] == d_min
 
 
 def test_reference_velocity_and_acceleration_are_derivatives_and_force_ramps():

@@ -2,19 +2,22 @@
 
 from .actuator_limits import ActuatorLimitsSystem
 from .contact_monitor import ContactMonitor
-from .criteria import JointTorqueCriterionSystem, ManipulabilityCriterionSystem, ObstacleCriterionSystem
+from .criteria import (
+    JointLimitsCriterionSystem,
+    JointTorqueCriterionSystem,
+    ManipulabilityCriterionSystem,
+    ObstacleCriterionSystem,
+)
 from .force_sensor import ForceSensor
 from .impedance_controller import ImpedanceController
-from .joint_limits import JointLimitsCriterionSystem
 from .null_space_controller import NullSpaceController
 from .priority_selector import PrioritySelector
-from .reference import CircleReference, SlideAndPressReference, SurfaceReference
+from .reference import SurfaceReference, SurfaceReferenceSystem
 from .robot_terms import RobotTermsSystem
 from .self_motion import SelfMotionSweep
 
 __all__ = [
     "ActuatorLimitsSystem",
-    "CircleReference",
     "ContactMonitor",
     "ForceSensor",
     "ImpedanceController",
@@ -26,6 +29,6 @@ __all__ = [
     "PrioritySelector",
     "RobotTermsSystem",
     "SelfMotionSweep",
-    "SlideAndPressReference",
     "SurfaceReference",
+    "SurfaceReferenceSystem",
 ]

@@ -6,7 +6,6 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from ..actuator_limits import limit_torque, torque_window
-from ._util import python_value_producer
 
 
 class ActuatorLimitsSystem(LeafSystem):
@@ -20,15 +19,15 @@ class ActuatorLimitsSystem(LeafSystem):
         - task_torque
         - null_space_torque
         output_ports:
-        - generalized_force
-        - saturation
+        - limited
 
     ``task_torque`` is τ − τ₀ of Eq. 7, ``null_space_torque`` τ₀ of Eq. 21 (n each)
-    [N m]; ``generalized_force`` τ (n) [N m]; ``saturation`` (2): s, the share of τ₀
-    kept (1: no limit binds), and the number of joints whose task torque had to be
-    clipped. The discrete state holds the torque applied over the last period, stored
-    in an unrestricted update alongside the plant's step (as the null-space
-    controller's q̇_dⁿ), for the rate limit.
+    [N m]; ``limited`` is [τ (n) [N m]; s; clipped]: the torque, the share s of τ₀
+    kept (1: no limit binds) and the number of joints whose task torque had to be
+    clipped (the controller splits it into ``generalized_force`` and ``saturation``).
+    The discrete state holds the torque applied over the last period, stored in an
+    unrestricted update alongside the plant's step (as the null-space controller's
+    q̇_dⁿ), for the rate limit.
     """
 
     def __init__(self, *, torque_limits: np.ndarray, rate_limits: np.ndarray, period: float):
@@ -43,33 +42,17 @@ class ActuatorLimitsSystem(LeafSystem):
         self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))  # [τ, 1 if it exists]
         deps = {self.input_port_ticket(p.get_index()) for p in (self._task, self._tau0)}
         deps.add(self.discrete_state_ticket(self._previous))
-        self._result = self.DeclareCacheEntry(
-            description="limited torque",
-            value_producer=python_value_producer(self._compute),
-            prerequisites_of_calc=deps,
-        )
-        self.DeclareVectorOutputPort(
-            "generalized_force",
-            n,
-            lambda c, o: o.SetFromVector(self._result.Eval(c)[0]),
-            prerequisites_of_calc=deps,
-        )
-        self.DeclareVectorOutputPort(
-            "saturation",
-            2,
-            lambda c, o: o.SetFromVector([self._result.Eval(c)[1], float(self._result.Eval(c)[2])]),
-            prerequisites_of_calc=deps,
-        )
+        self._limited = self.DeclareVectorOutputPort("limited", n + 2, self._calc, prerequisites_of_calc=deps)
         if np.isfinite(self._rate_max).any():
             self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._store)
 
-    def _compute(self, context):
+    def _calc(self, context, output):
         previous = context.get_discrete_state(self._previous).value()
         tau_prev = previous[: self._n] if previous[self._n] else None
         lower, upper = torque_window(self._tau_max, self._rate_max, self._period, tau_prev)
-        return limit_torque(self._task.Eval(context), self._tau0.Eval(context), lower, upper)
+        tau, s, clipped = limit_torque(self._task.Eval(context), self._tau0.Eval(context), lower, upper)
+        output.SetFromVector(np.concatenate([tau, [s, float(clipped)]]))
 
     def _store(self, context, state):
-        state.get_mutable_discrete_state(self._previous).SetFromVector(
-            np.append(self._result.Eval(context)[0], 1.0)
-        )
+        tau = self._limited.Eval(context)[: self._n]
+        state.get_mutable_discrete_state(self._previous).SetFromVector(np.append(tau, 1.0))

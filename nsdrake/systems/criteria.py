@@ -1,4 +1,13 @@
-"""Criterion systems: each outputs a criterion value p and its gradient Φ = ∂p/∂q."""
+"""Criterion systems: each outputs one packed vector [Φ; p; s; a] (:data:`CRITERION_LAYOUT`).
+
+Every criterion of Section 3.5 gives the priority selector the same four things:
+its gradient Φ = ∂p/∂q (Eq. 29), its value p, the quantity s that Fig. 1's tree
+compares with the criterion's limit, and the activation a ∈ [0, 1] that weighs its
+level in the projection of the levels below (:mod:`nsdrake.priority`). One packed
+port per criterion keeps a criterion to one Python evaluation per control tick;
+the controller splits it with Drake's (C++) ``Demultiplexer`` for its diagnostic
+ports (``d_min``, ``manipulability``, …).
+"""
 
 from __future__ import annotations
 
@@ -7,38 +16,50 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from ..controller_model import ControllerModel
+from ..criteria.joint_limits import activation as joint_limits_activation
+from ..criteria.joint_limits import joint_limits_criterion
 from ..criteria.joint_torque import joint_torque_criterion
 from ..criteria.manipulability import manipulability
-from ..criteria.obstacle import ObstacleDistances, activation, obstacle_potential
+from ..criteria.obstacle import ObstacleDistances, obstacle_potential
+from ..criteria.obstacle import activation as obstacle_activation
 from ..dynamics import RobotTerms
-from ._util import declare_scratch, python_value_producer
+from ._util import declare_scratch
+
+# Entries of a criterion port after its n gradient entries: [Φ (n); p; s; a].
+VALUE, SWITCHING, ACTIVATION = 0, 1, 2
+CRITERION_LAYOUT = ("gradient", "value", "switching", "activation")
+
+
+def criterion_size(n: int) -> int:
+    """Length of a criterion port for n joints."""
+    return n + 3
+
+
+def pack_criterion(Phi: np.ndarray, p: float, s: float, a: float) -> np.ndarray:
+    """[Φ; p; s; a] (:data:`CRITERION_LAYOUT`)."""
+    out = np.empty(Phi.shape[0] + 3)
+    out[: Phi.shape[0]] = Phi
+    out[-3], out[-2], out[-1] = p, s, a
+    return out
+
+
+def unpack_criterion(packed: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+    """(Φ, p, s, a) from a criterion port's value."""
+    return packed[:-3], float(packed[-3]), float(packed[-2]), float(packed[-1])
 
 
 class _CriterionSystem(LeafSystem):
-    """A system with a ``robot_terms`` input and ``value``/``gradient`` outputs computed
-    once per evaluation by ``self._compute(context) -> (p, Φ, *extra)``. Subclasses
-    call ``_declare_ports`` after setting their own attributes."""
+    """A system with a ``robot_terms`` input and one ``criterion`` output [Φ; p; s; a]
+    computed by ``self._compute(context) -> (Φ, p, s, a)``. Subclasses call
+    ``_declare_ports`` after setting their own attributes."""
 
     def _declare_ports(self, model_terms: RobotTerms):
-        """Declares ``robot_terms``, then the outputs."""
         self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
-        self._deps = {self.input_port_ticket(self._terms.get_index())}
-        self._result = self.DeclareCacheEntry(
-            description="criterion",
-            value_producer=python_value_producer(self._compute),
-            prerequisites_of_calc=self._deps,
-        )
         self.DeclareVectorOutputPort(
-            "value",
-            1,
-            lambda c, o: o.SetAtIndex(0, self._result.Eval(c)[0]),
-            prerequisites_of_calc=self._deps,
-        )
-        self.DeclareVectorOutputPort(
-            "gradient",
-            model_terms.n,
-            lambda c, o: o.SetFromVector(self._result.Eval(c)[1]),
-            prerequisites_of_calc=self._deps,
+            "criterion",
+            criterion_size(model_terms.n),
+            lambda c, o: o.SetFromVector(pack_criterion(*self._compute(c))),
+            prerequisites_of_calc={self.input_port_ticket(self._terms.get_index())},
         )
 
     def _compute(self, context):
@@ -54,10 +75,9 @@ class JointTorqueCriterionSystem(_CriterionSystem):
         input_ports:
         - robot_terms
         output_ports:
-        - value
-        - gradient
+        - criterion
 
-    ``value`` (1) [N² m²]; ``gradient`` (n) [N² m²/rad].
+    ``criterion`` is [Φ (n) [N² m²/rad]; p [N² m²]; s = p; a = 1] (:data:`CRITERION_LAYOUT`).
     """
 
     def __init__(self, *, F_d: np.ndarray, model_terms: RobotTerms):
@@ -67,7 +87,8 @@ class JointTorqueCriterionSystem(_CriterionSystem):
 
     def _compute(self, context):
         terms = self._terms.Eval(context)
-        return joint_torque_criterion(terms.J, terms.dJ_dq, self._F_d)
+        p, Phi = joint_torque_criterion(terms.J, terms.dJ_dq, self._F_d)
+        return Phi, p, p, 1.0
 
 
 class ManipulabilityCriterionSystem(_CriterionSystem):
@@ -79,10 +100,9 @@ class ManipulabilityCriterionSystem(_CriterionSystem):
         input_ports:
         - robot_terms
         output_ports:
-        - value
-        - gradient
+        - criterion
 
-    ``value`` is w (1); ``gradient`` is ∂w/∂q (n).
+    ``criterion`` is [∂w/∂q (n); w; s = w, compared with w_lim; a = 1] (:data:`CRITERION_LAYOUT`).
     """
 
     def __init__(self, *, model_terms: RobotTerms):
@@ -91,15 +111,45 @@ class ManipulabilityCriterionSystem(_CriterionSystem):
 
     def _compute(self, context):
         terms = self._terms.Eval(context)
-        return manipulability(terms.J, terms.dJ_dq)
+        w, Phi = manipulability(terms.J, terms.dJ_dq)
+        return Phi, w, w, 1.0
+
+
+class JointLimitsCriterionSystem(_CriterionSystem):
+    """p = −⅓ Σ max(0, ρ − margin)³ over both limits of every joint, its gradient, the
+    smallest margin and the level's activation (:mod:`nsdrake.criteria.joint_limits`).
+
+    .. pydrake_system::
+
+        name: JointLimitsCriterionSystem
+        input_ports:
+        - robot_terms
+        output_ports:
+        - criterion
+
+    ``criterion`` is [Φ (n) [rad²]; p [rad³]; s = the smallest distance of a joint to
+    one of its limits [rad] (inf without limits), compared with q_lim; a ∈ [0, 1]]
+    (:data:`CRITERION_LAYOUT`).
+    """
+
+    def __init__(self, *, lower: np.ndarray, upper: np.ndarray, influence: float, model_terms: RobotTerms):
+        super().__init__()
+        self._lower = np.asarray(lower, dtype=float)
+        self._upper = np.asarray(upper, dtype=float)
+        self._influence = float(influence)
+        self._declare_ports(model_terms)
+
+    def _compute(self, context):
+        q = self._terms.Eval(context).q
+        p, Phi, margin = joint_limits_criterion(q, self._lower, self._upper, self._influence)
+        return Phi, p, margin, joint_limits_activation(margin, self._influence)
 
 
 class ObstacleCriterionSystem(_CriterionSystem):
     """The obstacle potential p = −⅓ Σ max(0, d_∞ − d)³ over link–obstacle pairs and its
-    gradient (Eq. 31, :mod:`nsdrake.criteria.obstacle`), from signed-distance queries
-    on the controller model's own scene graph (the arm's link geometry and the
-    obstacles it knows about); also d_min, the smallest link–obstacle distance (the
-    tool's geometry is not a link).
+    gradient (Eq. 31, :mod:`nsdrake.criteria.obstacle`), from the controller model's own
+    geometry (the arm's links and the obstacles it knows about); also d_min, the
+    smallest link–obstacle distance (the tool's geometry is not a link).
 
     .. pydrake_system::
 
@@ -107,14 +157,10 @@ class ObstacleCriterionSystem(_CriterionSystem):
         input_ports:
         - robot_terms
         output_ports:
-        - value
-        - gradient
-        - d_min
-        - activation
+        - criterion
 
-    ``value`` (1) [m³];
-    ``gradient`` (n) [m³/rad]; ``d_min`` (1) [m]; ``activation`` (1) ∈ [0, 1], the
-    weight of this level in the priority stack (:func:`nsdrake.criteria.obstacle.activation`).
+    ``criterion`` is [Φ (n) [m³/rad]; p [m³]; s = d_min [m], compared with d_lim; a ∈ [0, 1]
+    (:func:`nsdrake.criteria.obstacle.activation`)] (:data:`CRITERION_LAYOUT`).
 
     The query and the point Jacobians need the model at the same q; the model
     context written for them is per-context scratch memory.
@@ -129,18 +175,6 @@ class ObstacleCriterionSystem(_CriterionSystem):
         self._influence = float(influence_distance)
         self._declare_ports(model_terms)
         self._scratch = declare_scratch(self, model.create_scratch)
-        self.DeclareVectorOutputPort(
-            "d_min",
-            1,
-            lambda c, o: o.SetAtIndex(0, self._result.Eval(c)[2]),
-            prerequisites_of_calc=self._deps,
-        )
-        self.DeclareVectorOutputPort(
-            "activation",
-            1,
-            lambda c, o: o.SetAtIndex(0, activation(self._result.Eval(c)[2], self._influence)),
-            prerequisites_of_calc=self._deps,
-        )
 
     def _compute(self, context):
         terms = self._terms.Eval(context)
@@ -155,4 +189,5 @@ class ObstacleCriterionSystem(_CriterionSystem):
             query=lambda: scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(scratch)),
         )
         p, Phi = obstacle_potential(pairs, self._influence, terms.n)
-        return p, Phi, min((pair.distance for pair in pairs), default=np.inf)
+        d_min = min((pair.distance for pair in pairs), default=np.inf)
+        return Phi, p, d_min, obstacle_activation(d_min, self._influence)

@@ -9,7 +9,6 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from ..dynamics import RobotTerms
 from ..null_space import null_space_torque
 from ..pseudo_inverse import GeneralizedInverse
-from ._util import python_value_producer
 
 
 class NullSpaceController(LeafSystem):
@@ -28,13 +27,11 @@ class NullSpaceController(LeafSystem):
         - robot_terms
         - desired_null_space_velocity
         output_ports:
-        - generalized_force
-        - null_space_velocity_error
-        - lyapunov
+        - null_space
 
-    ``desired_null_space_velocity`` is q̇_dⁿ (n) [rad/s];
-    ``generalized_force`` is τ₀ (n) [N m]; ``null_space_velocity_error`` is eⁿ
-    (n) [rad/s]; ``lyapunov`` is ν (1) [J].
+    ``desired_null_space_velocity`` is q̇_dⁿ (n) [rad/s]; ``null_space`` is
+    [τ₀ (n) [N m]; eⁿ (n) [rad/s]; ν [J]], one port so that the law is evaluated
+    once per tick (the controller splits it with a C++ ``Demultiplexer``).
     """
 
     def __init__(
@@ -67,26 +64,7 @@ class NullSpaceController(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._store)
         deps = {self.input_port_ticket(p.get_index()) for p in (self._terms, self._qdot_ns_d)}
         deps.add(self.discrete_state_ticket(self._previous))
-        self._result = self.DeclareCacheEntry(
-            description="null-space law",
-            value_producer=python_value_producer(self._compute),
-            prerequisites_of_calc=deps,
-        )
-        self.DeclareVectorOutputPort(
-            "generalized_force",
-            n,
-            lambda c, o: o.SetFromVector(self._result.Eval(c).tau0),
-            prerequisites_of_calc=deps,
-        )
-        self.DeclareVectorOutputPort(
-            "null_space_velocity_error",
-            n,
-            lambda c, o: o.SetFromVector(self._result.Eval(c).e_n),
-            prerequisites_of_calc=deps,
-        )
-        self.DeclareVectorOutputPort(
-            "lyapunov", 1, lambda c, o: o.SetAtIndex(0, self._result.Eval(c).nu), prerequisites_of_calc=deps
-        )
+        self.DeclareVectorOutputPort("null_space", 2 * n + 1, self._calc, prerequisites_of_calc=deps)
 
     def desired_acceleration(self, context) -> np.ndarray:
         """q̈_dⁿ: (q̇_dⁿ(t) − q̇_dⁿ(t − T)) / T, or zero without a previous sample or feedforward."""
@@ -95,8 +73,8 @@ class NullSpaceController(LeafSystem):
             return np.zeros(self._n)
         return (self._qdot_ns_d.Eval(context) - previous[: self._n]) / self._period
 
-    def _compute(self, context):
-        return null_space_torque(
+    def _calc(self, context, output):
+        result = null_space_torque(
             self._terms.Eval(context),
             self._inverse,
             self._qdot_ns_d.Eval(context),
@@ -105,6 +83,7 @@ class NullSpaceController(LeafSystem):
             self._task_velocity_compensation,
             self._coriolis_compensation,
         )
+        output.SetFromVector(np.concatenate([result.tau0, result.e_n, [result.nu]]))
 
     def _store(self, context, state):
         sample = np.append(self._qdot_ns_d.Eval(context), 1.0)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import Demultiplexer
 
 from ..reference import CircleOnSurface, ContactState, SlideAndPress, update_contact
-from ._util import python_value_producer
 
 
-class SurfaceReference(LeafSystem):
+class SurfaceReferenceSystem(LeafSystem):
     """Desired position, velocity, acceleration and normal force of a task on a surface
     whose reference (``reference.at(t, state=…)``) depends on the contact state. The
     contact state, from the measured normal force alone (as on a real robot: contact
@@ -21,19 +21,17 @@ class SurfaceReference(LeafSystem):
 
     .. pydrake_system::
 
-        name: SurfaceReference
+        name: SurfaceReferenceSystem
         input_ports:
-        - measured_force
+        - measured_wrench
         output_ports:
-        - x_d
-        - xdot_d
-        - xddot_d
-        - f_d
-        - in_contact
+        - reference
 
-    ``measured_force`` is the sensor's world force (3) [N]; the outputs are in
-    task coordinates (m) [m, m/s, m/s²], f_d [N], and ``in_contact`` (1): 1 while
-    in contact, 0 before it and after it was lost.
+    ``measured_wrench`` is the sensor's [M; f] (6), world [N m, N]; only its force
+    f enters. ``reference`` is [x_d; ẋ_d; ẍ_d; f_d; in_contact]: the desired motion
+    in task coordinates (m each) [m, m/s, m/s²], the desired normal force f_d [N],
+    and 1 while in contact, 0 before it and after it was lost (one port, evaluated
+    once per tick; :class:`SurfaceReference` splits it into named ports).
     """
 
     def __init__(
@@ -51,31 +49,23 @@ class SurfaceReference(LeafSystem):
         self._threshold = contact_threshold
         self._loss_time = loss_time
         m = reference.x0.shape[0]
-        self._force = self.DeclareVectorInputPort("measured_force", 3)
+        self._m = m
+        self._wrench = self.DeclareVectorInputPort("measured_wrench", 6)
         # [t_contact, r_contact, t_lost, t_low] of ContactState, then the first contact's time
         self._state = self.DeclareDiscreteState(
             BasicVector([math.inf, math.nan, math.inf, math.inf, math.inf])
         )
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
-        deps = {self.time_ticket(), self.discrete_state_ticket(self._state)}
-        self._value = self.DeclareCacheEntry(
-            description="reference at t",
-            value_producer=python_value_producer(self._eval),
-            prerequisites_of_calc=deps,
+        self._reference = self.DeclareVectorOutputPort(
+            "reference",
+            3 * m + 2,
+            self._calc,
+            prerequisites_of_calc={self.time_ticket(), self.discrete_state_ticket(self._state)},
         )
-        for name, k in (("x_d", 0), ("xdot_d", 1), ("xddot_d", 2)):
-            self.DeclareVectorOutputPort(
-                name, m, lambda c, o, k=k: o.SetFromVector(self._value.Eval(c)[k]), prerequisites_of_calc=deps
-            )
-        self.DeclareVectorOutputPort(
-            "f_d", 1, lambda c, o: o.SetAtIndex(0, self._value.Eval(c)[3]), prerequisites_of_calc=deps
-        )
-        self.DeclareVectorOutputPort(
-            "in_contact",
-            1,
-            lambda c, o: o.SetAtIndex(0, float(self._contact(c).in_contact)),
-            prerequisites_of_calc={self.discrete_state_ticket(self._state)},
-        )
+
+    def output_sizes(self) -> list[int]:
+        """Sizes of x_d, ẋ_d, ẍ_d, f_d, in_contact in the ``reference`` port (for a Demultiplexer)."""
+        return [self._m, self._m, self._m, 1, 1]
 
     def _contact(self, context) -> ContactState:
         return ContactState(*context.get_discrete_state(self._state).value()[:4])
@@ -84,12 +74,22 @@ class SurfaceReference(LeafSystem):
         return context.get_discrete_state(self._state).GetAtIndex(4)
 
     def _eval(self, context):
-        return self._ref.at(context.get_time(), state=self._contact(context))
+        return self._ref.at(
+            context.get_time(), state=self._contact(context), t_first=self._first_contact(context)
+        )
+
+    def _calc(self, context, output):
+        x_d, xdot_d, xddot_d, f_d = self._eval(context)
+        in_contact = float(self._contact(context).in_contact)
+        output.SetFromVector(np.concatenate([x_d, xdot_d, xddot_d, [f_d, in_contact]]))
 
     def _update(self, context, discrete_state):
         state = self._contact(context)
-        f_n = float(self._ref.normal @ self._force.Eval(context)[self._rows])
-        r_now = self._ref.offset(context.get_time(), state)
+        f_n = float(self._ref.normal @ self._wrench.Eval(context)[3:][self._rows])
+        # r, the normal offset of x_d now: from the output, computed (and cached) for this
+        # instant's torque already; SlideAndPress.offset would evaluate the reference again.
+        x_d = self._reference.Eval(context)[: self._m]
+        r_now = x_d @ self._ref.normal - self._ref.x0 @ self._ref.normal
         new = update_contact(state, context.get_time(), f_n, self._threshold, self._loss_time, r_now)
         first = self._first_contact(context)
         discrete_state.get_mutable_vector(self._state).SetFromVector(
@@ -97,50 +97,54 @@ class SurfaceReference(LeafSystem):
         )
 
 
-class SlideAndPressReference(SurfaceReference):
-    """The Fig. 3 task (:class:`nsdrake.reference.SlideAndPress`): ramp along the plate,
-    approach, press. Ports as :class:`SurfaceReference`."""
+class SurfaceReference(Diagram):
+    """The task reference of a task on a surface, with contact detection and loss
+    (:class:`SurfaceReferenceSystem`), its packed output split into named ports.
+
+    .. pydrake_system::
+
+        name: SurfaceReference
+        input_ports:
+        - measured_wrench
+        output_ports:
+        - x_d
+        - xdot_d
+        - xddot_d
+        - f_d
+        - in_contact
+
+    ``measured_wrench`` is the sensor's [M; f] (6), world [N m, N]. x_d, xdot_d,
+    xddot_d are the desired motion in task coordinates (m each) [m, m/s, m/s²], f_d
+    (1) the desired normal force [N], ``in_contact`` (1) 1 while in contact, 0 before
+    it and after it was lost. ``reference`` is a :class:`nsdrake.reference.SlideAndPress`
+    (Fig. 3) or a :class:`nsdrake.reference.CircleOnSurface` (the wiping task, timed
+    from the first contact); the other arguments are :class:`SurfaceReferenceSystem`'s.
+    """
 
     def __init__(
         self,
         *,
-        reference: SlideAndPress,
+        reference: SlideAndPress | CircleOnSurface,
         task_rows: np.ndarray,
         contact_threshold: float,
         period: float,
         loss_time: float = 0.05,
     ):
-        super().__init__(
-            reference=reference,
-            task_rows=task_rows,
-            contact_threshold=contact_threshold,
-            period=period,
-            loss_time=loss_time,
+        super().__init__()
+        builder = DiagramBuilder()
+        leaf = builder.AddNamedSystem(
+            "contact_and_reference",
+            SurfaceReferenceSystem(
+                reference=reference,
+                task_rows=task_rows,
+                contact_threshold=contact_threshold,
+                period=period,
+                loss_time=loss_time,
+            ),
         )
-
-
-class CircleReference(SurfaceReference):
-    """The wiping task (:class:`nsdrake.reference.CircleOnSurface`): approach, press, then
-    a circle on the surface, timed from the first contact. Ports as :class:`SurfaceReference`."""
-
-    def __init__(
-        self,
-        *,
-        reference: CircleOnSurface,
-        task_rows: np.ndarray,
-        contact_threshold: float,
-        period: float,
-        loss_time: float = 0.05,
-    ):
-        super().__init__(
-            reference=reference,
-            task_rows=task_rows,
-            contact_threshold=contact_threshold,
-            period=period,
-            loss_time=loss_time,
-        )
-
-    def _eval(self, context):
-        return self._ref.at(
-            context.get_time(), state=self._contact(context), t_first=self._first_contact(context)
-        )
+        parts = builder.AddNamedSystem("parts", Demultiplexer(leaf.output_sizes()))
+        builder.Connect(leaf.GetOutputPort("reference"), parts.get_input_port())
+        builder.ExportInput(leaf.GetInputPort("measured_wrench"), "measured_wrench")
+        for k, name in enumerate(("x_d", "xdot_d", "xddot_d", "f_d", "in_contact")):
+            builder.ExportOutput(parts.get_output_port(k), name)
+        builder.BuildInto(self)
