@@ -28,8 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from pydrake.geometry import ProximityProperties, SceneGraph, Shape
-from pydrake.math import RigidTransform, inv
+from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
@@ -238,7 +239,6 @@ class PinocchioDynamics:
         self._rows = arm.rows
         self._spatial_rows = arm.spatial_rows
         self._rotation = arm.m_r > 0
-        self._lower = np.tril_indices(arm.n, -1)
         self._drake_rows = np.array([3, 4, 5, 0, 1, 2])
         self._partials = arm._partials
 
@@ -254,27 +254,25 @@ class PinocchioDynamics:
     ) -> RobotTerms:
         pin, model, data = self._pin, self._model, self._data
         qp, vp = self._to_pin(q), self._to_pin(v)
-        pin.computeAllTerms(model, data, qp, vp)
-        H = data.M.copy()  # Pinocchio fills the upper triangle
-        H[self._lower] = H.T[self._lower]
-        nle = data.nle.copy()
+        pin.computeAllTerms(model, data, qp, vp)  # M (upper triangle), nle, g, joint Jacobians
         J6 = pin.getFrameJacobian(model, data, self._tool, pin.LOCAL_WORLD_ALIGNED)
         X_WT = pin.updateFramePlacement(model, data, self._tool)
         p_WT = X_WT.translation.copy()
         R_WT = X_WT.rotation.copy() if self._rotation else None
-        g = pin.computeGeneralizedGravity(model, data, qp).copy()
+        H, H_inv = symmetric_and_inverse(data.M)
+        nle, g = data.nle.copy(), data.g.copy()
         C = pin.computeCoriolisMatrix(model, data, qp, vp).copy() if coriolis else None
         J_spatial = J6[self._drake_rows]  # Drake's order: [angular; translational]
         if self._order is not None:
             o = self._order
-            H, nle, g, J_spatial = H[np.ix_(o, o)], nle[o], g[o], J_spatial[:, o]
+            H, H_inv, nle, g, J_spatial = H[np.ix_(o, o)], H_inv[np.ix_(o, o)], nle[o], g[o], J_spatial[:, o]
             C = C[np.ix_(o, o)] if C is not None else None
         J_w, J_v = J_spatial[:3], J_spatial[3:]
         return RobotTerms(
             q=q.copy(),
             v=v.copy(),
             H=H,
-            H_inv=inv(H),
+            H_inv=H_inv,
             Cv=nle - g,
             g=g,
             x=p_WT[self._rows],
@@ -286,6 +284,16 @@ class PinocchioDynamics:
             R_WT=R_WT,
             max_task_inertia=max_task_inertia,
         )
+
+
+@njit(cache=True)
+def symmetric_and_inverse(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H, H⁻¹) from Pinocchio's mass matrix, which fills only its upper triangle."""
+    H = M.copy()
+    for i in range(H.shape[0]):
+        for j in range(i):
+            H[i, j] = H[j, i]
+    return H, np.linalg.inv(H)
 
 
 AGREEMENT_TOLERANCE = 1e-9  # relative, per term

@@ -5,7 +5,7 @@
     ┌──────────────── station ────────────────┐
     │ plant ──state────────────────────────────┼──► controller.estimated_state
     │   ▲  └─reaction_forces─► force_sensor ───┼──► controller.measured_wrench
-    │   │                          └── force ──┼──► reference.measured_force
+    │   │                          └─ wrench ──┼──► reference.measured_wrench
     │   └── actuation ◄─ actuation_map ◄───────┼─── controller.generalized_force
     └─────────────────────────────────────────┘
     reference ─► controller.desired_position / _velocity / _acceleration / _force

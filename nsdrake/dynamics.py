@@ -74,8 +74,9 @@ def parse_task_axes(task_axes: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
 class RobotTerms:
     """Model terms at one state; see the module docstring. n joints, m task axes.
 
-    Derived quantities (J̇, ẋ, Λ, Ḣ, …) are computed on first use and kept, so
-    every consumer of the same RobotTerms shares one evaluation.
+    The derived quantities J̇, J̇ q̇, ẋ and H⁻¹ Jᵀ are computed at construction, in one
+    compiled call, Λ on first use, so every consumer of the same RobotTerms shares one evaluation;
+    :meth:`memo` keeps further ones (the generalised inverses).
     """
 
     q: np.ndarray  # (n,) joint positions [rad]
@@ -94,6 +95,23 @@ class RobotTerms:
     # Cap on the task inertia Λ near singular poses (see Lambda) [kg; kg m² for rotations].
     max_task_inertia: float = math.inf
     _memo: dict = field(default_factory=dict, repr=False, compare=False)
+    # Derived at construction, in one compiled call (:func:`derived_terms`):
+    Jdot: np.ndarray = field(init=False, repr=False, compare=False)  # (m, n) J̇ = Σ_k ∂J/∂q_k q̇_k
+    Jdot_v: np.ndarray = field(init=False, repr=False, compare=False)  # (m,) J̇ q̇ [m/s², rad/s²]
+    xdot: np.ndarray = field(init=False, repr=False, compare=False)  # (m,) ẋ = J q̇ (Eq. 2)
+    H_inv_Jt: np.ndarray = field(init=False, repr=False, compare=False)  # (n, m) H⁻¹ Jᵀ
+
+    def __post_init__(self):
+        derived = derived_terms(self.H_inv, self.J, self.dJ_dq, self.v)
+        for name, value in zip(("Jdot", "Jdot_v", "xdot", "H_inv_Jt"), derived, strict=True):
+            object.__setattr__(self, name, value)
+
+    @cached_property
+    def Lambda(self) -> np.ndarray:
+        """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1), made robust near
+        singular poses (:func:`task_inertia`); on first use, as it does not exist at an
+        exactly singular pose without a cap. (m, m) [kg; kg m² on rotational rows]."""
+        return task_inertia(self.J @ self.H_inv_Jt, 1.0 / self.max_task_inertia)
 
     @property
     def n(self) -> int:
@@ -111,39 +129,21 @@ class RobotTerms:
             value = self._memo[key] = compute()
             return value
 
-    @cached_property
-    def Jdot(self) -> np.ndarray:
-        """J̇ = Σ_k ∂J/∂q_k q̇_k, (m, n) [m/(rad s)]."""
-        n, m = self.n, self.m
-        return (self.v @ self.dJ_dq.reshape(n, m * n)).reshape(m, n)
-
-    @cached_property
-    def Jdot_v(self) -> np.ndarray:
-        """J̇ q̇, (m,) [m/s², rad/s² on rotational rows]."""
-        return self.Jdot @ self.v
-
-    @cached_property
-    def xdot(self) -> np.ndarray:
-        """ẋ = J q̇ (Eq. 2), (m,) [m/s; rad/s on rotational rows: the tool's angular velocity]."""
-        return self.J @ self.v
-
-    @cached_property
-    def H_inv_Jt(self) -> np.ndarray:
-        """H⁻¹ Jᵀ, (n, m)."""
-        return self.H_inv @ self.J.T
-
-    @cached_property
-    def Lambda(self) -> np.ndarray:
-        """Λ = (J H⁻¹ Jᵀ)⁻¹, the operational-space inertia (Section 3.1), made robust near
-        singular poses (:func:`task_inertia`). (m, m) [kg]."""
-        return task_inertia(self.J @ self.H_inv_Jt, 1.0 / self.max_task_inertia)
-
-    @cached_property
+    @property
     def Hdot(self) -> np.ndarray:
         """Ḣ = C + Cᵀ (needs C). (n, n)."""
         if self.C is None:
             raise ValueError("Ḣ needs the Coriolis matrix C; compute the terms with coriolis=True")
         return self.C + self.C.T
+
+
+@njit(cache=True)
+def derived_terms(H_inv, J, dJ_dq, v):
+    """(J̇, J̇ q̇, ẋ, H⁻¹ Jᵀ) at one state (:class:`RobotTerms`): J̇ = Σ_k ∂J/∂q_k q̇_k and
+    ẋ = J q̇ (Eq. 2)."""
+    n, m = J.shape[1], J.shape[0]
+    Jdot = (v @ np.ascontiguousarray(dJ_dq).reshape(n, m * n)).reshape(m, n)
+    return Jdot, Jdot @ v, J @ v, H_inv @ np.ascontiguousarray(J.T)
 
 
 @njit(cache=True)
@@ -182,41 +182,49 @@ class JacobianPartials:
     def __init__(self, revolute: np.ndarray, inboard: np.ndarray, rows=(0, 1, 2), rot_rows=()):
         revolute = np.asarray(revolute, dtype=bool)
         inboard = np.asarray(inboard, dtype=bool)
-        rows = np.asarray(rows, dtype=int)
-        rot_rows = np.asarray(rot_rows, dtype=int)
         # D[k, :, i] = w_k × J_i where joint k is joint i or inboard of it (k revolute),
         #            = w_i × J_k where joint k is outboard of joint i (i revolute; translational rows).
-        self._own = (inboard & revolute[:, None]).astype(float)[:, None, :]
-        self._other = (~inboard & revolute[None, :]).astype(float)[:, None, :]
-        # w ↦ the task rows of [w]×, flattened: [w]×[rows] = (w @ G).reshape(m, 3).
-        self._G = np.stack([skew(e)[rows].ravel() for e in np.eye(3)])  # (3, 3 m_t)
-        self._m = len(rows)
-        self._G_r = np.stack([skew(e)[rot_rows].ravel() for e in np.eye(3)])  # (3, 3 m_r)
-        self._m_r = len(rot_rows)
+        self._own = inboard & revolute[:, None]
+        self._other = ~inboard & revolute[None, :]
+        self._rows = np.asarray(rows, dtype=np.int64)
+        self._rot_rows = np.asarray(rot_rows, dtype=np.int64)
 
     def __call__(self, J_w: np.ndarray, J_v: np.ndarray) -> np.ndarray:
         """(n, m, n) array D with D[k] = ∂J/∂q_k (the task rows: translational rows of
         J_v, then rotational rows of J_w), from the (3, n) angular Jacobian J_w (column
         k is the world axis of revolute joint k) and the (3, n) translational Jacobian
         J_v of the tool point."""
-        n = J_w.shape[1]
-        S = (J_w.T @ self._G).reshape(n, self._m, 3)  # S[k] = rows of [w_k]×
-        P = S @ J_v  # (n, m_t, n): P[k, :, i] = (w_k × J_i)[rows]
-        D = P * self._own + P.transpose(2, 1, 0) * self._other
-        if not self._m_r:
-            return D
-        S_r = (J_w.T @ self._G_r).reshape(n, self._m_r, 3)
-        return np.concatenate([D, (S_r @ J_w) * self._own], axis=1)  # (w_k × w_i)[rot_rows]
+        return _jacobian_partials(J_w, J_v, self._own, self._other, self._rows, self._rot_rows)
 
 
-def skew(w: np.ndarray) -> np.ndarray:
-    """[w]×: the matrix of w × ·, for a (3,) vector or a (k, 3) stack. (…, 3, 3)."""
-    w = np.asarray(w)
-    S = np.zeros(w.shape[:-1] + (3, 3))
-    S[..., 0, 1], S[..., 0, 2] = -w[..., 2], w[..., 1]
-    S[..., 1, 0], S[..., 1, 2] = w[..., 2], -w[..., 0]
-    S[..., 2, 0], S[..., 2, 1] = -w[..., 1], w[..., 0]
-    return S
+@njit(cache=True)
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def _jacobian_partials(J_w, J_v, own, other, rows, rot_rows):
+    """:class:`JacobianPartials`'s D, in one compiled pass over the joint pairs (k, i)."""
+    n, m_t, m_r = J_w.shape[1], rows.shape[0], rot_rows.shape[0]
+    D = np.zeros((n, m_t + m_r, n))
+    c = np.empty(3)
+    for k in range(n):
+        for i in range(n):
+            if own[k, i]:  # w_k × J_v,i and, on rotational rows, w_k × J_w,i
+                c[0], c[1], c[2] = _cross(J_w[0, k], J_w[1, k], J_w[2, k], J_v[0, i], J_v[1, i], J_v[2, i])
+                for r in range(m_t):
+                    D[k, r, i] = c[rows[r]]
+                if m_r:
+                    c[0], c[1], c[2] = _cross(
+                        J_w[0, k], J_w[1, k], J_w[2, k], J_w[0, i], J_w[1, i], J_w[2, i]
+                    )
+                    for r in range(m_r):
+                        D[k, m_t + r, i] = c[rot_rows[r]]
+            elif other[k, i]:  # w_i × J_v,k
+                c[0], c[1], c[2] = _cross(J_w[0, i], J_w[1, i], J_w[2, i], J_v[0, k], J_v[1, k], J_v[2, k])
+                for r in range(m_t):
+                    D[k, r, i] = c[rows[r]]
+    return D
 
 
 def coriolis_matrix(bias: Callable[[np.ndarray], np.ndarray], v: np.ndarray) -> np.ndarray:

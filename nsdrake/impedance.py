@@ -60,6 +60,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .dynamics import RobotTerms
 from .orientation import orientation_error
@@ -135,10 +136,15 @@ def command_acceleration_from_error(
 ) -> np.ndarray:
     """ẍ_c = ẍ_d + K_v (ẋ_d − ẋ) + K_p e + n K_f (f_d − nᵀF) for a task error e (x_d − x,
     or the pose error of :func:`pose_error`). (m,) [m/s², rad/s² on rotational rows]."""
-    f_n = gains.normal @ F
-    return (
-        xddot_d + gains.K_v @ (xdot_d - xdot) + gains.K_p @ error + gains.normal * (gains.K_f * (f_d - f_n))
+    return _command_acceleration(
+        error, xdot, xdot_d, xddot_d, F, float(f_d), gains.K_p, gains.K_v, gains.K_f, gains.normal
     )
+
+
+@njit(cache=True)
+def _command_acceleration(error, xdot, xdot_d, xddot_d, F, f_d, K_p, K_v, K_f, normal):
+    f_n = normal @ F
+    return xddot_d + K_v @ (xdot_d - xdot) + K_p @ error + normal * (K_f * (f_d - f_n))
 
 
 def pose_error(
@@ -157,13 +163,17 @@ def task_wrench(W_T: np.ndarray, rows: np.ndarray, rot_rows: np.ndarray) -> np.n
     return np.concatenate([W_T[3:][rows], W_T[:3][rot_rows]])
 
 
+@njit(cache=True)
 def wrench_at_tool(wrench_So: np.ndarray, p_WSo: np.ndarray, p_WT: np.ndarray) -> np.ndarray:
     """[M_T; f] from [M_So; f]: the moment moves from the sensor origin So to the
     tool point T, M_T = M_So + (p_So − p_T) × f. (6,) world [N m, N]."""
     f = wrench_So[3:]
     r = p_WSo - p_WT
-    r_cross_f = np.array([r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]])
-    return np.concatenate([wrench_So[:3] + r_cross_f, f])
+    out = wrench_So.copy()
+    out[0] += r[1] * f[2] - r[2] * f[1]
+    out[1] += r[2] * f[0] - r[0] * f[2]
+    out[2] += r[0] * f[1] - r[1] * f[0]
+    return out
 
 
 def primary_torque(
@@ -175,7 +185,35 @@ def primary_torque(
     the tool point, in world coordinates; for a pure force, J_Tᵀ W_T = Jᵀ F.
     ``gravity_compensation`` False drops g (harmless in the horizontal plane).
     """
-    tau = terms.J.T @ (terms.Lambda @ (xddot_c - terms.Jdot_v)) + terms.J_spatial.T @ W_T + terms.Cv
+    return _primary_torque(
+        terms.J,
+        terms.Lambda,
+        terms.Jdot_v,
+        terms.J_spatial,
+        terms.Cv,
+        terms.g,
+        xddot_c,
+        W_T,
+        gravity_compensation,
+    )
+
+
+@njit(cache=True)
+def _primary_torque(J, Lambda, Jdot_v, J_spatial, Cv, g, xddot_c, W_T, gravity_compensation):
+    tau = J.T @ (Lambda @ (xddot_c - Jdot_v)) + J_spatial.T @ W_T + Cv
     if gravity_compensation:
-        tau = tau + terms.g
+        tau = tau + g
     return tau
+
+
+@njit(cache=True)
+def position_task_torque(
+    x, xdot, x_d, xdot_d, xddot_d, f_d, W_T, rows, K_p, K_v, K_f, normal, J, Lambda, Jdot_v, J_spatial, Cv, g,
+    gravity_compensation,
+):  # fmt: skip
+    """τ − τ₀ of a position task in one compiled call: :func:`command_acceleration` with F
+    the force of the wrench W_T = [M_T; f] on the task rows, then :func:`primary_torque`.
+    (n,) [N m]."""
+    F = W_T[3:][rows]
+    xddot_c = _command_acceleration(x_d - x, xdot, xdot_d, xddot_d, F, f_d, K_p, K_v, K_f, normal)
+    return _primary_torque(J, Lambda, Jdot_v, J_spatial, Cv, g, xddot_c, W_T, gravity_compensation)

@@ -9,9 +9,9 @@ from pydrake.systems.framework import LeafSystem
 from ..dynamics import RobotTerms
 from ..impedance import (
     ImpedanceGains,
-    command_acceleration,
     command_acceleration_from_error,
     pose_error,
+    position_task_torque,
     primary_torque,
     task_wrench,
     wrench_at_tool,
@@ -96,18 +96,29 @@ class ImpedanceController(LeafSystem):
         if len(self._rot_rows):
             output.SetFromVector(self._pose_torque(context, terms, W_T))
             return
-        F = W_T[3:][self._rows]
-        xddot_c = command_acceleration(
+        g = self._gains
+        tau = position_task_torque(
             terms.x,
             terms.xdot,
             self._x_d.Eval(context),
             self._xdot_d.Eval(context),
             self._xddot_d.Eval(context),
-            F,
             self._f_d.Eval(context)[0],
-            self._gains,
+            W_T,
+            self._rows,
+            g.K_p,
+            g.K_v,
+            g.K_f,
+            g.normal,
+            terms.J,
+            terms.Lambda,
+            terms.Jdot_v,
+            terms.J_spatial,
+            terms.Cv,
+            terms.g,
+            self._gravity,
         )
-        output.SetFromVector(primary_torque(terms, xddot_c, W_T, self._gravity))
+        output.SetFromVector(tau)
 
     def _pose_torque(self, context, terms, W_T):
         rot = self._rot_rows

@@ -67,31 +67,24 @@ class SurfaceReferenceSystem(LeafSystem):
         """Sizes of x_d, ẋ_d, ẍ_d, f_d, in_contact in the ``reference`` port (for a Demultiplexer)."""
         return [self._m, self._m, self._m, 1, 1]
 
-    def _contact(self, context) -> ContactState:
-        return ContactState(*context.get_discrete_state(self._state).value()[:4])
-
-    def _first_contact(self, context) -> float:
-        return context.get_discrete_state(self._state).GetAtIndex(4)
-
-    def _eval(self, context):
-        return self._ref.at(
-            context.get_time(), state=self._contact(context), t_first=self._first_contact(context)
-        )
+    def _contact(self, context) -> tuple[ContactState, float]:
+        """The contact state and the first contact's time."""
+        t_contact, r_contact, t_lost, t_low, first = context.get_discrete_state(self._state).value()
+        return ContactState(t_contact, r_contact, t_lost, t_low), first
 
     def _calc(self, context, output):
-        x_d, xdot_d, xddot_d, f_d = self._eval(context)
-        in_contact = float(self._contact(context).in_contact)
-        output.SetFromVector(np.concatenate([x_d, xdot_d, xddot_d, [f_d, in_contact]]))
+        state, first = self._contact(context)
+        x_d, xdot_d, xddot_d, f_d = self._ref.at(context.get_time(), state=state, t_first=first)
+        output.SetFromVector(np.concatenate([x_d, xdot_d, xddot_d, [f_d, float(state.in_contact)]]))
 
     def _update(self, context, discrete_state):
-        state = self._contact(context)
+        state, first = self._contact(context)
         f_n = float(self._ref.normal @ self._wrench.Eval(context)[3:][self._rows])
-        # r, the normal offset of x_d now: from the output, computed (and cached) for this
-        # instant's torque already; SlideAndPress.offset would evaluate the reference again.
+        # r, the normal offset of x_d now, from the output: computed (and cached) for this
+        # instant's torque already, so the path is not evaluated a second time.
         x_d = self._reference.Eval(context)[: self._m]
         r_now = x_d @ self._ref.normal - self._ref.x0 @ self._ref.normal
         new = update_contact(state, context.get_time(), f_n, self._threshold, self._loss_time, r_now)
-        first = self._first_contact(context)
         discrete_state.get_mutable_vector(self._state).SetFromVector(
             [new.t_contact, new.r_contact, new.t_lost, new.t_low, min(first, new.t_contact)]
         )
