@@ -25,6 +25,7 @@ from nsdrake.plant import add_station
 from nsdrake.priority import ORDERINGS, Criterion, Level, Mode, prioritized_velocity
 from nsdrake.reference import SlideAndPress
 from nsdrake.scenario import load_scenario
+from nsdrake.simulate import moving_link_geometries
 from nsdrake.systems import ForceSensor
 from nsdrake.systems.criteria import unpack_criterion
 
@@ -305,3 +306,42 @@ def test_controller_on_an_arm_nsdrake_did_not_build():
     ).stdout
     force = float(out.split("normal force")[1].split("N")[0])
     assert force == pytest.approx(5.0, rel=0.02)
+
+
+def test_diagnostic_ports_are_the_criteria_they_name():
+    """Each criterion's one packed port [Φ; p; s; a] is split by a Demultiplexer into the
+    controller's named ports: manipulability is w = √det(J Jᵀ), joint_torque_criterion is
+    ‖Jᵀ F_d‖², d_min is the smallest link–plate distance, all at the measured state and
+    against plain plant calls. A split out of order (value and switching quantity
+    swapped), or a criterion packed in the wrong layout, fails."""
+    scenario = load_scenario("fig3")
+    controller, station, _ = fig3_controller(scenario)
+    arm, n = station.arm_model, station.arm_model.n
+    rng = np.random.default_rng(5)
+    context = controller.CreateDefaultContext()
+    q = station.q0 + 0.1 * rng.standard_normal(n)
+    fixed_inputs(controller, context, q, np.zeros(n), rng)
+    J = plant_terms(arm, q, np.zeros(n))["J"]
+    F_d = scenario.reference.force * station.normal
+    port = lambda name: controller.GetOutputPort(name).Eval(context)[0]  # noqa: E731
+    assert port("manipulability") == pytest.approx(np.sqrt(np.linalg.det(J @ J.T)), rel=1e-12)
+    assert port("joint_torque_criterion") == pytest.approx(np.sum((J.T @ F_d) ** 2), rel=1e-12)
+    # d_min from Drake's own signed-distance queries on the simulated station's geometry
+    # (its GJK distance for a capsule and a box is good to about 1e-5 m).
+    builder = DiagramBuilder()
+    sim_station = add_station(builder, scenario)
+    diagram = builder.Build()
+    root = diagram.CreateDefaultContext()
+    sim_station.plant.SetPositions(sim_station.plant.GetMyMutableContextFromRoot(root), q)
+    sg = sim_station.scene_graph
+    query = sg.get_query_output_port().Eval(sg.GetMyContextFromRoot(root))
+    want = min(
+        query.ComputeSignedDistancePairClosestPoints(link, obstacle).distance
+        for link in moving_link_geometries(sim_station)
+        for obstacle in sim_station.obstacle_geometries
+    )
+    assert abs(port("d_min") - want) < 1e-4
+    obstacle = controller.GetSubsystemByName("obstacle_criterion")
+    packed = obstacle.GetOutputPort("criterion").Eval(obstacle.GetMyContextFromRoot(context))
+    _, p, s, _ = unpack_criterion(packed)
+    assert (s, p) == (port("d_min"), port("obstacle_potential"))
