@@ -42,8 +42,26 @@ def limit_torque(tau_task, tau0, lower, upper):
 def torque_window(tau_max, rate_max, period, tau_prev):
     """(lower, upper) per joint: ±τ_max, narrowed to τ_prev ± ρ_max T when a previous
     torque exists (``tau_prev`` None: the first period, no rate limit). [N m]."""
-    lower, upper = -tau_max, tau_max
-    if tau_prev is not None:
-        step = rate_max * period
-        lower, upper = np.maximum(lower, tau_prev - step), np.minimum(upper, tau_prev + step)
-    return lower, upper
+    if tau_prev is None:
+        return -tau_max, tau_max.copy()
+    return _window(tau_max, rate_max, period, tau_prev, True)
+
+
+@njit(cache=True)
+def _window(tau_max, rate_max, period, tau_prev, has_previous):
+    if not has_previous:
+        return -tau_max, tau_max.copy()
+    step = rate_max * period
+    return np.maximum(-tau_max, tau_prev - step), np.minimum(tau_max, tau_prev + step)
+
+
+@njit(cache=True)
+def limited_torque(tau_task, tau0, tau_max, rate_max, period, tau_prev, has_previous):
+    """[τ; s; clipped] (n + 2): :func:`limit_torque` within :func:`torque_window`, in one
+    compiled call (``has_previous`` False: no previous torque, ``tau_prev`` ignored)."""
+    lower, upper = _window(tau_max, rate_max, period, tau_prev, has_previous)
+    tau, s, clipped = limit_torque(tau_task, tau0, lower, upper)
+    out = np.empty(tau.shape[0] + 2)
+    out[: tau.shape[0]] = tau
+    out[-2], out[-1] = s, clipped
+    return out

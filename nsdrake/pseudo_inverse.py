@@ -24,6 +24,7 @@ import enum
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from pydrake.math import inv
 
 
@@ -75,14 +76,22 @@ class GeneralizedInverse:
         J, n = terms.J, terms.n
         if self.inertia_weighted:
             W_inv, A_inv = terms.H_inv, terms.Lambda
-            J_pinv = terms.H_inv_Jt @ A_inv
+            J_pinv, N = right_inverse_and_projector(terms.H_inv_Jt, A_inv, J)
         else:
             W_inv = np.eye(n)
             A = J @ J.T
             if self.damping:
                 A = A + self.damping**2 * np.eye(J.shape[0])
             A_inv = inv(A)
-            J_pinv = J.T @ A_inv
-        N = -(J_pinv @ J)
-        N[np.diag_indices(n)] += 1.0  # I − J^# J
+            J_pinv, N = right_inverse_and_projector(np.ascontiguousarray(J.T), A_inv, J)
         return InverseAtState(J_pinv=J_pinv, N=N, A_inv=A_inv, W_inv=W_inv)
+
+
+@njit(cache=True)
+def right_inverse_and_projector(W_inv_Jt: np.ndarray, A_inv: np.ndarray, J: np.ndarray):
+    """(J^#, N): J^# = W⁻¹ Jᵀ A⁻¹ and N = I − J^# J (Eq. 4), in one compiled call."""
+    J_pinv = W_inv_Jt @ A_inv
+    N = -(J_pinv @ J)
+    for i in range(N.shape[0]):
+        N[i, i] += 1.0
+    return J_pinv, N

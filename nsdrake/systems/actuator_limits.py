@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from ..actuator_limits import limit_torque, torque_window
+from ..actuator_limits import limited_torque
 
 
 class ActuatorLimitsSystem(LeafSystem):
@@ -48,10 +48,18 @@ class ActuatorLimitsSystem(LeafSystem):
 
     def _calc(self, context, output):
         previous = context.get_discrete_state(self._previous).value()
-        tau_prev = previous[: self._n] if previous[self._n] else None
-        lower, upper = torque_window(self._tau_max, self._rate_max, self._period, tau_prev)
-        tau, s, clipped = limit_torque(self._task.Eval(context), self._tau0.Eval(context), lower, upper)
-        output.SetFromVector(np.concatenate([tau, [s, float(clipped)]]))
+        n = self._n
+        output.SetFromVector(
+            limited_torque(
+                self._task.Eval(context),
+                self._tau0.Eval(context),
+                self._tau_max,
+                self._rate_max,
+                self._period,
+                previous[:n],
+                previous[n] != 0.0,
+            )
+        )
 
     def _store(self, context, state):
         tau = self._limited.Eval(context)[: self._n]

@@ -12,6 +12,7 @@ ports (``d_min``, ``manipulability``, …).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
@@ -35,6 +36,7 @@ def criterion_size(n: int) -> int:
     return n + 3
 
 
+@njit(cache=True)
 def pack_criterion(Phi: np.ndarray, p: float, s: float, a: float) -> np.ndarray:
     """[Φ; p; s; a] (:data:`CRITERION_LAYOUT`)."""
     out = np.empty(Phi.shape[0] + 3)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import MultibodyPlant
@@ -21,6 +22,19 @@ def sensor_tare(plant: MultibodyPlant, sensor_joint: Joint) -> tuple[np.ndarray,
     p_Wcm = plant.CalcCenterOfMassPositionInWorld(context, [instance])
     weight = mass * plant.gravity_field().gravity_vector()
     return p_WSo, -np.concatenate([np.cross(p_Wcm - p_WSo, weight), weight])
+
+
+@njit(cache=True)
+def contact_wrench(R_WJc: np.ndarray, F_J: np.ndarray, tare: np.ndarray) -> np.ndarray:
+    """W_c = −(W_J − W_tare) (:class:`ForceSensor`) from the weld's reaction F_J = [moment;
+    force] in the joint's child frame, rotated to world by R_WJc; zero (no sample) for an
+    all-zero reading. (6,) [N m, N]."""
+    W_J = np.empty(6)
+    W_J[:3] = R_WJc @ F_J[:3]
+    W_J[3:] = R_WJc @ F_J[3:]
+    if not W_J.any():
+        return W_J
+    return -(W_J - tare)
 
 
 class ForceSensor(LeafSystem):
@@ -76,9 +90,4 @@ class ForceSensor(LeafSystem):
 
     def _calc_wrench(self, context, output):
         F_J = self._reactions.Eval(context)[self._index]
-        R = self._R_WJc
-        W_J = np.concatenate([R @ F_J.rotational(), R @ F_J.translational()])
-        if not W_J.any():
-            output.SetFromVector(W_J)
-            return
-        output.SetFromVector(-(W_J - self._tare))
+        output.SetFromVector(contact_wrench(self._R_WJc, F_J.get_coeffs(), self._tare))
