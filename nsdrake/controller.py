@@ -366,12 +366,11 @@ def _add_criteria(builder, terms_port, config, normal, model, model_terms) -> di
         systems[Criterion.obstacle] = ObstacleCriterionSystem(
             model=model, influence_distance=crit.obstacle.influence_distance, model_terms=model_terms
         )
-    systems[Criterion.joint_limits] = JointLimitsCriterionSystem(
-        lower=model.plant.GetPositionLowerLimits(),
-        upper=model.plant.GetPositionUpperLimits(),
-        influence=crit.joint_limits.influence,
-        model_terms=model_terms,
-    )
+    lower, upper = model.plant.GetPositionLowerLimits(), model.plant.GetPositionUpperLimits()
+    if np.isfinite(lower).any() or np.isfinite(upper).any():
+        systems[Criterion.joint_limits] = JointLimitsCriterionSystem(
+            lower=lower, upper=upper, influence=crit.joint_limits.influence, model_terms=model_terms
+        )
     added = {}
     for c in Criterion:
         if c in systems:
@@ -397,10 +396,13 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
         c: system.GetOutputPort("criterion")
         for c, system in _add_criteria(builder, terms_port, config, normal, model, model_terms).items()
     }
-    if Criterion.obstacle not in criteria:  # no geometry: no obstacle in reach, d_min = ∞
-        criteria[Criterion.obstacle] = builder.AddNamedSystem(
-            "no_obstacle", ConstantVectorSource(pack_criterion(np.zeros(n), 0.0, np.inf, 0.0))
-        ).get_output_port()
+    # No obstacle geometry (d_min = ∞), no joint limits (margin = ∞): the criterion's
+    # constant value, without a system to evaluate at every tick.
+    for c in (Criterion.obstacle, Criterion.joint_limits):
+        if c not in criteria:
+            criteria[c] = builder.AddNamedSystem(
+                f"no_{c.value}", ConstantVectorSource(pack_criterion(np.zeros(n), 0.0, np.inf, 0.0))
+            ).get_output_port()
     gains = {
         Criterion.obstacle: d.criteria.obstacle.gain,
         Criterion.joint_torque: d.criteria.joint_torque.gain,

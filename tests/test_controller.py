@@ -201,8 +201,7 @@ def test_selector_blends_from_the_old_ordering_after_a_switch():
     }
     levels = {}
     for c in Criterion:
-        system = controller.GetSubsystemByName(f"{c.value}_criterion")
-        packed = system.GetOutputPort("criterion").Eval(system.GetMyContextFromRoot(context))
+        packed = selector.GetInputPort(c.value).Eval(sel_context)  # a criterion system, or a constant
         gradient, _, _, a = unpack_criterion(packed)
         levels[c] = Level(gradient, gains[c], a if gains[c] else 0.0)
 

@@ -40,10 +40,12 @@ the criterion is meant to keep the arm in), use the witness directly.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 from pydrake.geometry import Box, Capsule, Role, Sphere
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
@@ -53,9 +55,9 @@ from ..reference import smoothstep
 from .distance import segments_box, segments_sphere
 
 
-@dataclass(frozen=True)
-class DistancePair:
-    """One link–obstacle pair at one configuration."""
+class DistancePair(NamedTuple):
+    """One link–obstacle pair at one configuration (a NamedTuple: the criterion builds a
+    few per control tick, and a frozen dataclass costs several times more to create)."""
 
     distance: float  # signed distance d_ℓo [m]
     d_distance_dq: np.ndarray | None  # (n,) ∂d/∂q [m/rad], None when not needed (out of range)
@@ -148,15 +150,13 @@ class ObstacleDistances:
                 forms.append(None)
         return forms
 
-    def _segments(self, plant_context) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The links' body rotations R_WB (k, 3, 3) and origins p_WB (k, 3), and their axis
-        segments A, B (k, 3), world (a link without an axis gets a zero-length segment
-        at its geometry's origin, never used)."""
+    def _segments(self, plant_context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The links' body poses M = [R_WB | p_WB] (k, 3, 4) and their axis segments A, B
+        (k, 3), world (a link without an axis gets a zero-length segment at its
+        geometry's origin, never used)."""
         M = np.array([self.plant.EvalBodyPoseInWorld(plant_context, b).GetAsMatrix34() for b in self._bodies])
-        R_WB, p_WB = M[:, :, :3], M[:, :, 3]
-        centre = (R_WB @ self._p_BG[:, :, None])[:, :, 0] + p_WB
-        half_axis = self._half_lengths[:, None] * (R_WB @ self._z_BG[:, :, None])[:, :, 0]
-        return R_WB, p_WB, centre - half_axis, centre + half_axis
+        A, B = _axis_segments(M, self._p_BG, self._z_BG, self._half_lengths)
+        return M, A, B
 
     def pairs(self, plant_context: Context, gradient_within: float, query=None) -> list[DistancePair]:
         """Every link–obstacle pair; ∂d/∂q only for pairs closer than ``gradient_within``.
@@ -166,15 +166,16 @@ class ObstacleDistances:
         """
         if self._closed_forms is None:
             self._closed_forms = self._obstacle_forms(plant_context)
-        R, p, A, B = self._segments(plant_context)
-        rows = [form(A, B) if form is not None else None for form in self._closed_forms]
+        M, A, B = self._segments(plant_context)
+        # Per obstacle with a closed form: rows [φ, ∇φ, S] per link, and S in each link's body frame.
+        rows = [None if form is None else form(A, B) for form in self._closed_forms]
+        in_body = [None if r is None else _in_body_frames(M, r[:, 4:7]) for r in rows]
         plant, out = self.plant, []
         for k, (g_link, link_name, body, X_BG, axis) in enumerate(self._links):
-            R_WB, p_WB = R[k], p[k]
             for o, (g_obs, obs_name) in enumerate(self._obstacles):
                 row = rows[o][k] if rows[o] is not None and axis is not None else None
-                if row is not None and not np.isnan(row[0]):
-                    distance, n_W, p_BC = row[0] - axis[0], row[1:4], R_WB.T @ (row[4:7] - p_WB)
+                if row is not None and not math.isnan(row[0]):
+                    distance, n_W, p_BC = row[0] - axis[0], row[1:4], in_body[o][k]
                 else:
                     if callable(query):
                         query = query()
@@ -190,7 +191,7 @@ class ObstacleDistances:
                         self._world,
                     )
                     grad = n_W @ J_C
-                out.append(DistancePair(distance, grad, link_name, obs_name))
+                out.append(DistancePair(float(distance), grad, link_name, obs_name))
         return out
 
     def _queried(self, query, g_link, g_obs, X_BG, axis, gradient_within):
@@ -257,6 +258,29 @@ class ObstacleDistances:
             if result.id_G == g_obs:
                 return float(result.distance), np.asarray(result.grad_W)
         raise RuntimeError("the obstacle geometry does not support point distance queries")
+
+
+@njit(cache=True)
+def _axis_segments(M, p_BG, z_BG, half_lengths):
+    """(A, B): each link's axis segment, world, from its body pose M[k] = [R_WB | p_WB], its
+    geometry origin p_BG[k] and axis z_BG[k] in the body frame, and half length."""
+    k = M.shape[0]
+    A, B = np.empty((k, 3)), np.empty((k, 3))
+    for i in range(k):
+        R = M[i, :, :3]
+        centre = R @ p_BG[i] + M[i, :, 3]
+        half_axis = half_lengths[i] * (R @ z_BG[i])
+        A[i], B[i] = centre - half_axis, centre + half_axis
+    return A, B
+
+
+@njit(cache=True)
+def _in_body_frames(M, p_W):
+    """p_B = R_WBᵀ (p_W − p_WB) for each link's pose M[k] and world point p_W[k]. (k, 3)."""
+    out = np.empty((M.shape[0], 3))
+    for i in range(M.shape[0]):
+        out[i] = M[i, :, :3].T @ (p_W[i] - M[i, :, 3])
+    return out
 
 
 def _box_form(R_WO, p_WO, half, A, B):
