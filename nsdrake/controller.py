@@ -28,7 +28,7 @@ from .systems import (
     RobotTermsSystem,
     SelfMotionSweep,
 )
-from .systems.criteria import pack_criterion
+from .systems.criteria import criterion_parts, pack_criterion
 
 
 class ControllerConfigError(ValueError):
@@ -435,14 +435,9 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
     parts = {}
     for c, port in criteria.items():
         builder.Connect(port, selector.GetInputPort(c.value))
-        parts[c] = _split(
-            builder, f"{c.value}_parts", port, {"gradient": n, "value": 1, "switching": 1, "activation": 1}
-        )
+        parts[c] = _split(builder, f"{c.value}_parts", port, criterion_parts(n))
     selection = _split(
-        builder,
-        "selection_parts",
-        selector.GetOutputPort("selection"),
-        {"desired_null_space_velocity": n, "mode": 1, "speed_scale": 1},
+        builder, "selection_parts", selector.GetOutputPort("selection"), selector.output_parts()
     )
     diagnostics = {
         "mode": selection["mode"],
@@ -488,12 +483,7 @@ def _add_actuator_limits(builder, impedance, null_space_torque, config, model) -
     )
     builder.Connect(impedance.get_output_port(), limits.GetInputPort("task_torque"))
     builder.Connect(null_space_torque, limits.GetInputPort("null_space_torque"))
-    return _split(
-        builder,
-        "limited_parts",
-        limits.GetOutputPort("limited"),
-        {"generalized_force": model.n, "saturation": 2},
-    )
+    return _split(builder, "limited_parts", limits.GetOutputPort("limited"), limits.output_parts())
 
 
 def _add_null_space(builder, terms, qdot_ns, config, model_terms) -> dict:
@@ -513,10 +503,6 @@ def _add_null_space(builder, terms, qdot_ns, config, model_terms) -> dict:
     )
     builder.Connect(terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
     builder.Connect(qdot_ns, null_space.GetInputPort("desired_null_space_velocity"))
-    n = model_terms.n
     return _split(
-        builder,
-        "null_space_parts",
-        null_space.GetOutputPort("null_space"),
-        {"generalized_force": n, "null_space_velocity_error": n, "lyapunov": 1},
+        builder, "null_space_parts", null_space.GetOutputPort("null_space"), null_space.output_parts()
     )

@@ -46,6 +46,10 @@ class ActuatorLimitsSystem(LeafSystem):
         if np.isfinite(self._rate_max).any():
             self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._store)
 
+    def output_parts(self) -> dict[str, int]:
+        """The parts of the ``limited`` port and their sizes, in order."""
+        return {"generalized_force": self._n, "saturation": 2}
+
     def _calc(self, context, output):
         previous = context.get_discrete_state(self._previous).value()
         n = self._n

@@ -26,14 +26,17 @@ from ..criteria.obstacle import activation as obstacle_activation
 from ..dynamics import RobotTerms
 from ._util import declare_scratch
 
-# Entries of a criterion port after its n gradient entries: [Φ (n); p; s; a].
-VALUE, SWITCHING, ACTIVATION = 0, 1, 2
-CRITERION_LAYOUT = ("gradient", "value", "switching", "activation")
+CRITERION_LAYOUT = ("gradient", "value", "switching", "activation")  # [Φ (n); p; s; a]
+
+
+def criterion_parts(n: int) -> dict[str, int]:
+    """The parts of a criterion port for n joints and their sizes, in order."""
+    return dict(zip(CRITERION_LAYOUT, (n, 1, 1, 1), strict=True))
 
 
 def criterion_size(n: int) -> int:
     """Length of a criterion port for n joints."""
-    return n + 3
+    return sum(criterion_parts(n).values())
 
 
 @njit(cache=True)

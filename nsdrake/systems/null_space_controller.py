@@ -66,6 +66,10 @@ class NullSpaceController(LeafSystem):
         deps.add(self.discrete_state_ticket(self._previous))
         self.DeclareVectorOutputPort("null_space", 2 * n + 1, self._calc, prerequisites_of_calc=deps)
 
+    def output_parts(self) -> dict[str, int]:
+        """The parts of the ``null_space`` port and their sizes, in order."""
+        return {"generalized_force": self._n, "null_space_velocity_error": self._n, "lyapunov": 1}
+
     def desired_acceleration(self, context) -> np.ndarray:
         """q̈_dⁿ: (q̇_dⁿ(t) − q̇_dⁿ(t − T)) / T, or zero without a previous sample or feedforward."""
         previous = context.get_discrete_state(self._previous).value()

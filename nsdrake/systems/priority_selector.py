@@ -98,6 +98,10 @@ class PrioritySelector(LeafSystem):
         deps |= {self.discrete_state_ticket(self._state), self.time_ticket()}
         self.DeclareVectorOutputPort("selection", n + 2, self._calc, prerequisites_of_calc=deps)
 
+    def output_parts(self) -> dict[str, int]:
+        """The parts of the ``selection`` port and their sizes, in order."""
+        return {"desired_null_space_velocity": self._n, "mode": 1, "speed_scale": 1}
+
     def _stacked(self, context) -> np.ndarray:
         """The criteria ports, one row each in Criterion order. (k, n + 3)."""
         return np.array([port.Eval(context) for port in self._criteria])

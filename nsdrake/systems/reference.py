@@ -31,7 +31,7 @@ class SurfaceReferenceSystem(LeafSystem):
     f enters. ``reference`` is [x_d; ẋ_d; ẍ_d; f_d; in_contact]: the desired motion
     in task coordinates (m each) [m, m/s, m/s²], the desired normal force f_d [N],
     and 1 while in contact, 0 before it and after it was lost (one port, evaluated
-    once per tick; :class:`SurfaceReference` splits it into named ports).
+    once per tick; :class:`SurfaceReference` splits it into named ports, :meth:`output_parts`).
     """
 
     def __init__(
@@ -63,9 +63,9 @@ class SurfaceReferenceSystem(LeafSystem):
             prerequisites_of_calc={self.time_ticket(), self.discrete_state_ticket(self._state)},
         )
 
-    def output_sizes(self) -> list[int]:
-        """Sizes of x_d, ẋ_d, ẍ_d, f_d, in_contact in the ``reference`` port (for a Demultiplexer)."""
-        return [self._m, self._m, self._m, 1, 1]
+    def output_parts(self) -> dict[str, int]:
+        """The parts of the ``reference`` port and their sizes, in order."""
+        return {"x_d": self._m, "xdot_d": self._m, "xddot_d": self._m, "f_d": 1, "in_contact": 1}
 
     def _contact(self, context) -> tuple[ContactState, float]:
         """The contact state and the first contact's time."""
@@ -135,9 +135,9 @@ class SurfaceReference(Diagram):
                 loss_time=loss_time,
             ),
         )
-        parts = builder.AddNamedSystem("parts", Demultiplexer(leaf.output_sizes()))
+        parts = builder.AddNamedSystem("parts", Demultiplexer(list(leaf.output_parts().values())))
         builder.Connect(leaf.GetOutputPort("reference"), parts.get_input_port())
         builder.ExportInput(leaf.GetInputPort("measured_wrench"), "measured_wrench")
-        for k, name in enumerate(("x_d", "xdot_d", "xddot_d", "f_d", "in_contact")):
+        for k, name in enumerate(leaf.output_parts()):
             builder.ExportOutput(parts.get_output_port(k), name)
         builder.BuildInto(self)
