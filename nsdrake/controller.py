@@ -389,7 +389,6 @@ def _split(builder, name: str, port, sizes: dict[str, int]) -> dict:
 def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
     """Criteria → priority selector (or a prescribed sweep) → q̇_dⁿ; returns its port and
     the diagnostic ports to export."""
-    d = config.desired_null_space
     n = model.n
     terms_port = terms.GetOutputPort("robot_terms")
     criteria = {
@@ -403,34 +402,7 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
             criteria[c] = builder.AddNamedSystem(
                 f"no_{c.value}", ConstantVectorSource(pack_criterion(np.zeros(n), 0.0, np.inf, 0.0))
             ).get_output_port()
-    gains = {
-        Criterion.obstacle: d.criteria.obstacle.gain,
-        Criterion.joint_torque: d.criteria.joint_torque.gain,
-        Criterion.manipulability: d.criteria.manipulability.gain,
-        Criterion.joint_limits: d.criteria.joint_limits.gain,
-    }
-    sel = d.selector
-    selector = builder.AddNamedSystem(
-        "priority_selector",
-        PrioritySelector(
-            inverse=generalized_inverse(config),
-            gains=gains,
-            limits=SelectorLimits(
-                d_lim=sel.d_lim,
-                w_lim=sel.w_lim,
-                d_band=sel.d_band,
-                w_band=sel.w_band,
-                q_lim=sel.q_lim,
-                q_band=sel.q_band,
-            ),
-            blend_time=sel.blend_time,
-            rotate_gradient=d.rotate_gradient,
-            speed_limits=speed_limits(config, model),
-            speed_headroom=d.speed_headroom,
-            period=config.period,
-            model_terms=model_terms,
-        ),
-    )
+    selector = _add_selector(builder, config, model, model_terms)
     builder.Connect(terms_port, selector.GetInputPort("robot_terms"))
     parts = {}
     for c, port in criteria.items():
@@ -449,24 +421,59 @@ def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
         "d_min": parts[Criterion.obstacle]["switching"],
         "obstacle_potential": parts[Criterion.obstacle]["value"],
     }
-    command = selection["desired_null_space_velocity"]
-    if d.source == "sweep":
-        sw = d.sweep
-        sweep = builder.AddNamedSystem(
-            "self_motion_sweep",
-            SelfMotionSweep(
-                inverse=generalized_inverse(config),
-                direction=np.array([sw.direction.get(j, 0.0) for j in model.joint_names]),
-                amplitude=sw.amplitude,
-                frequency=sw.frequency,
-                start_time=sw.start_time,
-                ramp_time=sw.ramp_time,
-                model_terms=model_terms,
+    if config.desired_null_space.source != "sweep":
+        return selection["desired_null_space_velocity"], diagnostics
+    sweep = _add_sweep(builder, config, model, model_terms)
+    builder.Connect(terms_port, sweep.get_input_port())
+    return sweep.get_output_port(), diagnostics
+
+
+def _add_selector(builder, config, model, model_terms) -> PrioritySelector:
+    d = config.desired_null_space
+    sel = d.selector
+    return builder.AddNamedSystem(
+        "priority_selector",
+        PrioritySelector(
+            inverse=generalized_inverse(config),
+            gains={
+                Criterion.obstacle: d.criteria.obstacle.gain,
+                Criterion.joint_torque: d.criteria.joint_torque.gain,
+                Criterion.manipulability: d.criteria.manipulability.gain,
+                Criterion.joint_limits: d.criteria.joint_limits.gain,
+            },
+            limits=SelectorLimits(
+                d_lim=sel.d_lim,
+                w_lim=sel.w_lim,
+                d_band=sel.d_band,
+                w_band=sel.w_band,
+                q_lim=sel.q_lim,
+                q_band=sel.q_band,
             ),
-        )
-        builder.Connect(terms_port, sweep.get_input_port())
-        command = sweep.get_output_port()
-    return command, diagnostics
+            blend_time=sel.blend_time,
+            rotate_gradient=d.rotate_gradient,
+            speed_limits=speed_limits(config, model),
+            speed_headroom=d.speed_headroom,
+            period=config.period,
+            model_terms=model_terms,
+        ),
+    )
+
+
+def _add_sweep(builder, config, model, model_terms) -> SelfMotionSweep:
+    """A prescribed self-motion in place of the selector's q̇_dⁿ (``source: sweep``)."""
+    sw = config.desired_null_space.sweep
+    return builder.AddNamedSystem(
+        "self_motion_sweep",
+        SelfMotionSweep(
+            inverse=generalized_inverse(config),
+            direction=np.array([sw.direction.get(j, 0.0) for j in model.joint_names]),
+            amplitude=sw.amplitude,
+            frequency=sw.frequency,
+            start_time=sw.start_time,
+            ramp_time=sw.ramp_time,
+            model_terms=model_terms,
+        ),
+    )
 
 
 def _add_actuator_limits(builder, impedance, null_space_torque, config, model) -> dict:
