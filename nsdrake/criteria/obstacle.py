@@ -52,7 +52,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import Context
 
 from ..reference import smoothstep
-from .distance import segments_box, segments_sphere
+from .distance import _rotate, segments_box, segments_sphere
 
 
 class DistancePair(NamedTuple):
@@ -268,8 +268,8 @@ def _axis_segments(M, p_BG, z_BG, half_lengths):
     A, B = np.empty((k, 3)), np.empty((k, 3))
     for i in range(k):
         R = M[i, :, :3]
-        centre = R @ p_BG[i] + M[i, :, 3]
-        half_axis = half_lengths[i] * (R @ z_BG[i])
+        centre = _rotate(R, p_BG[i], False) + M[i, :, 3]
+        half_axis = half_lengths[i] * _rotate(R, z_BG[i], False)
         A[i], B[i] = centre - half_axis, centre + half_axis
     return A, B
 
@@ -279,7 +279,7 @@ def _in_body_frames(M, p_W):
     """p_B = R_WBᵀ (p_W − p_WB) for each link's pose M[k] and world point p_W[k]. (k, 3)."""
     out = np.empty((M.shape[0], 3))
     for i in range(M.shape[0]):
-        out[i] = M[i, :, :3].T @ (p_W[i] - M[i, :, 3])
+        out[i] = _rotate(M[i, :, :3], p_W[i] - M[i, :, 3], True)
     return out
 
 
