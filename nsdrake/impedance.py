@@ -185,17 +185,12 @@ def primary_torque(
     the tool point, in world coordinates; for a pure force, J_Tᵀ W_T = Jᵀ F.
     ``gravity_compensation`` False drops g (harmless in the horizontal plane).
     """
-    return _primary_torque(
-        terms.J,
-        terms.Lambda,
-        terms.Jdot_v,
-        terms.J_spatial,
-        terms.Cv,
-        terms.g,
-        xddot_c,
-        W_T,
-        gravity_compensation,
-    )
+    return _primary_torque(*_model_terms(terms), xddot_c, W_T, gravity_compensation)
+
+
+def _model_terms(terms: RobotTerms) -> tuple:
+    """The terms Eqs. 6–7 need, as the compiled kernels take them: J, Λ, J̇ q̇, J_T, C q̇, g."""
+    return terms.J, terms.Lambda, terms.Jdot_v, terms.J_spatial, terms.Cv, terms.g
 
 
 @njit(cache=True)
@@ -206,14 +201,32 @@ def _primary_torque(J, Lambda, Jdot_v, J_spatial, Cv, g, xddot_c, W_T, gravity_c
     return tau
 
 
-@njit(cache=True)
 def position_task_torque(
+    terms: RobotTerms,
+    x_d: np.ndarray,
+    xdot_d: np.ndarray,
+    xddot_d: np.ndarray,
+    f_d: float,
+    W_T: np.ndarray,
+    rows: np.ndarray,
+    gains: ImpedanceGains,
+    gravity_compensation: bool = True,
+) -> np.ndarray:
+    """τ − τ₀ of a position task in one compiled call: :func:`command_acceleration` with F
+    the force of the wrench W_T = [M_T; f] on the task ``rows``, then :func:`primary_torque`.
+    (n,) [N m]."""
+    g = gains
+    return _position_task_torque(
+        terms.x, terms.xdot, x_d, xdot_d, xddot_d, float(f_d), W_T, rows, g.K_p, g.K_v, g.K_f, g.normal,
+        *_model_terms(terms), gravity_compensation,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _position_task_torque(
     x, xdot, x_d, xdot_d, xddot_d, f_d, W_T, rows, K_p, K_v, K_f, normal, J, Lambda, Jdot_v, J_spatial, Cv, g,
     gravity_compensation,
 ):  # fmt: skip
-    """τ − τ₀ of a position task in one compiled call: :func:`command_acceleration` with F
-    the force of the wrench W_T = [M_T; f] on the task rows, then :func:`primary_torque`.
-    (n,) [N m]."""
     F = W_T[3:][rows]
     xddot_c = _command_acceleration(x_d - x, xdot, xdot_d, xddot_d, F, f_d, K_p, K_v, K_f, normal)
     return _primary_torque(J, Lambda, Jdot_v, J_spatial, Cv, g, xddot_c, W_T, gravity_compensation)

@@ -96,26 +96,15 @@ class ImpedanceController(LeafSystem):
         if len(self._rot_rows):
             output.SetFromVector(self._pose_torque(context, terms, W_T))
             return
-        g = self._gains
         tau = position_task_torque(
-            terms.x,
-            terms.xdot,
+            terms,
             self._x_d.Eval(context),
             self._xdot_d.Eval(context),
             self._xddot_d.Eval(context),
             self._f_d.Eval(context)[0],
             W_T,
             self._rows,
-            g.K_p,
-            g.K_v,
-            g.K_f,
-            g.normal,
-            terms.J,
-            terms.Lambda,
-            terms.Jdot_v,
-            terms.J_spatial,
-            terms.Cv,
-            terms.g,
+            self._gains,
             self._gravity,
         )
         output.SetFromVector(tau)
