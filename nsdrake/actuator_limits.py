@@ -39,16 +39,11 @@ def limit_torque(tau_task, tau0, lower, upper):
     return tau, s, clipped
 
 
-def torque_window(tau_max, rate_max, period, tau_prev):
-    """(lower, upper) per joint: ±τ_max, narrowed to τ_prev ± ρ_max T when a previous
-    torque exists (``tau_prev`` None: the first period, no rate limit). [N m]."""
-    if tau_prev is None:
-        return -tau_max, tau_max.copy()
-    return _window(tau_max, rate_max, period, tau_prev, True)
-
-
 @njit(cache=True)
-def _window(tau_max, rate_max, period, tau_prev, has_previous):
+def torque_window(tau_max, rate_max, period, tau_prev, has_previous):
+    """(lower, upper) per joint: ±τ_max, narrowed to τ_prev ± ρ_max T when a previous
+    torque exists (``has_previous`` False: the first period, no rate limit, ``tau_prev``
+    ignored). [N m]."""
     if not has_previous:
         return -tau_max, tau_max.copy()
     step = rate_max * period
@@ -59,7 +54,7 @@ def _window(tau_max, rate_max, period, tau_prev, has_previous):
 def limited_torque(tau_task, tau0, tau_max, rate_max, period, tau_prev, has_previous):
     """[τ; s; clipped] (n + 2): :func:`limit_torque` within :func:`torque_window`, in one
     compiled call (``has_previous`` False: no previous torque, ``tau_prev`` ignored)."""
-    lower, upper = _window(tau_max, rate_max, period, tau_prev, has_previous)
+    lower, upper = torque_window(tau_max, rate_max, period, tau_prev, has_previous)
     tau, s, clipped = limit_torque(tau_task, tau0, lower, upper)
     out = np.empty(tau.shape[0] + 2)
     out[: tau.shape[0]] = tau

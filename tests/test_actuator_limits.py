@@ -42,9 +42,9 @@ def test_task_torque_outside_its_window_is_clipped_and_counted():
 
 def test_rate_window_narrows_around_the_previous_torque():
     """The window is ±τ_max ∩ τ_prev ± ρ T, and no rate limit before a previous torque."""
-    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, np.array([9.9]))
+    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, np.array([9.9]), True)
     assert lower[0] == pytest.approx(9.7) and upper[0] == 10.0
-    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, None)
+    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, np.array([9.9]), False)
     assert lower[0] == -10.0 and upper[0] == 10.0
 
 

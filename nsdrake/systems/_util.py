@@ -6,14 +6,6 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import ValueProducer
 
 
-def python_value_producer(compute) -> ValueProducer:
-    """A ValueProducer for a cache entry holding whatever ``compute(context)`` returns."""
-    return ValueProducer(
-        allocate=lambda: AbstractValue.Make(object()),
-        calc=lambda context, value: value.set_value(compute(context)),
-    )
-
-
 def declare_scratch(system, create):
     """A cache entry holding ``create()`` (a model context) that ``system`` may write q
     and q̇ into while computing an output: per-context scratch memory (no
