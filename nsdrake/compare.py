@@ -35,7 +35,7 @@ import numpy as np
 
 from .dynamics import ArmModel
 from .metrics import SETTLE_TIME, first_contact_index, torque_steps
-from .output import record_written
+from .output import declare, record_written
 from .realism_measures import (
     MODE_CRITERION,
     MODE_NAME,
@@ -490,10 +490,15 @@ def run_family(
     for i in range(len(family.variants)):
         variant_scenario(family, i, config, duration)  # every input error before any simulation
     folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
+    declare(out, [*COMPARE_FILES, *(f"{f.relative_to(out).as_posix()}/traces.csv" for f in folders)])
     try:
         return _run_family(family, out, folders, config, duration, jobs, isolate, progress)
     finally:  # done or failed: the manifest lists what the run wrote, for a later --overwrite
         record_written(out)
+
+
+# The files a comparison writes beside its variants' traces (declared before any is written).
+COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png")
 
 
 def _run_family(family, out, folders, config, duration, jobs, isolate, progress) -> FamilyResult:

@@ -1,10 +1,19 @@
 """Output folders: claimed atomically, marked with what nsdrake wrote, never taken from a user.
 
-A run claims its folder by creating the manifest ``.nsdrake-run`` in it with O_EXCL: of
-two runs that reach the same folder at once, exactly one succeeds, and the other moves on
-to the next default folder (``runs/NAME-2``, …) or, with an explicit ``--out``, stops.
-When the run ends (done or failed), the manifest lists every file and folder it wrote.
-``--overwrite`` removes exactly those, and refuses a folder holding anything else.
+A command claims its folder by creating the manifest ``.nsdrake-run`` in it with O_EXCL:
+of two commands that reach the same folder at once, exactly one succeeds, and the other
+moves on to the next default folder (``runs/NAME-2``, …) or, with an explicit ``--out``,
+stops. The manifest names the process that holds the claim, and lists, *before* it is
+written, every file the command may write there (:func:`declare`): a command killed at
+any moment (SIGKILL, a power cut) leaves a manifest that covers everything it wrote.
+When the command ends (done or failed), :func:`record_written` trims the list to what
+exists and releases the claim.
+
+``--overwrite`` (:func:`prepare_output_folder`) removes exactly the files listed, and
+refuses, removing nothing, a folder holding anything else, a folder without a manifest,
+and a folder whose claim is held by a live nsdrake process. A claim whose process is gone
+(killed) is stale: it is reclaimed like a finished one. Sweeps take over their own folder
+to resume (:func:`take_over`) under the same rules.
 
 Every problem is an :class:`OutputFolderError` with a one-line message naming the path.
 """
@@ -12,12 +21,17 @@ Every problem is an :class:`OutputFolderError` with a one-line message naming th
 from __future__ import annotations
 
 import os
-from pathlib import Path
+import socket
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
 
 MANIFEST = ".nsdrake-run"
+_LOCK = ".nsdrake-run.lock"  # held while a command takes over an existing claim
+_OWNER = "# owner: "  # the manifest line naming the process that holds the claim
 _HEADER = (
-    "# nsdrake wrote the files and folders listed below (paths relative to this folder);\n"
-    "# nsdrake run/compare --overwrite removes exactly these and refuses a folder holding anything else.\n"
+    "# nsdrake wrote the files listed below (paths relative to this folder; a folder ends in /);\n"
+    "# --overwrite removes exactly these and refuses a folder holding anything else.\n"
 )
 
 
@@ -27,6 +41,89 @@ class OutputFolderError(ValueError):
 
 def _why(e: OSError) -> str:
     return e.strerror or " ".join(str(e).split())
+
+
+def _own_files(name: str) -> bool:
+    """The manifest and its helpers (lock, temporary copies): never a user's entry."""
+    return name == MANIFEST or name.startswith(MANIFEST + ".")
+
+
+# --- who holds a claim ------------------------------------------------------------------
+
+
+def _start_time(pid: int) -> str:
+    """The process's start time in clock ticks since boot (Linux), so that a reused pid is
+    not mistaken for the claim's process; "" where /proc is not there."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return ""
+    return stat.rsplit(")", 1)[-1].split()[19]
+
+
+def _owner_line() -> str:
+    pid = os.getpid()
+    return f"{_OWNER}{socket.gethostname()} {pid} {_start_time(pid)}".rstrip() + "\n"
+
+
+def _holder_alive(owner: str | None) -> int | None:
+    """The pid of the live process other than this one that holds a claim, else None."""
+    if not owner:
+        return None
+    host, pid_text, *start = owner.split()
+    try:
+        pid = int(pid_text)
+    except ValueError:
+        return None
+    if host != socket.gethostname() or pid == os.getpid():
+        return None  # another machine's claim cannot be checked: it is treated as stale
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:
+        pass  # alive, another user's
+    if start and _start_time(pid) not in ("", start[0]):
+        return None  # the pid was reused by another process
+    return pid
+
+
+@dataclass
+class Manifest:
+    listed: set[str]  # entries, files as "a/b", folders as "a/"
+    owner: str | None  # "HOST PID START" of the process holding the claim, None when released
+
+
+def read_manifest(folder: Path) -> Manifest | None:
+    """The folder's manifest, or None if it has none; unreadable is one line."""
+    path = Path(folder) / MANIFEST
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as e:
+        raise OutputFolderError(f"{folder}: cannot read {MANIFEST}: {' '.join(str(e).split())}") from None
+    listed, owner = set(), None
+    for line in text.splitlines():
+        if line.startswith(_OWNER):
+            owner = line[len(_OWNER) :].strip() or None
+        elif line and not line.startswith("#"):
+            listed.add(line)
+    return Manifest(listed, owner)
+
+
+def _with_folders(entries: Iterable[str]) -> set[str]:
+    """The entries and every folder above them ("a/b/c" brings "a/" and "a/b/")."""
+    out = set()
+    for e in entries:
+        out.add(e)
+        for parent in PurePosixPath(e.rstrip("/")).parents:
+            if str(parent) != ".":
+                out.add(f"{parent.as_posix()}/")
+    return out
+
+
+# --- making and claiming ----------------------------------------------------------------
 
 
 def _file_in_the_way(path: Path) -> Path | None:
@@ -58,11 +155,11 @@ def _claim(folder: Path) -> bool:
     except OSError as e:
         raise OutputFolderError(f"{folder}: cannot write in the folder: {_why(e)}") from None
     with os.fdopen(fd, "w") as f:
-        f.write(_HEADER)
+        f.write(_HEADER + _owner_line())
     return True
 
 
-def _entries(folder: Path) -> list[str]:
+def entries(folder: Path) -> list[str]:
     """Everything below ``folder`` but the manifest: files as "a/b", folders as "a/" (symbolic
     links as files, never followed)."""
     found = []
@@ -75,48 +172,90 @@ def _entries(folder: Path) -> list[str]:
             else:
                 found.append(f"{(rel / d).as_posix()}/")
         found += [(rel / f).as_posix() for f in files]
-    return sorted(e for e in found if e != MANIFEST)
+    return sorted(e for e in found if not _own_files(e))
 
 
-def _remove_previous_run(folder: Path) -> None:
-    """Removes what an earlier nsdrake run wrote into ``folder``; refuses, removing
-    nothing, if the folder holds anything that run's manifest does not list."""
+def _write_manifest(folder: Path, listed: Iterable[str], owner: bool) -> None:
+    manifest = Path(folder) / MANIFEST
+    tmp = manifest.with_name(f"{MANIFEST}.{os.getpid()}.tmp")
+    body = _HEADER + (_owner_line() if owner else "") + "".join(f"{e}\n" for e in sorted(listed))
     try:
-        listed = {
-            line for line in (folder / MANIFEST).read_text().splitlines() if line and not line.startswith("#")
-        }
-    except FileNotFoundError:
+        tmp.write_text(body)
+        os.replace(tmp, manifest)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise OutputFolderError(f"{folder}: cannot write {MANIFEST}: {_why(e)}") from None
+
+
+def _refuse_if_held(folder: Path, manifest: Manifest) -> None:
+    pid = _holder_alive(manifest.owner)
+    if pid is not None:
         raise OutputFolderError(
-            f"{folder}: --overwrite refused: the folder has no {MANIFEST}, so nsdrake did not write it; "
-            "move its files away or choose another --out"
-        ) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise OutputFolderError(f"{folder}: cannot read {MANIFEST}: {' '.join(str(e).split())}") from None
-    entries = _entries(folder)
-    foreign = [e for e in entries if e not in listed]
+            f"{folder}: nsdrake process {pid} is still writing into this folder; wait for it or choose "
+            "another --out"
+        )
+
+
+def foreign_entries(folder: Path, manifest: Manifest) -> list[str]:
+    """What is in ``folder`` that its manifest does not list (a user's files)."""
+    listed = _with_folders(manifest.listed)
+    return [e for e in entries(folder) if e not in listed]
+
+
+def refuse_foreign(folder: Path, manifest: Manifest) -> None:
+    foreign = foreign_entries(folder, manifest)
     if foreign:
         more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
         raise OutputFolderError(
             f"{folder}: --overwrite refused: nsdrake did not write {foreign[0]}{more}; "
             "move it away or choose another --out"
         )
+
+
+def remove_listed(folder: Path, listed: Iterable[str]) -> None:
+    """Removes the ``listed`` entries that exist (files, then the folders they leave empty)."""
+    listed = _with_folders(listed)
     try:
-        for e in sorted(entries, key=lambda e: e.count("/") - e.endswith("/"), reverse=True):
-            path = folder / e
+        for e in sorted(listed, key=lambda e: e.count("/") - e.endswith("/"), reverse=True):
+            path = Path(folder) / e
             if e.endswith("/"):
-                path.rmdir()  # empty now: everything in it was listed and removed first
-            else:
-                path.unlink(missing_ok=True)
-        (folder / MANIFEST).unlink(missing_ok=True)
+                if path.is_dir() and not path.is_symlink() and not any(path.iterdir()):
+                    path.rmdir()
+            elif path.is_file() or path.is_symlink():
+                path.unlink()
     except OSError as e:
         raise OutputFolderError(f"{folder}: --overwrite: cannot remove {e.filename}: {_why(e)}") from None
+
+
+def _manifest_or_refuse(folder: Path) -> Manifest:
+    manifest = read_manifest(folder)
+    if manifest is None:
+        raise OutputFolderError(
+            f"{folder}: --overwrite refused: the folder has no {MANIFEST}, so nsdrake did not write it; "
+            "move its files away or choose another --out"
+        )
+    return manifest
+
+
+def _remove_previous_run(folder: Path) -> None:
+    """Removes what an earlier nsdrake command wrote into ``folder``; refuses, removing
+    nothing, a folder without a manifest, one holding anything its manifest does not
+    list, and one whose claim a live process still holds."""
+    manifest = _manifest_or_refuse(folder)
+    _refuse_if_held(folder, manifest)
+    refuse_foreign(folder, manifest)
+    remove_listed(folder, manifest.listed)
+    try:
+        (folder / MANIFEST).unlink(missing_ok=True)
+    except OSError as e:
+        raise OutputFolderError(f"{folder}: --overwrite: cannot remove {MANIFEST}: {_why(e)}") from None
 
 
 def prepare_output_folder(out: Path, *, overwrite: bool) -> Path:
     """Claims the folder ``out`` (making it and its parents if needed).
 
     A non-empty folder is refused unless ``overwrite``; with it, what an earlier nsdrake
-    run wrote there is removed first, and a folder holding anything else is refused.
+    command wrote there is removed first, and a folder holding anything else is refused.
     """
     out = Path(out)
     _make_folders(out)
@@ -151,17 +290,76 @@ def default_output_folder(name: str, root: Path = Path("runs")) -> Path:
             return candidate
 
 
-def record_written(folder: Path) -> None:
-    """Lists in the manifest everything now in ``folder`` (which its run claimed empty or
-    emptied), so that a later --overwrite may remove it. Does nothing in a folder that no
-    run claimed; on a write error, leaves the manifest as it was (a later --overwrite
-    then refuses rather than guesses)."""
+def take_over(folder: Path) -> Manifest:
+    """Takes over the claim on ``folder`` that an earlier nsdrake command made (to resume or
+    to replace its work); refuses a folder without a manifest and one whose claim a live
+    process holds. Two commands taking over at once: one succeeds, the other is refused."""
+    folder = Path(folder)
+    manifest = _manifest_or_refuse(folder)
+    lock = folder / _LOCK
+    for attempt in range(2):
+        try:
+            fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            holder = _holder_alive(_read_quietly(lock))
+            if holder is not None or attempt:
+                raise OutputFolderError(
+                    f"{folder}: another nsdrake process is taking this folder over; choose another --out"
+                ) from None
+            lock.unlink(missing_ok=True)  # left by a killed process
+            continue
+        except OSError as e:
+            raise OutputFolderError(f"{folder}: cannot write in the folder: {_why(e)}") from None
+        with os.fdopen(fd, "w") as f:
+            f.write(_owner_line()[len(_OWNER) :])
+        break
+    try:
+        manifest = read_manifest(folder) or manifest
+        _refuse_if_held(folder, manifest)
+        _write_manifest(folder, manifest.listed, owner=True)
+    finally:
+        lock.unlink(missing_ok=True)
+    return manifest
+
+
+def _read_quietly(path: Path) -> str | None:
+    try:
+        return path.read_text().strip() or None
+    except OSError:
+        return None
+
+
+def declare(folder: Path, entries: Iterable[str]) -> None:
+    """Lists ``entries`` (paths relative to ``folder``) in its manifest *before* they are
+    written, so that whatever happens next, a later --overwrite knows them as nsdrake's.
+    Does nothing in a folder that no command claimed (a user's own call)."""
     manifest = Path(folder) / MANIFEST
     if not manifest.is_file():
         return
-    tmp = manifest.with_name(f"{MANIFEST}.{os.getpid()}.tmp")
+    lines = "".join(f"{e}\n" for e in entries)
     try:
-        tmp.write_text(_HEADER + "".join(f"{e}\n" for e in _entries(folder) if e != tmp.name))
-        os.replace(tmp, manifest)
-    except OSError:
-        tmp.unlink(missing_ok=True)
+        with manifest.open("a") as f:
+            f.write(lines)
+    except OSError as e:
+        raise OutputFolderError(f"{folder}: cannot write {MANIFEST}: {_why(e)}") from None
+
+
+def record_written(folder: Path) -> None:
+    """At the end of a command (done or failed): the manifest keeps the declared entries
+    that exist, with the folders above them, and the claim is released. Nothing that was
+    not declared is listed, so a file a user put there meanwhile stays theirs. Does
+    nothing in a folder that no command claimed; on a write error, leaves the manifest as
+    it was (a later --overwrite then refuses rather than guesses)."""
+    folder = Path(folder)
+    try:
+        manifest = read_manifest(folder)
+    except OutputFolderError:
+        return
+    if manifest is None:
+        return
+    listed = _with_folders(manifest.listed)
+    existing = [e for e in entries(folder) if e in listed]
+    try:
+        _write_manifest(folder, existing, owner=False)
+    except OutputFolderError:
+        pass

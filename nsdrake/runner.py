@@ -29,6 +29,7 @@ from .metrics import (
 )
 from .output import (  # noqa: F401 (re-exported: diagrams/fig3.py, the CLI)
     OutputFolderError,
+    declare,
     default_output_folder,
     prepare_output_folder,
     record_written,
@@ -109,7 +110,24 @@ def run_to_folder(
         record_written(out)
 
 
+# Every file a run may write into its folder, declared in the manifest before any is written.
+RUN_FILES = (
+    "scenario.yaml",
+    "traces.csv",
+    "traces_without_null_space_task.csv",
+    "replay.html",
+    "diagram.dot",
+    "diagram.svg",
+    "metrics.json",
+    "fig3.png",
+    "priority.png",
+    "pose.png",
+    "report.html",
+)
+
+
 def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, meshcat) -> RunResult:
+    declare(out, RUN_FILES)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
     compare = scenario.report.compare_without_null_space_task
     stages = 2 if compare else 1

@@ -37,7 +37,6 @@ import json
 import math
 import os
 import random
-import shutil
 import sys
 import time
 import typing
@@ -48,7 +47,18 @@ import numpy as np
 import yaml
 
 from .metrics import D_MIN_AFTER
-from .runner import OutputFolderError, scenario_yaml
+from .output import (
+    OutputFolderError,
+    declare,
+    entries,
+    prepare_output_folder,
+    read_manifest,
+    record_written,
+    refuse_foreign,
+    remove_listed,
+    take_over,
+)
+from .runner import scenario_yaml
 from .scenario import (
     Scenario,
     ScenarioError,
@@ -453,39 +463,75 @@ def sweep_identity(spec: SweepSpec, runs: list[Run]) -> str:
     return hashlib.sha256("\n".join(r.hash for r in runs).encode()).hexdigest()
 
 
+SWEEP_FILES = ("sweep.yaml", "sweep.json", "results.csv", "sweep.png")
+
+
+def _with_tmp(names) -> list[str]:
+    """The names and the temporary files :func:`_write_atomic` writes them through."""
+    return [x for name in names for x in (name, f"{name}.tmp")]
+
+
+def run_entries(index: int) -> list[str]:
+    """What a sweep writes for run ``index`` (paths relative to the sweep's folder)."""
+    return _with_tmp([f"runs/{index:04d}/traces.csv", f"runs/{index:04d}/result.json"])
+
+
+def _previous_sweep(out: Path) -> dict | None:
+    try:
+        previous = json.loads((out / "sweep.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return previous if isinstance(previous, dict) else None
+
+
 def prepare_sweep_folder(out: Path, spec: SweepSpec, runs: list[Run], *, overwrite: bool) -> bool:
-    """Creates ``out`` or checks that it holds this same sweep (True: resuming). A folder
-    with other content is refused unless ``overwrite``; with it, runs that are still part
-    of the sweep are kept and the others removed."""
+    """Claims ``out`` for the sweep (True: resuming this same sweep there), under the rules
+    of every nsdrake output folder (:mod:`nsdrake.output`): a new or empty folder is
+    claimed; a folder holding this sweep (its manifest and ``sweep.json``) is taken over
+    to resume; a folder holding another sweep is refused unless ``overwrite``, and then
+    keeps the runs still part of this sweep and removes only the listed files of the
+    others; any other folder is treated as ``nsdrake run`` treats it (with ``overwrite``
+    only what an nsdrake command listed is removed). A folder holding anything nsdrake
+    did not write is refused, removing nothing."""
     out = Path(out)
     identity = sweep_identity(spec, runs)
-    manifest = out / "sweep.json"
-    resuming = False
     if out.exists() and not out.is_dir():
         raise OutputFolderError(f"{out}: exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()):
-        try:
-            previous = json.loads(manifest.read_text())
-        except (OSError, ValueError):
-            previous = None
-        if previous is None and not overwrite:
-            raise OutputFolderError(f"{out}: folder is not empty; choose another --out or pass --overwrite")
-        if previous is not None and previous.get("identity") != identity and not overwrite:
-            raise OutputFolderError(
-                f"{out}: holds a sweep of {previous.get('spec', 'another spec')} whose runs differ from "
-                f"{spec.source}'s (the spec or its scenario changed); pass --overwrite to replace them, "
-                "or choose another --out"
+    resuming = False
+    if not out.is_dir() or not entries(out):
+        if out.is_dir() and read_manifest(out) is not None:
+            take_over(out)  # claimed empty (the default folder), or a killed command's
+        else:
+            prepare_output_folder(out, overwrite=False)
+    else:
+        manifest = read_manifest(out)
+        previous = _previous_sweep(out) if manifest is not None else None
+        if previous is None:
+            if not overwrite:
+                raise OutputFolderError(
+                    f"{out}: folder is not empty; choose another --out or pass --overwrite"
+                )
+            prepare_output_folder(out, overwrite=True)  # an nsdrake run's: its listed files only
+        elif previous.get("identity") == identity:
+            take_over(out)
+            resuming = True
+        else:
+            if not overwrite:
+                raise OutputFolderError(
+                    f"{out}: holds a sweep of {previous.get('spec', 'another spec')} whose runs differ "
+                    f"from {spec.source}'s (the spec or its scenario changed); pass --overwrite to replace "
+                    "them, or choose another --out"
+                )
+            manifest = take_over(out)
+            refuse_foreign(out, manifest)
+            keep = {f"runs/{r.index:04d}/" for r in runs}
+            remove_listed(
+                out, [e for e in manifest.listed if e.startswith("runs/") and not e.startswith(tuple(keep))]
             )
-        resuming = previous is not None and previous.get("identity") == identity
-    out.mkdir(parents=True, exist_ok=True)
-    if not resuming and (out / "runs").is_dir():
-        keep = {f"{r.index:04d}" for r in runs}
-        for folder in (out / "runs").iterdir():
-            if folder.name not in keep and folder.is_dir():
-                shutil.rmtree(folder)
+    declare(out, _with_tmp(SWEEP_FILES))
     _write_atomic(out / "sweep.yaml", spec.text)
     body = {"spec": spec.source, "identity": identity, "runs": len(runs)}
-    _write_atomic(manifest, json.dumps(body, indent=2) + "\n")
+    _write_atomic(out / "sweep.json", json.dumps(body, indent=2) + "\n")
     return resuming
 
 
@@ -519,6 +565,7 @@ def store(out: Path, run: Run, result: dict, baseline: bool) -> dict:
     """Writes the run's traces, then its result.json (so a result always has its traces);
     returns the record as it reads back from the file."""
     folder = run_folder(out, run.index)
+    declare(out, run_entries(run.index))
     folder.mkdir(parents=True, exist_ok=True)
     if result.get("traces_csv") is not None:
         _write_atomic(folder / "traces.csv", result["traces_csv"])
@@ -687,12 +734,23 @@ def run_sweep(
     scheduler: str | None = None,
     overwrite: bool = False,
     progress=None,
+    prepared: bool = False,
 ) -> SweepOutcome:
-    """Runs every run not already finished in ``out``; writes each result as it comes."""
+    """Runs every run not already finished in ``out`` (claimed here, unless ``prepared``
+    by :func:`prepare_sweep_folder`); writes each result as it comes. Done, failed or
+    interrupted, the folder's manifest then lists what the sweep wrote."""
+    out = Path(out)
+    if not prepared:
+        prepare_sweep_folder(out, spec, runs, overwrite=overwrite)
+    try:
+        return _run_sweep(spec, runs, out, engine=engine, jobs=jobs, scheduler=scheduler, progress=progress)
+    finally:
+        record_written(out)
+
+
+def _run_sweep(spec, runs, out, *, engine, jobs, scheduler, progress) -> SweepOutcome:
     from .sweep_engines import results
 
-    out = Path(out)
-    prepare_sweep_folder(out, spec, runs, overwrite=overwrite)
     records = {r.index: rec for r in runs if (rec := finished(out, r, spec)) is not None}
     write_results(out, spec, records)
     todo = [r for r in runs if r.index not in records]
@@ -726,6 +784,7 @@ def sweep_command(args) -> int:
         f"{args.jobs} processes" if args.jobs > 1 else "this process"
     )  # fmt: skip
     resume = f"nsdrake sweep {args.spec} --out {out}"
+    prepare_sweep_folder(out, spec, runs, overwrite=args.overwrite)  # refused before a word is printed
     print(f"nsdrake: sweeping {spec.name}: {len(runs)} runs on {where} into {out}/")
     try:
         outcome = run_sweep(
@@ -735,8 +794,8 @@ def sweep_command(args) -> int:
             engine=args.engine,
             jobs=args.jobs,
             scheduler=args.scheduler,
-            overwrite=args.overwrite,
             progress=SweepProgress(len(runs)),
+            prepared=True,
         )
     except KeyboardInterrupt:
         kept = sum(1 for r in runs if finished(out, r, spec) is not None)

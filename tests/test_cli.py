@@ -7,6 +7,7 @@ import re
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -128,6 +129,35 @@ def test_overwrite_refuses_a_file_nsdrake_did_not_write(tmp_path, capsys, where)
     assert err.count("\n") == 1 and f"--overwrite refused: nsdrake did not write {first}" in err
     assert (out / where).read_text() == "keep me"
     assert (out / "traces.csv").read_bytes() == before  # nothing removed
+
+
+def test_a_killed_runs_folder_is_reclaimed_by_overwrite(tmp_path, capsys):
+    """Issue 15, item 7: after a SIGKILL the manifest listed nothing, and --overwrite
+    refused the folder claiming nsdrake "did not write scenario.yaml". Catches a stale
+    claim that cannot be reclaimed, and a reclaim that removes a file of the user's."""
+    import os
+    import signal
+
+    out = tmp_path / "killed"
+    command = [sys.executable, "-m", "nsdrake.cli", "run", "fig3", "--duration", "3", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not (out / "scenario.yaml").exists() and process.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    (out / "mine.txt").write_text("mine")
+    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--overwrite", "--no-replay"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nsdrake did not write mine.txt" in err, err
+    assert (out / "scenario.yaml").exists()  # nothing removed
+    (out / "mine.txt").unlink()
+    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--overwrite", "--no-replay"]) in (
+        0,
+        1,
+    )
+    assert len(Traces.read_csv(out / "traces.csv")) == 51
 
 
 def test_concurrent_claims_never_share_a_folder(tmp_path):

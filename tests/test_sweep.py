@@ -307,6 +307,101 @@ def test_a_non_sweep_folder_is_never_written_into_without_overwrite(tmp_path, ca
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
 
+def _tree(folder):
+    """Every file below ``folder`` with its bytes (the manifest aside)."""
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and not p.name.startswith(".nsdrake-run")
+    }
+
+
+def test_overwrite_into_a_working_folder_removes_nothing(tmp_path, capsys, monkeypatch):
+    """Issue 15, item 1 (data loss): `nsdrake sweep --overwrite` into a working folder
+    holding a user's file and an earlier `nsdrake run`'s runs/ deleted runs/ whole and
+    exited 0. Catches any removal there: the folder is refused with one line, every byte
+    survives, and no sweep file is written."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "fig3", "--duration", "0.1", "--no-replay"]) in (0, 1)
+    (tmp_path / "notes.txt").write_text("mine")
+    spec = write_spec(tmp_path)
+    before = _tree(tmp_path)
+    capsys.readouterr()
+    assert main(["sweep", str(spec), "--out", ".", "--jobs", "1", "--overwrite"]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.count("\n") == 1 and "--overwrite refused" in captured.err, captured.err
+    assert "sweeping" not in captured.out  # refused before it said it would sweep
+    assert _tree(tmp_path) == before
+    assert not (tmp_path / "sweep.json").exists()
+
+
+def test_overwrite_into_a_run_folder_with_a_users_file_removes_nothing(tmp_path, capsys):
+    """Catches a sweep that reclaims an `nsdrake run` folder while a file of the user's sits
+    in it (the run's own files may go, but only when nothing else is there)."""
+    out = tmp_path / "run"
+    assert main(["run", "fig3", "--duration", "0.1", "--no-replay", "--out", str(out)]) in (0, 1)
+    (out / "mine.txt").write_text("mine")
+    before = _tree(out)
+    spec = write_spec(tmp_path)
+    capsys.readouterr()
+    assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1", "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nsdrake did not write mine.txt" in err, err
+    assert _tree(out) == before
+
+
+def test_overwrite_of_another_sweep_removes_only_its_listed_runs(reference, tmp_path, capsys):
+    """Catches --overwrite deleting a user's file inside another sweep's folder (refused,
+    nothing removed) and, without one, removing more than the runs the new spec drops
+    (a run folder holding only the old sweep's files)."""
+    spec, serial = reference
+    out = tmp_path / "other"
+    shutil.copytree(serial, out)
+    (out / "runs/0002/notes.txt").write_text("mine")
+    shorter = write_spec(tmp_path, SPEC.replace("[50.0, 100.0, 200.0]", "[50.0, 100.0]"), "short.yaml")
+    before = _tree(out)
+    capsys.readouterr()
+    assert main(["sweep", str(shorter), "--out", str(out), "--jobs", "1", "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nsdrake did not write runs/0002/notes.txt" in err, err
+    assert _tree(out) == before
+    (out / "runs/0002/notes.txt").unlink()
+    assert main(["sweep", str(shorter), "--out", str(out), "--jobs", "1", "--overwrite"]) == 0
+    assert sorted(p.name for p in (out / "runs").iterdir()) == ["0000", "0001"]
+    assert (out / "runs/0000/traces.csv").read_bytes() == (serial / "runs/0000/traces.csv").read_bytes()
+
+
+def test_a_folder_claimed_by_a_live_process_is_refused(reference, tmp_path, capsys):
+    """Catches a sweep resuming (or replacing) a folder while another nsdrake process is
+    still writing into it: two writers would interleave their results."""
+    import subprocess
+    import sys
+
+    spec, serial = reference
+    out = tmp_path / "busy"
+    shutil.copytree(serial, out)
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        from nsdrake.output import _start_time
+
+        manifest = (out / ".nsdrake-run").read_text()
+        import socket
+
+        owner = f"# owner: {socket.gethostname()} {sleeper.pid} {_start_time(sleeper.pid)}\n"
+        (out / ".nsdrake-run").write_text(manifest + owner)
+        before = _tree(out)
+        assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"nsdrake process {sleeper.pid} is still writing" in err, err
+        assert _tree(out) == before
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    # its process gone, the claim is stale: the sweep resumes (nothing to simulate)
+    assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
+    assert "0 runs simulated, 3 already finished" in capsys.readouterr().out
+
+
 # --- failures ------------------------------------------------------------------------
 
 
