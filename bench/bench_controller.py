@@ -37,12 +37,12 @@ from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
-from nsdrake.diagram import build_controller, build_diagram
-from nsdrake.models import models_dir
-from nsdrake.plant import add_station
-from nsdrake.scenario import load_scenario
-from nsdrake.simulate import collect_traces
-from nsdrake.systems import ForceSensor
+from nsdrake.experiment.diagram import build_controller, build_diagram
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.simulate import collect_traces
+from nsdrake.station.force_sensor import ForceSensor
+from nsdrake.station.models import models_dir
+from nsdrake.station.plant import add_station
 
 
 def simulate_cpu(diagram, plant, q0, v0, duration: float) -> tuple[float, object]:

@@ -20,7 +20,7 @@ import statistics
 from bench_controller import fig3_controller, panda_controller, step_cost
 
 from nsdrake import systems
-from nsdrake.systems import criteria
+from nsdrake.control.systems import criteria
 
 
 def _stored(calc, name):

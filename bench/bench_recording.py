@@ -24,10 +24,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from nsdrake.runner import run_to_folder
-from nsdrake.scenario import load_scenario
-from nsdrake.simulate import run
-from nsdrake.visualization import start_meshcat, write_replay
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.simulate import run
+from nsdrake.reporting.run_folder import run_to_folder
+from nsdrake.station.visualization import start_meshcat, write_replay
 
 
 def simulation(scenario, recorded: bool, folder: Path) -> float:

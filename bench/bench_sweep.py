@@ -26,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from nsdrake.sweep import load_sweep, plan_runs, run_sweep
+from nsdrake.studies.sweep import load_sweep, plan_runs, run_sweep
 
 
 def timed(spec, runs, out: Path, **engine) -> float:

@@ -6,8 +6,8 @@ A thin script over the package: the same as `nsdrake run fig3 --out OUT_DIR`.
 import sys
 from pathlib import Path
 
-from nsdrake.runner import prepare_output_folder, run_to_folder
-from nsdrake.scenario import load_scenario
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.reporting.run_folder import prepare_output_folder, run_to_folder
 
 if __name__ == "__main__":
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("runs/fig3-script")

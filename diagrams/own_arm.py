@@ -23,8 +23,9 @@ from pydrake.all import (
 )
 
 from nsdrake import ControllerConfig, NullSpaceImpedanceController
-from nsdrake.reference import SlideAndPress
-from nsdrake.systems import ForceSensor, SurfaceReference
+from nsdrake.experiment.reference import SlideAndPress
+from nsdrake.experiment.reference_system import SurfaceReference
+from nsdrake.station.force_sensor import ForceSensor
 
 LINK = '<link name="l{i}"><inertial><origin xyz="0.1 0 0"/><mass value="0.3"/><inertia ixx="1e-5" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial></link><joint name="j{i}" type="revolute"><parent link="{parent}"/><child link="l{i}"/><origin xyz="{x} 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="50" velocity="5"/></joint><transmission><type>transmission_interface/SimpleTransmission</type><joint name="j{i}"/><actuator name="m{i}"/></transmission>'  # noqa: E501
 TOOL = '<link name="tool"><inertial><mass value="0.05"/><inertia ixx="2e-6" ixy="0" ixz="0" iyy="2e-6" iyz="0" izz="2e-6"/></inertial><collision><geometry><sphere radius="0.015"/></geometry><drake:proximity_properties><drake:point_contact_stiffness value="1e5"/><drake:hunt_crossley_dissipation value="5"/></drake:proximity_properties></collision></link><joint name="tw" type="fixed"><parent link="l5"/><child link="tool"/><origin xyz="0.2 0 0"/></joint>'  # noqa: E501

@@ -6,8 +6,18 @@ consistent pseudo-inverse", Robotica 18, 513–518.
 
 __version__ = "0.1.0"
 
-from .config import ControllerConfig
-from .controller import NullSpaceImpedanceController
-from .controller_model import ControllerModel, Obstacle
+from nsdrake.control import (
+    ControllerConfig,
+    ControllerConfigError,
+    ControllerModel,
+    NullSpaceImpedanceController,
+    Obstacle,
+)
 
-__all__ = ["ControllerConfig", "ControllerModel", "NullSpaceImpedanceController", "Obstacle"]
+__all__ = [
+    "ControllerConfig",
+    "ControllerConfigError",
+    "ControllerModel",
+    "NullSpaceImpedanceController",
+    "Obstacle",
+]

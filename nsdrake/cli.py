@@ -19,13 +19,13 @@ import sys
 import time
 from pathlib import Path
 
-from .compare import load_family, run_family, shipped_families, variant_scenario
-from .output import OutputFolderError, default_output_folder, prepare_output_folder
-from .runner import check_scenario, run_to_folder
-from .scenario import ScenarioError, load_scenario, shipped_scenarios
-from .sweep import shipped_sweeps, sweep_command
-from .sweep_engines import ENGINES
-from .visualization import start_meshcat
+from nsdrake.experiment.output import OutputFolderError, default_output_folder, prepare_output_folder
+from nsdrake.experiment.scenario import ScenarioError, load_scenario, shipped_scenarios
+from nsdrake.reporting.run_folder import check_scenario, run_to_folder
+from nsdrake.station.visualization import start_meshcat
+from nsdrake.studies.compare import load_family, run_family, shipped_families, variant_scenario
+from nsdrake.studies.sweep import shipped_sweeps, sweep_command
+from nsdrake.studies.sweep_engines import ENGINES
 
 
 class _Parser(argparse.ArgumentParser):

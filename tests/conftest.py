@@ -10,8 +10,8 @@ import pytest
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
-from nsdrake.dynamics import ArmModel
-from nsdrake.models import models_dir
+from nsdrake.control.dynamics import ArmModel
+from nsdrake.station.models import models_dir
 
 sys.path.insert(0, str(Path(__file__).parent))
 from models import TEST_ARMS  # noqa: E402
@@ -117,7 +117,7 @@ def terms_at(arm: ArmModel, q, v, coriolis=True):
 
 def fig3_with(tmp_path, overrides: str = "", duration: float | None = None):
     """The shipped fig3 scenario with a YAML overlay (written to a file, as a user would)."""
-    from nsdrake.scenario import load_scenario
+    from nsdrake.experiment.scenario import load_scenario
 
     if not overrides:
         return load_scenario("fig3", duration=duration)
@@ -130,7 +130,7 @@ def simulate_to(scenario, t_end: float):
     """Builds the diagram, simulates to ``t_end`` and returns (built, root context)."""
     from pydrake.systems.analysis import Simulator
 
-    from nsdrake.diagram import build_diagram
+    from nsdrake.experiment.diagram import build_diagram
 
     built = build_diagram(scenario)
     simulator = Simulator(built.diagram)
@@ -152,8 +152,8 @@ SHORT_RUN_DURATION = 2.0
 @pytest.fixture(scope="session")
 def short_run(tmp_path_factory):
     """(out folder, RunResult, ControlledStation-free facts) of ``run_to_folder`` on fig3 for 2 s."""
-    from nsdrake.runner import run_to_folder
-    from nsdrake.scenario import load_scenario
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.reporting.run_folder import run_to_folder
 
     out = tmp_path_factory.mktemp("fig3_short")
     result = run_to_folder(load_scenario("fig3", duration=SHORT_RUN_DURATION), out)

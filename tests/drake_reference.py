@@ -8,7 +8,7 @@ from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoD
 from pydrake.math import inv as drake_inv
 from pydrake.multibody.tree import JacobianWrtVariable
 
-from nsdrake.dynamics import ArmModel
+from nsdrake.control.dynamics import ArmModel
 
 
 class AutoDiffArm:

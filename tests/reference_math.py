@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nsdrake.pseudo_inverse import GeneralizedInverse
+from nsdrake.control.pseudo_inverse import GeneralizedInverse
 
 
 def weighted_inverse(J: np.ndarray, W_inv: np.ndarray, damping: float = 0.0) -> np.ndarray:

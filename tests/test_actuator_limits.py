@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nsdrake.actuator_limits import limit_torque, torque_window
+from nsdrake.control.actuator_limits import limit_torque, torque_window
 
 INF = np.full(3, np.inf)
 
@@ -55,7 +55,7 @@ def test_closed_loop_limits_hold_and_saturation_is_traced(tmp_path):
     tool still presses 10 N on the plate."""
     from conftest import fig3_with
 
-    from nsdrake.simulate import run
+    from nsdrake.experiment.simulate import run
 
     scenario = fig3_with(
         tmp_path,

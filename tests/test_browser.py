@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from conftest import SHORT_RUN_DURATION
 
-from nsdrake.traces import Traces
+from nsdrake.experiment.traces import Traces
 
 CHROMIUM = os.environ.get("NSDRAKE_CHROMIUM", "/usr/bin/chromium")
 CHROMEDRIVER = os.environ.get("NSDRAKE_CHROMEDRIVER", "/usr/bin/chromedriver")

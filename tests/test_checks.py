@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 from conftest import fig3_with
 
-from nsdrake.checks import sampled_loop_radius
-from nsdrake.models import models_dir
-from nsdrake.runner import check_scenario
-from nsdrake.scenario import ScenarioError
+from nsdrake.experiment.checks import sampled_loop_radius
+from nsdrake.experiment.scenario import ScenarioError
+from nsdrake.reporting.run_folder import check_scenario
+from nsdrake.station.models import models_dir
 
 T = 0.002  # fig3's period [s]
 

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from nsdrake.cli import _Progress, main
-from nsdrake.output import OutputFolderError, default_output_folder, prepare_output_folder
-from nsdrake.traces import Traces
+from nsdrake.experiment.output import OutputFolderError, default_output_folder, prepare_output_folder
+from nsdrake.experiment.traces import Traces
 
 REQUIRED_COLUMNS = (
     "t x y x_d y_d f_x f_y f_d q1 q2 q3 q4 v1 v2 v3 v4 tau1 tau2 tau3 tau4 "
@@ -70,7 +70,7 @@ def test_progress_bar_only_on_a_terminal(monkeypatch, capsys, tty):
 
 
 def test_written_scenario_reloads_to_the_same_run(tmp_path):
-    from nsdrake.scenario import load_scenario, load_scenario_file
+    from nsdrake.experiment.scenario import load_scenario, load_scenario_file
 
     out = tmp_path / "run"
     main(["run", "fig3", "--duration", "0.2", "--out", str(out)])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from conftest import fig3_with
 
-from nsdrake.simulate import run
+from nsdrake.experiment.simulate import run
 
 # The plate is moved out of reach and the task reference is still: free motion
 # with a fixed tool. The arm starts with a pure self-motion velocity (J q̇ = 0,
@@ -28,7 +28,7 @@ def self_motion_velocity(speed: float) -> np.ndarray:
     """A joint velocity at fig3's initial pose with J q̇ = 0 and ‖q̇‖ = speed."""
     from conftest import paper_arm, terms_at
 
-    from nsdrake.scenario import load_scenario
+    from nsdrake.experiment.scenario import load_scenario
 
     s = load_scenario("fig3")
     arm = paper_arm()

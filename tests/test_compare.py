@@ -15,8 +15,8 @@ import sys
 import pytest
 
 from nsdrake.cli import main
-from nsdrake.compare import load_family, run_family, shipped_families, slug, variant_scenario
-from nsdrake.scenario import ScenarioError
+from nsdrake.experiment.scenario import ScenarioError
+from nsdrake.studies.compare import load_family, run_family, shipped_families, slug, variant_scenario
 
 
 def subset(name: str, *indices: int):
@@ -127,7 +127,7 @@ def test_compare_input_errors(tmp_path, monkeypatch, capsys, args, message):
 
 
 def test_malformed_family_files_are_refused(tmp_path, monkeypatch):
-    import nsdrake.compare as compare
+    import nsdrake.studies.compare as compare
 
     monkeypatch.setattr(compare, "FAMILY_DIR", tmp_path)
     cases = {

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from nsdrake.reference import ContactState, SlideAndPress, update_contact
+from nsdrake.experiment.reference import ContactState, SlideAndPress, update_contact
 
 THRESHOLD, LOSS = 0.5, 0.05
 
@@ -78,9 +78,9 @@ def test_fig3_for_30_s_slides_off_the_plate_and_finishes(tmp_path):
     """The issue's run: the tool leaves the plate at about 13.4 s. The run finishes,
     the contact is reported lost once, no force is commanded after that, the arm
     stays within reach, nothing is NaN and no link touches the plate."""
-    from nsdrake.runner import run_to_folder
-    from nsdrake.scenario import load_scenario
-    from nsdrake.traces import Traces
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.experiment.traces import Traces
+    from nsdrake.reporting.run_folder import run_to_folder
 
     result = run_to_folder(load_scenario("fig3", duration=30.0), tmp_path, replay=False)
     assert result.failure is None
@@ -113,8 +113,8 @@ def test_hard_settings_finish_with_finite_bounded_traces(tmp_path, overlay):
     report; out of reach, the tool waits at the edge of the workspace."""
     from conftest import fig3_with
 
-    from nsdrake.runner import run_to_folder
-    from nsdrake.traces import Traces
+    from nsdrake.experiment.traces import Traces
+    from nsdrake.reporting.run_folder import run_to_folder
 
     (tmp_path / "run").mkdir()
     result = run_to_folder(fig3_with(tmp_path, overlay), tmp_path / "run", replay=False)

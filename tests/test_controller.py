@@ -20,14 +20,14 @@ import pytest
 from drake_reference import AutoDiffArm, christoffel_C, plant_terms
 from pydrake.systems.framework import DiagramBuilder
 
-from nsdrake.diagram import build_controller
-from nsdrake.plant import add_station
-from nsdrake.priority import ORDERINGS, Criterion, Level, Mode, prioritized_velocity
-from nsdrake.reference import SlideAndPress
-from nsdrake.scenario import load_scenario
-from nsdrake.simulate import moving_link_geometries
-from nsdrake.systems import ForceSensor
-from nsdrake.systems.criteria import unpack_criterion
+from nsdrake.control.priority import ORDERINGS, Criterion, Level, Mode, prioritized_velocity
+from nsdrake.control.systems.criteria import unpack_criterion
+from nsdrake.experiment.diagram import build_controller
+from nsdrake.experiment.reference import SlideAndPress
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.simulate import moving_link_geometries
+from nsdrake.station.force_sensor import ForceSensor
+from nsdrake.station.plant import add_station
 
 TOL = 1e-10
 ROOT = Path(__file__).resolve().parents[1]
@@ -169,7 +169,7 @@ def test_null_space_outputs_match_eqs_14_and_23():
 def test_selector_blends_from_the_old_ordering_after_a_switch():
     """Half-way through the blend after a switch from mode 3 to mode 2, q̇_dⁿ is the
     smoothstep mix ½(new) + ½(old) of the two orderings' velocities (Fig. 1 switching,
-    nsdrake.priority). Skipping the blend, or blending the wrong way, fails. (Joint-speed
+    nsdrake.control.priority). Skipping the blend, or blending the wrong way, fails. (Joint-speed
     limits off, so that no scaling enters.)"""
     scenario = load_scenario("fig3")
     d = dataclasses.replace(scenario.desired_null_space, joint_speed_limits={})
@@ -215,10 +215,10 @@ def test_selector_blends_from_the_old_ordering_after_a_switch():
 
 
 def test_obstacle_activation_fades_in_between_the_influence_distance_and_its_half():
-    """The obstacle level's weight (nsdrake.criteria.obstacle.activation): 0 beyond the
+    """The obstacle level's weight (nsdrake.control.criteria.obstacle.activation): 0 beyond the
     influence distance d_∞, 1 inside d_∞/2, the smoothstep in between. Replacing the
     fade by a constant, or by a hard switch at d_∞, fails."""
-    from nsdrake.criteria.obstacle import activation
+    from nsdrake.control.criteria.obstacle import activation
 
     d_inf = 0.1
     assert activation(0.2, d_inf) == 0.0
@@ -235,7 +235,7 @@ def test_obstacle_activation_fades_in_between_the_influence_distance_and_its_hal
 def test_controller_reports_the_obstacle_activation_it_uses():
     """The obstacle criterion's activation is the fade of its own d_min, and the controller's
     d_min port is that same distance."""
-    from nsdrake.criteria.obstacle import activation
+    from nsdrake.control.criteria.obstacle import activation
 
     scenario = load_scenario("fig3")
     controller, station, _ = fig3_controller(scenario)

@@ -20,10 +20,10 @@ from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 from pydrake.math import inv as drake_inv
 from pydrake.systems.framework import DiagramBuilder
 
-from nsdrake.criteria.joint_torque import joint_torque_criterion
-from nsdrake.criteria.manipulability import manipulability
-from nsdrake.criteria.obstacle import ObstacleDistances, obstacle_potential
-from nsdrake.plant import add_station
+from nsdrake.control.criteria.joint_torque import joint_torque_criterion
+from nsdrake.control.criteria.manipulability import manipulability
+from nsdrake.control.criteria.obstacle import ObstacleDistances, obstacle_potential
+from nsdrake.station.plant import add_station
 
 AD_TOL = 1e-7
 FD_TOL = 1e-6
@@ -139,7 +139,7 @@ class ObstacleScene:
     plain plant + scene graph diagram that Drake can convert to AutoDiffXd."""
 
     def __init__(self, tmp_path_factory):
-        from nsdrake.scenario import load_scenario
+        from nsdrake.experiment.scenario import load_scenario
 
         path = tmp_path_factory.mktemp("scene") / "scene.yaml"
         path.write_text(OBSTACLE_SCENE)

@@ -13,7 +13,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
-from nsdrake.criteria.distance import segments_box, segments_sphere
+from nsdrake.control.criteria.distance import segments_box, segments_sphere
 
 TOL = 1e-9  # [m] the golden-section reference resolves s to ~1e-12; φ is Lipschitz with constant ‖B − A‖
 

@@ -8,8 +8,8 @@ import json
 
 import numpy as np
 
-from nsdrake.runner import run_to_folder
-from nsdrake.scenario import load_scenario
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.reporting.run_folder import run_to_folder
 
 
 def unstable_fig3():

@@ -14,7 +14,7 @@ from conftest import terms_at
 from drake_reference import AutoDiffArm, plant_terms
 from models import random_states
 
-from nsdrake.dynamics import coriolis_matrix
+from nsdrake.control.dynamics import coriolis_matrix
 
 EXACT = 1e-10
 FD = 1e-7
@@ -109,7 +109,7 @@ def test_coriolis_matrix_from_a_known_quadratic():
 
 @pytest.mark.parametrize("bad", ["w", "xy"])
 def test_task_axes_are_checked(arm4, bad):
-    from nsdrake.dynamics import ArmModel
+    from nsdrake.control.dynamics import ArmModel
 
     with pytest.raises(ValueError, match="task axes"):
         ArmModel(arm4.plant, arm4.tool_frame, [bad])

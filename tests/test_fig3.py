@@ -11,10 +11,10 @@ import pytest
 from conftest import fig3_with
 from models import serial_arm_urdf
 
-from nsdrake.models import models_dir
-from nsdrake.runner import run_to_folder
-from nsdrake.simulate import run
-from nsdrake.traces import Traces
+from nsdrake.experiment.simulate import run
+from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.run_folder import run_to_folder
+from nsdrake.station.models import models_dir
 
 # Contact comes at ≈ 1.27 s, so the acceptance window [contact + 0.5 s, end] is 0.8 s long.
 CI_DURATION = 2.6
@@ -22,7 +22,7 @@ CI_DURATION = 2.6
 
 @pytest.fixture(scope="module")
 def fig3_run(tmp_path_factory):
-    from nsdrake.scenario import load_scenario
+    from nsdrake.experiment.scenario import load_scenario
 
     out = tmp_path_factory.mktemp("fig3")
     scenario = load_scenario("fig3", duration=CI_DURATION)
@@ -55,9 +55,9 @@ def test_metrics_recompute_from_the_written_traces(fig3_run):
     """metrics.json's figures come from the CSV files alone: recomputing them from the
     written files and the scenario (no simulation) gives the same numbers."""
     out, result = fig3_run
-    from nsdrake.diagram import build_diagram
-    from nsdrake.runner import compute_metrics
-    from nsdrake.scenario import load_scenario_file
+    from nsdrake.experiment.diagram import build_diagram
+    from nsdrake.experiment.scenario import load_scenario_file
+    from nsdrake.reporting.run_folder import compute_metrics
 
     scenario = load_scenario_file(out / "scenario.yaml")
     traces = Traces.read_csv(out / "traces.csv")

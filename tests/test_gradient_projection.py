@@ -7,9 +7,9 @@ import pytest
 from conftest import terms_at
 from models import random_states
 
-from nsdrake.gradient_projection import gradient_step
-from nsdrake.priority import joint_speed_scale
-from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.control.gradient_projection import gradient_step
+from nsdrake.control.priority import joint_speed_scale
+from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 DC = GeneralizedInverse(PseudoInverseKind.dynamically_consistent)
 MP = GeneralizedInverse(PseudoInverseKind.moore_penrose)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from conftest import paper_arm
 
-from nsdrake.compare import load_family, run_family, variant_scenario
-from nsdrake.criteria.joint_torque import joint_torque_criterion
-from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.control.criteria.joint_torque import joint_torque_criterion
+from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.studies.compare import load_family, run_family, variant_scenario
 
 Q0_FIG3 = np.array([0.401, 0.972, 1.012, 0.614])  # fig3's initial pose [rad]
 F_D = np.array([0.0, 10.0])  # fig3's desired force, along the plate's normal +y [N]

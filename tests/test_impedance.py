@@ -13,8 +13,8 @@ from drake_reference import plant_terms
 from models import random_states
 from pydrake.common.value import AbstractValue
 
-from nsdrake.impedance import ImpedanceGains, command_acceleration, primary_torque, wrench_at_tool
-from nsdrake.systems import ImpedanceController
+from nsdrake.control.impedance import ImpedanceGains, command_acceleration, primary_torque, wrench_at_tool
+from nsdrake.control.systems import ImpedanceController
 
 TOL = 1e-9
 

@@ -12,9 +12,9 @@ import pytest
 from conftest import PANDA_Q0, panda_arm, panda_configurations
 
 from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
-from nsdrake.criteria.joint_limits import activation, joint_limits_criterion
-from nsdrake.models import models_dir
-from nsdrake.priority import ORDERINGS, Criterion, Mode, SelectorLimits, select_mode
+from nsdrake.control.criteria.joint_limits import activation, joint_limits_criterion
+from nsdrake.control.priority import ORDERINGS, Criterion, Mode, SelectorLimits, select_mode
+from nsdrake.station.models import models_dir
 
 FD = 1e-7
 RHO = 0.3
@@ -143,7 +143,7 @@ def test_controller_reads_the_limits_from_its_model():
     PositionLower/UpperLimits) and its margin output is the smallest distance to them; the
     joint-speed limits default to the model's velocity limits (2.175 / 2.61 rad/s).
     Catches limits typed into the code, or taken from the wrong joints."""
-    from nsdrake.controller import speed_limits
+    from nsdrake.control.controller import speed_limits
 
     config = ControllerConfig()
     config.desired_null_space.criteria.joint_limits.gain = 1.0

@@ -14,9 +14,9 @@ from drake_reference import AutoDiffArm, christoffel_C
 from models import random_states
 from reference_math import H_inv_dot, pinv_derivative, pinv_of
 
-from nsdrake.impedance import primary_torque
-from nsdrake.null_space import lyapunov, null_space_torque, null_space_velocity_error
-from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.control.impedance import primary_torque
+from nsdrake.control.null_space import lyapunov, null_space_torque, null_space_velocity_error
+from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 TOL = 1e-9
 DC = GeneralizedInverse(PseudoInverseKind.dynamically_consistent)

@@ -17,13 +17,13 @@ import pytest
 from conftest import PANDA_POSE_AXES, panda_arm, panda_configurations, terms_at
 from pydrake.systems.framework import DiagramBuilder
 
-from nsdrake.criteria.joint_torque import joint_torque_criterion
-from nsdrake.criteria.manipulability import manipulability
-from nsdrake.criteria.obstacle import ObstacleDistances, obstacle_potential
-from nsdrake.null_space import null_space_torque
-from nsdrake.plant import add_station
-from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
-from nsdrake.scenario import load_scenario
+from nsdrake.control.criteria.joint_torque import joint_torque_criterion
+from nsdrake.control.criteria.manipulability import manipulability
+from nsdrake.control.criteria.obstacle import ObstacleDistances, obstacle_potential
+from nsdrake.control.null_space import null_space_torque
+from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.station.plant import add_station
 
 FD_TOL = 1e-6
 EXACT = 1e-10

@@ -23,7 +23,7 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.multibody.tree import JacobianWrtVariable, RevoluteJoint
 from pydrake.systems.framework import DiagramBuilder
 
-from nsdrake.models import models_dir
+from nsdrake.station.models import models_dir
 
 PANDA = models_dir() / "panda.urdf"
 EXACT = 1e-9

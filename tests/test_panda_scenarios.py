@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 from pydrake.systems.framework import DiagramBuilder
 
-from nsdrake.diagram import build_diagram
-from nsdrake.metrics import pose_metrics, self_motion_metrics
-from nsdrake.orientation import orientation_error
-from nsdrake.plant import add_station, desired_tool_orientation, tool_orientation
-from nsdrake.reference import CircleOnSurface, there_and_back
-from nsdrake.runner import compute_metrics
-from nsdrake.scenario import ScenarioError, load_scenario
-from nsdrake.simulate import run
-from nsdrake.traces import Traces
+from nsdrake.control.orientation import orientation_error
+from nsdrake.experiment.diagram import build_diagram
+from nsdrake.experiment.reference import CircleOnSurface, there_and_back
+from nsdrake.experiment.scenario import ScenarioError, load_scenario
+from nsdrake.experiment.simulate import run
+from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.metrics import pose_metrics, self_motion_metrics
+from nsdrake.reporting.run_folder import compute_metrics
+from nsdrake.station.plant import add_station, desired_tool_orientation, tool_orientation
 
 
 def circle(**overrides):
@@ -92,7 +92,7 @@ def test_circle_keeps_its_clock_through_a_contact_loss():
     most max_overtravel (as SlideAndPress), while the path along the surface keeps the
     first contact's clock: a contact regained later (a new t_contact) does not send x_d
     back to the start of the circle. Catches a circle timed from the latest contact."""
-    from nsdrake.reference import ContactState
+    from nsdrake.experiment.reference import ContactState
 
     ref = circle()
     t_first, t = 1.0, 8.0
@@ -304,7 +304,7 @@ def test_unstable_rotational_gains_are_refused(tmp_path):
     """A pose task's rotational gains are checked for the sampled loop's stability like the
     translational ones (k_p,r = 4e6 /s² at 1 ms is unstable), with one line naming them.
     Catches a check that only looks at the translational rows."""
-    from nsdrake.runner import check_scenario
+    from nsdrake.reporting.run_folder import check_scenario
 
     path = tmp_path / "stiff.yaml"
     path.write_text("impedance: {K_p_rotation: 4000000.0}\n")

@@ -18,15 +18,15 @@ from pydrake.common.eigen_geometry import AngleAxis, Quaternion
 from pydrake.math import RotationMatrix
 
 from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
-from nsdrake.controller import ControllerConfigError
-from nsdrake.dynamics import ArmModel
-from nsdrake.models import models_dir
-from nsdrake.orientation import (
+from nsdrake.control.controller import ControllerConfigError
+from nsdrake.control.dynamics import ArmModel
+from nsdrake.control.orientation import (
     orientation_error,
     quaternion_to_rotation,
     rotation_log,
     rotation_to_quaternion,
 )
+from nsdrake.station.models import models_dir
 
 EXACT = 1e-10
 FD = 1e-7
@@ -160,7 +160,7 @@ def test_orientation_error_rate_and_the_angle_identity():
     """Along R(t) = exp([ω t]×) R₀ and R_d(t) = exp([ω_d t]×) R_d0, the central difference of
     e_o equals J_l⁻¹(e_o)(ω_d − R_e ω) (R_e = R_d Rᵀ, J_l the left Jacobian of SO(3)), and
     e_oᵀ ė_o = e_oᵀ (ω_d − ω): the identity behind the closed loop's energy function
-    (nsdrake.orientation). Catches an error measure whose angle does not change at the
+    (nsdrake.control.orientation). Catches an error measure whose angle does not change at the
     rate of the angular-velocity error along its axis (e.g. the body-frame log with
     world-frame ω, or the quaternion vector part)."""
     rng = np.random.default_rng(5)

@@ -8,7 +8,7 @@ import pytest
 from conftest import terms_at
 from models import random_states
 
-from nsdrake.priority import (
+from nsdrake.control.priority import (
     Level,
     Mode,
     SelectorLimits,
@@ -18,7 +18,7 @@ from nsdrake.priority import (
     select_mode,
     update_switch_state,
 )
-from nsdrake.pseudo_inverse import GeneralizedInverse
+from nsdrake.control.pseudo_inverse import GeneralizedInverse
 
 LIMITS = SelectorLimits(d_lim=0.05, w_lim=0.1, d_band=0.01, w_band=0.02)
 DC = GeneralizedInverse()
@@ -140,8 +140,8 @@ def test_priority_demo_closed_loop(tmp_path):
     """The shipped priority_demo: modes 1, 2 and 3 visited, each mode's criterion improving
     while it is active, no torque step at a switch beyond 2 × the 99th percentile
     elsewhere, no joint over its speed limit (all from metrics.json's figures)."""
-    from nsdrake.runner import run_to_folder
-    from nsdrake.scenario import load_scenario
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.reporting.run_folder import run_to_folder
 
     result = run_to_folder(load_scenario("priority_demo"), tmp_path)
     by_name = {m.name: m for m in result.metrics}

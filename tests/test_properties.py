@@ -22,9 +22,9 @@ from drake_reference import AutoDiffArm
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from nsdrake.impedance import primary_torque
-from nsdrake.null_space import null_space_torque
-from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.control.impedance import primary_torque
+from nsdrake.control.null_space import null_space_torque
+from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 ARM = paper_arm()
 AD = AutoDiffArm(ARM)

@@ -24,8 +24,8 @@ from reference_math import (
     weighted_inverse,
 )
 
-from nsdrake.null_space import task_velocity_compensation_at
-from nsdrake.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.control.null_space import task_velocity_compensation_at
+from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 TOL = 1e-9
 KINDS = [

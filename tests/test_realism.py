@@ -20,16 +20,16 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from nsdrake.diagram import build_diagram
-from nsdrake.elastic import elastic_urdf
-from nsdrake.friction import friction_slope, friction_torque
-from nsdrake.model_error import scale_urdf_masses
-from nsdrake.models import models_dir
-from nsdrake.realism import RUNGS, ForceSensorConfig, RealismConfig
-from nsdrake.realism_diagram import ForceSensorModel
-from nsdrake.realism_measures import force_oscillation, wrong_way_share
-from nsdrake.scenario import Scenario, ScenarioError, load_scenario, shipped_scenarios
-from nsdrake.simulate import run
+from nsdrake.experiment.diagram import build_diagram
+from nsdrake.experiment.scenario import Scenario, ScenarioError, load_scenario, shipped_scenarios
+from nsdrake.experiment.simulate import run
+from nsdrake.realism.config import RUNGS, ForceSensorConfig, RealismConfig
+from nsdrake.realism.model_error import scale_urdf_masses
+from nsdrake.realism.wiring import ForceSensorModel
+from nsdrake.station.elastic import elastic_urdf
+from nsdrake.station.friction import friction_slope, friction_torque
+from nsdrake.station.models import models_dir
+from nsdrake.studies.measures import force_oscillation, wrong_way_share
 
 ARM4 = (models_dir() / "arm4.urdf").read_text()
 
@@ -273,7 +273,7 @@ def test_friction_steps_the_plant_finely_enough_and_the_check_refuses_a_coarse_s
     """Friction alone steps the plant at 0.5 ms (min_substeps 4), where its explicit slope
     × step × max λ(H⁻¹) stays below 1 for fig3's arm; at 2 ms the check before a run
     refuses it in one line. Catches friction integrated at a step where it chatters."""
-    from nsdrake.runner import check_scenario
+    from nsdrake.reporting.run_folder import check_scenario
 
     scenario = fig3_with(tmp_path, "realism: {friction: {enabled: true}}\n")
     check_scenario(scenario)
@@ -496,7 +496,7 @@ def test_each_rung_moves_fig3s_figures_the_way_physics_predicts(tmp_path):
     """``nsdrake compare realism`` for 3.5 s (contact at 1.27 s, at 2.5 s with every rung):
     each rung against the clean run, in the direction its physics predicts. Catches a
     rung that is wired but does nothing, or that does something else."""
-    from nsdrake.compare import load_family, run_family
+    from nsdrake.studies.compare import load_family, run_family
 
     result = run_family(load_family("realism"), tmp_path, duration=3.5, jobs=2)
     rows = [dict(row) for row in result.rows]

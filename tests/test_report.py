@@ -10,9 +10,9 @@ from pathlib import Path
 
 import yaml
 
-from nsdrake.metrics import Metric
-from nsdrake.report import flatten, render_report
-from nsdrake.visualization import DiagramPicture
+from nsdrake.reporting.metrics import Metric
+from nsdrake.reporting.report import flatten, render_report
+from nsdrake.station.visualization import DiagramPicture
 
 
 class _Page(HTMLParser):

@@ -7,8 +7,8 @@ import time
 import pytest
 from conftest import fig3_with
 
-from nsdrake.diagram import build_diagram
-from nsdrake.scenario import ScenarioError, load_scenario, load_scenario_file, shipped_scenarios
+from nsdrake.experiment.diagram import build_diagram
+from nsdrake.experiment.scenario import ScenarioError, load_scenario, load_scenario_file, shipped_scenarios
 
 BAD = [
     ("duration: [1, 2", "malformed YAML"),

@@ -1,5 +1,5 @@
 """Near and at singular poses (issue: safe when things go wrong): the task inertia Λ is
-capped (nsdrake.dynamics.task_inertia), the law is unchanged away from singularity,
+capped (nsdrake.control.dynamics.task_inertia), the law is unchanged away from singularity,
 and the controller's torque stays finite and bounded at the stretched arm."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import paper_arm, terms_at
 
-from nsdrake.dynamics import task_inertia
+from nsdrake.control.dynamics import task_inertia
 
 CAP = 50.0  # [kg] the default ImpedanceConfig.max_task_inertia
 
@@ -73,7 +73,7 @@ def test_controller_torque_is_finite_and_bounded_at_the_stretched_arm(stretch):
     gains × the capped inertia, not the 1e6 N m the exact Λ would give."""
     from test_controller import fig3_controller
 
-    from nsdrake.scenario import load_scenario
+    from nsdrake.experiment.scenario import load_scenario
 
     controller, station, _ = fig3_controller(load_scenario("fig3"))
     context = controller.CreateDefaultContext()

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from nsdrake.cli import main
-from nsdrake.sweep import CRASH_ENV, METRICS, SweepProgress, expand, load_sweep
+from nsdrake.studies.sweep import CRASH_ENV, METRICS, SweepProgress, expand, load_sweep
 
 SPEC = """\
 base: fig3
@@ -152,7 +152,7 @@ def test_a_missing_dask_or_a_scheduler_without_dask_is_one_line(tmp_path, capsys
 def test_the_shipped_sweep_loads_and_every_run_passes_the_checks(capsys):
     """Catches a shipped sweep broken by a renamed field or metric, or with a run the
     checks refuse; and `nsdrake list` not showing the sweeps."""
-    from nsdrake.sweep import plan_runs
+    from nsdrake.studies.sweep import plan_runs
 
     spec = load_sweep("robustness")
     assert len(plan_runs(spec)) == 18
@@ -382,7 +382,7 @@ def test_a_folder_claimed_by_a_live_process_is_refused(reference, tmp_path, caps
     shutil.copytree(serial, out)
     sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
-        from nsdrake.output import _start_time
+        from nsdrake.experiment.output import _start_time
 
         manifest = (out / ".nsdrake-run").read_text()
         import socket
@@ -456,10 +456,10 @@ def test_the_progress_bar_is_drawn_on_a_terminal_only():
 def test_metric_names_are_those_nsdrake_run_computes(tmp_path):
     """Catches the sweep's list of metric names drifting from runner.compute_metrics
     (a renamed figure would be refused, or silently collected as empty cells)."""
-    from nsdrake.runner import compute_metrics
-    from nsdrake.scenario import load_scenario
-    from nsdrake.simulate import run
-    from nsdrake.traces import Traces
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.experiment.simulate import run
+    from nsdrake.experiment.traces import Traces
+    from nsdrake.reporting.run_folder import compute_metrics
 
     scenario = load_scenario("fig3", duration=0.6)
     traces, built = run(scenario)

@@ -13,11 +13,11 @@ import pytest
 from conftest import SHORT_RUN_DURATION, fig3_with
 from replay_reader import animation_tracks, replay_commands
 
-from nsdrake.diagram import build_diagram
-from nsdrake.metrics import first_contact_index
-from nsdrake.simulate import run
-from nsdrake.traces import Traces
-from nsdrake.visualization import (
+from nsdrake.experiment.diagram import build_diagram
+from nsdrake.experiment.simulate import run
+from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.metrics import first_contact_index
+from nsdrake.station.visualization import (
     start_meshcat,
     visual_body_paths,
     visualizer_period,

@@ -1,0 +1,318 @@
+"""The arm as the controller knows it: its own model, never the simulated plant.
+
+A :class:`ControllerModel` owns a Drake ``MultibodyPlant`` of the arm (and, for
+obstacle avoidance, a ``SceneGraph`` holding the arm's collision geometry and the
+obstacles it should keep away from), the tool frame and the task axes. It is what
+a controller on a real robot has: a model of the arm and of its surroundings,
+read from a URDF, and nothing from the simulator.
+
+Model terms (H, C q̇, g, C, J) come from one of two libraries:
+
+- ``"drake"``: the plant's own calls (:class:`nsdrake.control.dynamics.ArmModel`), C by
+  polarisation of the bias term;
+- ``"pinocchio"``: Pinocchio (``pip install pin``) built from the same URDF, C from
+  ``computeCoriolisMatrix`` (the Christoffel matrix, Ḣ = C + Cᵀ), about ten times
+  faster. At construction H, g, C q̇ and the tool Jacobian of both libraries are
+  compared at a few seeded random states; a mismatch is refused with a one-line
+  error naming the term (:class:`ModelMismatchError`).
+
+``"auto"`` takes Pinocchio when it is installed and the model came from a URDF.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+from pydrake.geometry import ProximityProperties, SceneGraph, Shape
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
+from pydrake.systems.framework import DiagramBuilder
+
+from nsdrake.control.criteria.obstacle import proximity_geometries
+from nsdrake.control.dynamics import ArmModel, RobotTerms
+
+DYNAMICS = ("auto", "drake", "pinocchio")
+
+
+class ModelMismatchError(ValueError):
+    """Two model libraries disagree about the same arm."""
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A fixed obstacle the controller knows about: a shape at a pose in the world."""
+
+    name: str
+    shape: Shape  # pydrake.geometry.Box, Sphere, Cylinder, …
+    X_WO: RigidTransform  # pose of the shape's frame in the world
+
+
+class ControllerModel:
+    """The controller's model of the arm and its surroundings (module docstring).
+
+    Build it with :meth:`from_urdf` (obstacle avoidance and Pinocchio possible) or
+    :meth:`from_plant` (a finalized plant of your own, Drake terms, no obstacles).
+
+    Attributes:
+        plant: the controller's MultibodyPlant (finalized).
+        arm: the :class:`nsdrake.control.dynamics.ArmModel` (joint order, tool frame, task axes).
+        n, m: joints, task axes.
+        joint_names: in velocity order.
+        dynamics: "drake" or "pinocchio", the library the model terms come from.
+    """
+
+    def __init__(
+        self,
+        *,
+        plant: MultibodyPlant,
+        tool_frame: str,
+        task_axes: Sequence[str],
+        scene_graph: SceneGraph | None = None,
+        diagram=None,
+        urdf_text: str | None = None,
+        dynamics: str = "auto",
+    ):
+        if dynamics not in DYNAMICS:
+            raise ValueError(f"dynamics must be one of {', '.join(DYNAMICS)}, got {dynamics!r}")
+        if not plant.is_finalized():
+            raise ValueError("the controller model's plant must be finalized")
+        if not plant.HasFrameNamed(tool_frame):
+            raise ValueError(f"the controller model has no frame named '{tool_frame}'")
+        self.plant = plant
+        self.scene_graph = scene_graph
+        self.diagram = diagram
+        self.tool_frame_name = tool_frame
+        self.arm = ArmModel(plant, plant.GetFrameByName(tool_frame), task_axes)
+        self.n, self.m = self.arm.n, self.arm.m
+        self.joint_names = self.arm.joint_names
+        self.link_geometries: list = []
+        self.obstacle_geometries: list = []
+        if scene_graph is not None:
+            inspector = scene_graph.model_inspector()
+            tool = self.arm.tool_frame.body().index()
+            world = plant.world_body().index()
+            arm_bodies = [plant.get_body(b).index() for b in _moving_bodies(plant) if b != tool]
+            self.link_geometries = proximity_geometries(inspector, plant, arm_bodies)
+            self.obstacle_geometries = proximity_geometries(inspector, plant, [world])
+        self._pinocchio = None
+        if dynamics == "pinocchio" and urdf_text is None:
+            raise ValueError(
+                "Pinocchio dynamics need the model's URDF: build it with ControllerModel.from_urdf"
+            )
+        if dynamics == "pinocchio" or (dynamics == "auto" and urdf_text is not None and _has_pinocchio()):
+            self._pinocchio = PinocchioDynamics(urdf_text, self.arm, plant.gravity_field().gravity_vector())
+            check_agreement(self._pinocchio, self.arm)
+        self.dynamics = "pinocchio" if self._pinocchio else "drake"
+
+    @classmethod
+    def from_urdf(
+        cls,
+        urdf: str | Path,
+        *,
+        tool_frame: str,
+        task_axes: Sequence[str],
+        gravity: Sequence[float] = (0.0, 0.0, -9.81),
+        obstacles: Sequence[Obstacle] = (),
+        dynamics: str = "auto",
+    ) -> ControllerModel:
+        """The arm of a URDF (a path, or the URDF's text), welded to the world by the
+        file itself, with ``obstacles`` fixed in the world and ``gravity`` [m/s²]."""
+        text = str(urdf) if str(urdf).lstrip().startswith("<") else Path(urdf).read_text()
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        plant.set_name("controller_model")
+        Parser(plant).AddModelsFromString(text, "urdf")
+        for ob in obstacles:
+            plant.RegisterCollisionGeometry(
+                plant.world_body(), ob.X_WO, ob.shape, ob.name, ProximityProperties()
+            )
+        plant.mutable_gravity_field().set_gravity_vector(np.asarray(gravity, dtype=float))
+        plant.Finalize()
+        diagram = builder.Build()
+        return cls(
+            plant=plant,
+            tool_frame=tool_frame,
+            task_axes=task_axes,
+            scene_graph=scene_graph,
+            diagram=diagram,
+            urdf_text=text,
+            dynamics=dynamics,
+        )
+
+    @classmethod
+    def from_plant(
+        cls, plant: MultibodyPlant, *, tool_frame: str, task_axes: Sequence[str]
+    ) -> ControllerModel:
+        """A finalized plant of the arm alone (not the simulated one): Drake terms, no obstacles."""
+        return cls(plant=plant, tool_frame=tool_frame, task_axes=task_axes, dynamics="drake")
+
+    @property
+    def has_geometry(self) -> bool:
+        return bool(self.link_geometries) and bool(self.obstacle_geometries)
+
+    def create_scratch(self):
+        """Per-context scratch memory for :meth:`terms` and the geometry queries: a
+        context of the model's diagram (or of the plant alone)."""
+        return (self.diagram or self.plant).CreateDefaultContext()
+
+    def plant_context(self, scratch):
+        return self.plant.GetMyMutableContextFromRoot(scratch) if self.diagram else scratch
+
+    def terms(
+        self, scratch, q: np.ndarray, v: np.ndarray, coriolis: bool, max_task_inertia: float = math.inf
+    ) -> RobotTerms:
+        """:class:`nsdrake.control.dynamics.RobotTerms` at (q, q̇), from the chosen library."""
+        if self._pinocchio is not None:
+            return self._pinocchio.terms(q, v, coriolis, max_task_inertia)
+        return self.arm.terms(self.plant_context(scratch), q, v, coriolis, max_task_inertia)
+
+
+def _moving_bodies(plant: MultibodyPlant) -> list:
+    """Bodies that some joint moves (the arm's links and tool)."""
+    joints = [plant.get_joint(j) for j in plant.GetJointIndices() if plant.get_joint(j).num_velocities()]
+    return list(plant.GetBodiesKinematicallyAffectedBy([j.index() for j in joints])) if joints else []
+
+
+def _has_pinocchio() -> bool:
+    try:
+        import pinocchio  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def pinocchio_urdf(text: str) -> str:
+    """The URDF as Pinocchio's parser reads it: geometry and Drake extensions dropped
+    (Pinocchio needs only kinematics and inertia, and rejects Drake's capsules), the
+    ``world`` link declared, and continuous joints as revolute ones (Pinocchio would
+    give them two position coordinates, cos and sin)."""
+    root = ET.fromstring(text)
+    for parent in root.iter():
+        for child in list(parent):
+            if child.tag in ("collision", "visual", "transmission") or str(child.tag).startswith("{"):
+                parent.remove(child)
+    for joint in root.findall("joint"):
+        if joint.get("type") == "continuous":
+            joint.set("type", "revolute")
+            limit = joint.find("limit")
+            if limit is None:
+                limit = ET.SubElement(joint, "limit", effort="0", velocity="0")
+            limit.set("lower", "-1e300")
+            limit.set("upper", "1e300")
+    links = {link.get("name") for link in root.findall("link")}
+    for joint in root.findall("joint"):
+        parent = joint.find("parent").get("link")
+        if parent not in links:
+            ET.SubElement(root, "link", name=parent)
+            links.add(parent)
+    return ET.tostring(root, encoding="unicode")
+
+
+class PinocchioDynamics:
+    """Model terms from Pinocchio, in the joint order of the Drake ``arm``."""
+
+    def __init__(self, urdf_text: str, arm: ArmModel, gravity: np.ndarray):
+        import pinocchio as pin
+
+        self._pin = pin
+        self._model = pin.buildModelFromXML(pinocchio_urdf(urdf_text))
+        self._model.gravity.linear = np.asarray(gravity, dtype=float)
+        self._data = self._model.createData()
+        name = arm.tool_frame.name()
+        if not self._model.existFrame(name):
+            raise ModelMismatchError(f"Pinocchio's model of the URDF has no frame '{name}'")
+        self._tool = self._model.getFrameId(name)
+        if self._model.nq != arm.n or self._model.nv != arm.n:
+            raise ModelMismatchError(
+                f"Pinocchio's model has nq={self._model.nq}, nv={self._model.nv}; Drake's has {arm.n} joints"
+            )
+        # Drake's velocity order → Pinocchio's.
+        order = [self._model.joints[self._model.getJointId(j)].idx_v for j in arm.joint_names]
+        self._order = None if order == list(range(arm.n)) else np.array(order)
+        self._rows = arm.rows
+        self._spatial_rows = arm.spatial_rows
+        self._rotation = arm.m_r > 0
+        self._drake_rows = np.array([3, 4, 5, 0, 1, 2])
+        self._partials = arm._partials
+
+    def _to_pin(self, x: np.ndarray) -> np.ndarray:
+        if self._order is None:
+            return x
+        out = np.empty_like(x)
+        out[self._order] = x
+        return out
+
+    def terms(
+        self, q: np.ndarray, v: np.ndarray, coriolis: bool, max_task_inertia: float = math.inf
+    ) -> RobotTerms:
+        pin, model, data = self._pin, self._model, self._data
+        qp, vp = self._to_pin(q), self._to_pin(v)
+        pin.computeAllTerms(model, data, qp, vp)  # M (upper triangle), nle, g, joint Jacobians
+        J6 = pin.getFrameJacobian(model, data, self._tool, pin.LOCAL_WORLD_ALIGNED)
+        X_WT = pin.updateFramePlacement(model, data, self._tool)
+        p_WT = X_WT.translation.copy()
+        R_WT = X_WT.rotation.copy() if self._rotation else None
+        H, H_inv = symmetric_and_inverse(data.M)
+        nle, g = data.nle.copy(), data.g.copy()
+        C = pin.computeCoriolisMatrix(model, data, qp, vp).copy() if coriolis else None
+        J_spatial = J6[self._drake_rows]  # Drake's order: [angular; translational]
+        if self._order is not None:
+            o = self._order
+            H, H_inv, nle, g, J_spatial = H[np.ix_(o, o)], H_inv[np.ix_(o, o)], nle[o], g[o], J_spatial[:, o]
+            C = C[np.ix_(o, o)] if C is not None else None
+        J_w, J_v = J_spatial[:3], J_spatial[3:]
+        return RobotTerms(
+            q=q.copy(),
+            v=v.copy(),
+            H=H,
+            H_inv=H_inv,
+            Cv=nle - g,
+            g=g,
+            x=p_WT[self._rows],
+            p_WT=p_WT,
+            J=J_spatial[self._spatial_rows],
+            J_spatial=J_spatial,
+            dJ_dq=self._partials(J_w, J_v),
+            C=C,
+            R_WT=R_WT,
+            max_task_inertia=max_task_inertia,
+        )
+
+
+@njit(cache=True)
+def symmetric_and_inverse(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H, H⁻¹) from Pinocchio's mass matrix, which fills only its upper triangle."""
+    H = M.copy()
+    for i in range(H.shape[0]):
+        for j in range(i):
+            H[i, j] = H[j, i]
+    return H, np.linalg.inv(H)
+
+
+AGREEMENT_TOLERANCE = 1e-9  # relative, per term
+
+
+def check_agreement(pinocchio: PinocchioDynamics, arm: ArmModel, states: int = 3, seed: int = 0) -> None:
+    """Raises ModelMismatchError unless Pinocchio's and Drake's H, g, C q̇, C and J agree
+    at ``states`` seeded random states, to AGREEMENT_TOLERANCE relative to the term's size."""
+    rng = np.random.default_rng(seed)
+    context = arm.plant.CreateDefaultContext()
+    for _ in range(states):
+        q, v = rng.uniform(-np.pi, np.pi, arm.n), rng.uniform(-1.0, 1.0, arm.n)
+        a, b = pinocchio.terms(q, v, True), arm.terms(context, q, v, True)
+        for name in ("H", "g", "Cv", "C", "J_spatial"):
+            x, y = getattr(a, name), getattr(b, name)
+            scale = max(float(np.max(np.abs(y))), 1e-12)
+            error = float(np.max(np.abs(x - y)))
+            if error > AGREEMENT_TOLERANCE * max(scale, 1.0):
+                raise ModelMismatchError(
+                    f"the controller model's {name} from Pinocchio differs from Drake's by {error:.3g} "
+                    f"at q = {np.round(q, 3).tolist()}: the two libraries read the URDF differently"
+                )

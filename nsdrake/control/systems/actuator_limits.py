@@ -1,0 +1,70 @@
+"""ActuatorLimitsSystem: torque and torque-rate limits with the primary task first."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from nsdrake.control.actuator_limits import limited_torque
+
+
+class ActuatorLimitsSystem(LeafSystem):
+    """τ = τ_task + s τ₀ within each joint's torque and torque-rate limits, τ₀ reduced
+    first (:mod:`nsdrake.control.actuator_limits`).
+
+    .. pydrake_system::
+
+        name: ActuatorLimitsSystem
+        input_ports:
+        - task_torque
+        - null_space_torque
+        output_ports:
+        - limited
+
+    ``task_torque`` is τ − τ₀ of Eq. 7, ``null_space_torque`` τ₀ of Eq. 21 (n each)
+    [N m]; ``limited`` is [τ (n) [N m]; s; clipped]: the torque, the share s of τ₀
+    kept (1: no limit binds) and the number of joints whose task torque had to be
+    clipped (the controller splits it into ``generalized_force`` and ``saturation``).
+    The discrete state holds the torque applied over the last period, stored in an
+    unrestricted update alongside the plant's step (as the null-space controller's
+    q̇_dⁿ), for the rate limit.
+    """
+
+    def __init__(self, *, torque_limits: np.ndarray, rate_limits: np.ndarray, period: float):
+        super().__init__()
+        n = len(torque_limits)
+        self._n = n
+        self._tau_max = np.asarray(torque_limits, dtype=float)
+        self._rate_max = np.asarray(rate_limits, dtype=float)
+        self._period = period
+        self._task = self.DeclareVectorInputPort("task_torque", n)
+        self._tau0 = self.DeclareVectorInputPort("null_space_torque", n)
+        self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))  # [τ, 1 if it exists]
+        deps = {self.input_port_ticket(p.get_index()) for p in (self._task, self._tau0)}
+        deps.add(self.discrete_state_ticket(self._previous))
+        self._limited = self.DeclareVectorOutputPort("limited", n + 2, self._calc, prerequisites_of_calc=deps)
+        if np.isfinite(self._rate_max).any():
+            self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._store)
+
+    def output_parts(self) -> dict[str, int]:
+        """The parts of the ``limited`` port and their sizes, in order."""
+        return {"generalized_force": self._n, "saturation": 2}
+
+    def _calc(self, context, output):
+        previous = context.get_discrete_state(self._previous).value()
+        n = self._n
+        output.SetFromVector(
+            limited_torque(
+                self._task.Eval(context),
+                self._tau0.Eval(context),
+                self._tau_max,
+                self._rate_max,
+                self._period,
+                previous[:n],
+                previous[n] != 0.0,
+            )
+        )
+
+    def _store(self, context, state):
+        tau = self._limited.Eval(context)[: self._n]
+        state.get_mutable_discrete_state(self._previous).SetFromVector(np.append(tau, 1.0))

@@ -1,0 +1,357 @@
+"""Wiring: the station, the reference, the controller and the loggers in one diagram.
+
+::
+
+    ┌──────────────── station ────────────────┐
+    │ plant ──state────────────────────────────┼──► controller.estimated_state
+    │   ▲  └─reaction_forces─► force_sensor ───┼──► controller.measured_wrench
+    │   │                          └─ wrench ──┼──► reference.measured_wrench
+    │   └── actuation ◄─ actuation_map ◄───────┼─── controller.generalized_force
+    └─────────────────────────────────────────┘
+    reference ─► controller.desired_position / _velocity / _acceleration / _force
+    orientation_reference ─► controller.desired_orientation / _angular_velocity /
+                             _angular_acceleration  (pose tasks only)
+
+The controller (:class:`nsdrake.NullSpaceImpedanceController`) is a diagram of its
+own — robot_terms, impedance_controller, the criteria, priority_selector,
+null_space_controller — built on its own model of the arm and of the obstacles,
+never on the simulated plant. Every signal the traces need is logged once per
+control period by a ``VectorLogSink``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Meshcat
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    LogVectorOutput,
+    MatrixGain,
+    VectorLogSink,
+)
+
+from nsdrake.control.config import ControllerConfig
+from nsdrake.control.controller import (
+    ControllerConfigError,
+    NullSpaceImpedanceController,
+    without_null_space_task,
+)
+from nsdrake.control.dynamics import ArmModel
+from nsdrake.control.model import ControllerModel
+from nsdrake.control.orientation import rotation_to_quaternion
+from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
+from nsdrake.experiment.reference_system import SurfaceReference
+from nsdrake.experiment.scenario import Scenario, ScenarioError
+from nsdrake.realism.model_error import scale_urdf_masses
+from nsdrake.realism.wiring import add_force_sensor_model, add_realism_loggers, connect_realistic_controller
+from nsdrake.station.contact_monitor import ContactMonitor
+from nsdrake.station.force_sensor import ForceSensor
+from nsdrake.station.plant import Station, add_station, desired_tool_orientation, station_obstacles
+from nsdrake.station.visualization import Visualizers, add_visualizers, visualizer_period
+
+
+@dataclass
+class ControlledStation:
+    """What :func:`build_diagram` returns."""
+
+    diagram: Diagram
+    station: Station
+    controller: NullSpaceImpedanceController
+    loggers: dict[str, VectorLogSink]
+    scenario: Scenario
+    visualizers: Visualizers | None = None  # when built with a Meshcat
+    # Pose tasks: the desired tool orientation R_d (3, 3), held throughout; None otherwise.
+    desired_orientation: np.ndarray | None = None
+
+    def system(self, name: str):
+        """The subsystem called ``name``, in the diagram or inside the controller."""
+        if self.diagram.HasSubsystemNamed(name):
+            return self.diagram.GetSubsystemByName(name)
+        return self.controller.GetSubsystemByName(name)
+
+
+def initial_task_position(station: Station) -> np.ndarray:
+    """x = p(q0), the tool's task position at the initial pose. (m,) [m]."""
+    plant = station.arm_model.plant  # the station's plant, or the rigid arm's beside an elastic one
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, station.q0)
+    return station.arm_model.task_position(context)
+
+
+def has_joint_limits(station: Station) -> bool:
+    """Whether the arm has any finite joint position limit (the Panda; not the paper's arm)."""
+    plant = station.plant
+    return bool(
+        np.isfinite(plant.GetPositionLowerLimits()).any() or np.isfinite(plant.GetPositionUpperLimits()).any()
+    )
+
+
+def speed_limit_vector(scenario: Scenario, arm: ArmModel) -> np.ndarray:
+    """Each joint's speed limit (velocity order): the scenario's, else the arm model's
+    velocity limit (zero or none: unlimited), as the controller uses them. [rad/s]."""
+    limits = scenario.desired_null_space.joint_speed_limits
+    model = arm.plant.GetVelocityUpperLimits()
+    return np.array(
+        [limits.get(name, m if m > 0 else np.inf) for name, m in zip(arm.joint_names, model, strict=True)]
+    )
+
+
+def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> ControllerConfig:
+    """The controller's part of the scenario."""
+    config = ControllerConfig(
+        period=scenario.control_period,
+        impedance=scenario.impedance,
+        null_space=scenario.null_space,
+        desired_null_space=scenario.desired_null_space,
+        actuator_limits=scenario.actuator_limits,
+        nominal_force=scenario.reference.force,
+    )
+    return config if null_space_task else without_null_space_task(config)
+
+
+def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
+    """The controller's own model: the arm's URDF, the gravity of the scenario, and the
+    plate and obstacles where the station put them. With ``realism.model_error``, the
+    URDF's link and tool masses (and inertias) scaled by (1 + mass_error)."""
+    urdf = station.arm_file
+    if scenario.realism.model_error.enabled:
+        urdf = scale_urdf_masses(Path(urdf).read_text(), 1.0 + scenario.realism.model_error.mass_error)
+    return ControllerModel.from_urdf(
+        urdf,
+        tool_frame=scenario.arm.tool_frame,
+        task_axes=scenario.task.axes,
+        gravity=station.gravity,
+        obstacles=station_obstacles(station),
+    )
+
+
+def build_controller(
+    scenario: Scenario, station: Station, wrench_point, *, null_space_task: bool = True
+) -> NullSpaceImpedanceController:
+    """The scenario's controller, on its own model of the station's arm and obstacles;
+    ``wrench_point`` is the point the measured moment is about (the sensor origin)."""
+    try:
+        return NullSpaceImpedanceController(
+            controller_model=controller_model(scenario, station),
+            normal=station.normal,
+            config=controller_config(scenario, null_space_task=null_space_task),
+            wrench_point=wrench_point,
+        )
+    except ControllerConfigError as e:
+        raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
+
+
+def arm_reach(station: Station, samples: int = 2000) -> tuple[np.ndarray, float]:
+    """(centre, radius) on the task axes of the disc the tool point can reach: centred on
+    the first joint, radius the farthest tool distance over seeded random poses within
+    the joint limits (and the zero pose). [m]."""
+    arm = station.arm_model
+    plant = arm.plant
+    context = plant.CreateDefaultContext()
+    lower = np.maximum(plant.GetPositionLowerLimits(), -np.pi)
+    upper = np.minimum(plant.GetPositionUpperLimits(), np.pi)
+    centre = arm.joints[0].frame_on_child().CalcPoseInWorld(context).translation()[arm.rows]
+    rng = np.random.default_rng(0)
+    farthest = 0.0
+    for q in np.vstack([np.clip(np.zeros(arm.n), lower, upper), rng.uniform(lower, upper, (samples, arm.n))]):
+        plant.SetPositions(context, q)
+        farthest = max(farthest, float(np.linalg.norm(arm.task_position(context) - centre)))
+    return centre, farthest
+
+
+def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station, sensor) -> SurfaceReference:
+    """The task reference the scenario's ``reference.path`` names, fed by the force sensor."""
+    r = scenario.reference
+    common = {
+        "task_rows": station.arm_model.rows,
+        "contact_threshold": r.contact_threshold,
+        "period": scenario.control_period,
+        "loss_time": r.loss_time,
+    }
+    if r.path == "circle":
+        path = CircleOnSurface(
+            x0=initial_task_position(station),
+            tangent=station.tangent,
+            normal=station.normal,
+            radius=r.radius,
+            laps=r.laps,
+            speed=r.tangent_speed,
+            start_angle=r.start_angle,
+            delay=r.delay,
+            approach_speed=r.approach_speed,
+            blend_time=r.blend_time,
+            force=r.force,
+            force_ramp_time=r.force_ramp_time,
+            max_overtravel=r.max_overtravel,
+        )
+    else:
+        centre, reach = arm_reach(station)
+        path = SlideAndPress(
+            x0=initial_task_position(station),
+            tangent=station.tangent,
+            normal=station.normal,
+            tangent_speed=r.tangent_speed,
+            approach_speed=r.approach_speed,
+            blend_time=r.blend_time,
+            force=r.force,
+            force_ramp_time=r.force_ramp_time,
+            step_time=r.step_time if r.step_time > 0 else math.inf,
+            step_force=r.step_force,
+            max_overtravel=r.max_overtravel,
+            centre=centre,
+            reach=(1.0 - r.reach_margin) * reach,
+        )
+    reference = builder.AddNamedSystem("reference", SurfaceReference(reference=path, **common))
+    builder.Connect(sensor.GetOutputPort("wrench"), reference.GetInputPort("measured_wrench"))
+    return reference
+
+
+def add_orientation_reference(builder, controller, R_d: np.ndarray) -> None:
+    """A pose task's desired orientation R_d (held), zero desired angular velocity and
+    acceleration, into the controller's rotational ports."""
+    for name, port, value in (
+        ("orientation_reference", "desired_orientation", rotation_to_quaternion(R_d)),
+        ("angular_velocity_reference", "desired_angular_velocity", np.zeros(3)),
+        ("angular_acceleration_reference", "desired_angular_acceleration", np.zeros(3)),
+    ):
+        source = builder.AddNamedSystem(name, ConstantVectorSource(value))
+        builder.Connect(source.get_output_port(), controller.GetInputPort(port))
+
+
+def add_sensing(builder: DiagramBuilder, station: Station) -> tuple[ForceSensor, ContactMonitor]:
+    """The force sensor under the plate, and the monitor of contacts other than the tool's."""
+    plant = station.plant
+    sensor = builder.AddNamedSystem(
+        "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
+    )
+    builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
+    monitor = builder.AddNamedSystem(
+        "contact_monitor",
+        ContactMonitor(
+            plant=plant,
+            watched={*plant.GetBodyIndices(station.plate), *(b.index() for b in station.obstacle_bodies)},
+            allowed={station.tool_body.index()},
+        ),
+    )
+    builder.Connect(plant.get_contact_results_output_port(), monitor.get_input_port())
+    return sensor, monitor
+
+
+def connect_controller(builder, station: Station, controller, sensor, reference) -> None:
+    plant = station.plant
+    builder.Connect(plant.get_state_output_port(), controller.GetInputPort("estimated_state"))
+    builder.Connect(sensor.GetOutputPort("wrench"), controller.GetInputPort("measured_wrench"))
+    connect_reference(builder, controller, reference)
+    # τ = B u with B the plant's actuation matrix (a permutation here): u = Bᵀ τ.
+    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(plant.MakeActuationMatrix().T))
+    builder.Connect(controller.GetOutputPort("generalized_force"), actuation.get_input_port())
+    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
+
+
+def connect_reference(builder, controller, reference) -> None:
+    for port, ref in (
+        ("desired_position", "x_d"),
+        ("desired_velocity", "xdot_d"),
+        ("desired_acceleration", "xddot_d"),
+        ("desired_force", "f_d"),
+    ):
+        builder.Connect(reference.GetOutputPort(ref), controller.GetInputPort(port))
+
+
+def add_loggers(
+    builder, station, controller, sensor, reference, monitor, period, state_port=None
+) -> dict[str, VectorLogSink]:
+    """``state_port``: the arm's [q; q̇] when the plant's state is not (the belt rung)."""
+    signals = {
+        "x_d": reference.GetOutputPort("x_d"),
+        "wrench": sensor.GetOutputPort("wrench"),
+        "f_d": reference.GetOutputPort("f_d"),
+        "state": state_port if state_port is not None else station.plant.get_state_output_port(),
+        "forbidden_contacts": monitor.get_output_port(),
+        "in_contact": reference.GetOutputPort("in_contact"),
+    }
+    for name, port in {
+        "tau": "generalized_force",
+        "qns": "desired_null_space_velocity",
+        "mode": "mode",
+        "speed_scale": "speed_scale",
+        "w": "manipulability",
+        "d_min": "d_min",
+        "p_obstacle": "obstacle_potential",
+        "en": "null_space_velocity_error",
+        "nu": "lyapunov",
+        "p_tau": "joint_torque_criterion",
+        "saturation": "saturation",
+    }.items():
+        signals[name] = controller.GetOutputPort(port)
+    if has_joint_limits(station):
+        signals["p_joint_limits"] = controller.GetOutputPort("joint_limits_criterion")
+    loggers = {}
+    for name, port in signals.items():
+        logger = LogVectorOutput(port, builder, publish_period=period)
+        logger.set_name(f"log_{name}")
+        loggers[name] = logger
+    return loggers
+
+
+def build_diagram(
+    scenario: Scenario, *, null_space_task: bool = True, meshcat: Meshcat | None = None
+) -> ControlledStation:
+    """The Fig. 3 diagram for ``scenario``: station, reference, controller, loggers.
+
+    ``null_space_task`` False sets every criterion gain and the sweep to zero
+    (q̇_dⁿ = 0): the null-space controller then only damps self-motion. With a
+    ``meshcat``, the diagram also has the Meshcat visualizers.
+    """
+    builder = DiagramBuilder()
+    station = add_station(builder, scenario)
+    sensor, monitor = add_sensing(builder, station)
+    realism = scenario.realism
+    # What the controller and the reference read: the ideal sensor, or its realistic model.
+    measured = (
+        add_force_sensor_model(builder, scenario, station, sensor) if realism.force_sensor.enabled else sensor
+    )
+    reference = add_reference(builder, scenario, station, measured)
+    controller = build_controller(scenario, station, sensor.p_WSo, null_space_task=null_space_task)
+    builder.AddSystem(controller)
+    state_port = None
+    if realism.any:
+        state_port = connect_realistic_controller(
+            builder, scenario, station, controller, measured, reference, connect_reference
+        )
+    else:
+        connect_controller(builder, station, controller, sensor, reference)
+    R_d = None
+    if station.arm_model.m_r:
+        R_d = desired_tool_orientation(station, scenario.reference.orientation)
+        add_orientation_reference(builder, controller, R_d)
+    loggers = add_loggers(
+        builder, station, controller, measured, reference, monitor, scenario.control_period, state_port
+    )
+    if realism.any:
+        loggers.update(add_realism_loggers(builder, station, sensor, scenario.control_period))
+    visualizers = None
+    if meshcat is not None:
+        visualizers = add_visualizers(
+            builder,
+            station,
+            meshcat,
+            period=visualizer_period(scenario.control_period),
+            camera=(scenario.report.camera_position, scenario.report.camera_target),
+        )
+    diagram = builder.Build()
+    diagram.set_name("nsdrake")
+    return ControlledStation(
+        diagram=diagram,
+        station=station,
+        controller=controller,
+        loggers=loggers,
+        scenario=scenario,
+        visualizers=visualizers,
+        desired_orientation=R_d,
+    )

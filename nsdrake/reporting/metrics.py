@@ -1,0 +1,533 @@
+"""Acceptance figures, computed from the traces alone.
+
+Each figure is a :class:`Metric` with its value, unit, the bound it must meet
+and whether it does, so that metrics.json and the report show pass/fail.
+
+- :func:`fig3_metrics`: the Fig. 3 experiment. The window runs from 0.5 s after
+  first contact (the first row whose normal force reaches the contact threshold)
+  to the end of the run.
+- :func:`priority_metrics`: Fig. 1's switching: modes visited, each mode's
+  criterion improving while the mode is active, torque steps at switches.
+- :func:`joint_speed_metric`: the measured joint speeds against their limits.
+- :func:`pose_metrics`: a pose task on a surface (panda_wipe): force, in-plane position
+  and orientation tracking in the same window as fig3's, the smallest distance of the
+  arm's links to each obstacle against the selector's d_lim, forbidden contacts, and
+  every joint's closest approach to its position, speed and torque limits.
+- :func:`self_motion_metrics`: the elbow's swivel while the tool holds its pose and force
+  (panda_self_motion, Eq. 11 on a real arm).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nsdrake.experiment.traces import Traces
+
+SETTLE_TIME = 0.5  # [s] after first contact, start of the window
+FORCE_RMS_BOUND = 0.02  # RMS(f_n − f_d) ≤ 2% of f_d
+FORCE_MAX_BOUND = 0.10  # max |f_n − f_d| ≤ 10% of f_d
+POSITION_RMS_BOUND = 1e-3  # RMS of the tangential position error ≤ 1 mm [m]
+ORIENTATION_RMS_BOUND = 0.5  # RMS of the orientation error ≤ 0.5° [deg]
+ORIENTATION_MAX_BOUND = 2.0  # largest orientation error ≤ 2° [deg]
+SWIVEL_RANGE_BOUND = 0.5  # the elbow swivels through at least 0.5 rad [rad]
+NULL_SPACE_RELATIVE_BOUND = 0.05  # RMS ‖eⁿ‖ ≤ 5% of RMS ‖q̇_dⁿ‖ …
+NULL_SPACE_ABSOLUTE_BOUND = 1e-3  # … or 1e-3 rad/s, whichever is larger [rad/s]
+D_MIN_AFTER = 1.0  # [s] from this time on, d_min must stay above d_lim
+TORQUE_STEP_RATIO_BOUND = 2.0  # largest torque step at a switch ≤ 2 × the 99th percentile elsewhere
+CONTACT_ONSET_EXCLUDED = (-0.01, 0.3)  # [s] around first contact, excluded from the torque-step baseline
+
+
+@dataclass
+class Metric:
+    name: str
+    value: float
+    unit: str
+    bound: str  # the acceptance bound, in words; "" for a figure reported without one
+    passed: bool | None  # None when there is no bound
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["value"] = _json_number(self.value)
+        return d
+
+
+def _json_number(x: float):
+    x = float(x)
+    return x if math.isfinite(x) else str(x)
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else math.nan
+
+
+def first_contact_index(traces: Traces, threshold: float) -> int | None:
+    """The first row whose normal force reaches ``threshold``, or None."""
+    hits = np.flatnonzero(traces["f_n"] >= threshold)
+    return int(hits[0]) if hits.size else None
+
+
+def fig3_metrics(
+    traces: Traces,
+    *,
+    tangent: np.ndarray,
+    task_axes: tuple[str, ...],
+    contact_threshold: float,
+    p_tau_without_null_space_task: float | None = None,
+    d_lim: float | None = None,
+) -> list[Metric]:
+    """The acceptance figures of the fig3 issue from one run's traces.
+
+    Args:
+        traces: the run's traces (columns as written to traces.csv).
+        tangent: (m,) unit direction along the plate, in task coordinates.
+        task_axes: names of the task axes, e.g. ("x", "y").
+        contact_threshold: normal force that counts as contact [N].
+        p_tau_without_null_space_task: final joint-torque criterion of the same
+            run with q̇_dⁿ = 0, if it was run.
+        d_lim: the selector's obstacle limit: after the first second d_min must
+            stay above it [m].
+    """
+    t = traces["t"]
+    metrics: list[Metric] = []
+    k0 = first_contact_index(traces, contact_threshold)
+    if k0 is None:
+        return [Metric("first_contact_time", math.inf, "s", "contact happens", False)]
+    t_contact = float(t[k0])
+    metrics.append(Metric("first_contact_time", t_contact, "s", "", None))
+    window = t >= t_contact + SETTLE_TIME
+    if not window.any():
+        return metrics + [Metric("window_rows", 0, "rows", "> 0 rows after settling", False)]
+    metrics.append(Metric("window_start", t_contact + SETTLE_TIME, "s", "", None))
+    metrics.append(Metric("window_rows", int(window.sum()), "rows", "", None))
+
+    f_n, f_d = traces["f_n"][window], traces["f_d"][window]
+    f_ref = float(np.max(f_d))
+    err = f_n - f_d
+    metrics.append(
+        Metric(
+            "normal_force_min",
+            float(f_n.min()),
+            "N",
+            "> 0 (tool never leaves the plate)",
+            bool(f_n.min() > 0),
+        )
+    )
+    rms_f = _rms(err)
+    metrics.append(
+        Metric(
+            "force_error_rms",
+            rms_f,
+            "N",
+            f"<= {FORCE_RMS_BOUND:.0%} of f_d = {FORCE_RMS_BOUND * f_ref:.4g} N",
+            rms_f <= FORCE_RMS_BOUND * f_ref,
+        )
+    )
+    max_f = float(np.max(np.abs(err)))
+    metrics.append(
+        Metric(
+            "force_error_max",
+            max_f,
+            "N",
+            f"<= {FORCE_MAX_BOUND:.0%} of f_d = {FORCE_MAX_BOUND * f_ref:.4g} N",
+            max_f <= FORCE_MAX_BOUND * f_ref,
+        )
+    )
+    x = np.column_stack([traces[a] for a in task_axes])[window]
+    x_d = np.column_stack([traces[f"{a}_d"] for a in task_axes])[window]
+    rms_x = _rms((x - x_d) @ tangent)
+    metrics.append(
+        Metric(
+            "tangential_position_error_rms",
+            rms_x,
+            "m",
+            f"<= {POSITION_RMS_BOUND:g} m",
+            rms_x <= POSITION_RMS_BOUND,
+        )
+    )
+
+    en = np.linalg.norm(traces.block("en")[window], axis=1)
+    qns = np.linalg.norm(traces.block("qns")[window], axis=1)
+    rms_en, rms_qns = _rms(en), _rms(qns)
+    bound = max(NULL_SPACE_RELATIVE_BOUND * rms_qns, NULL_SPACE_ABSOLUTE_BOUND)
+    metrics.append(Metric("null_space_command_rms", rms_qns, "rad/s", "", None))
+    metrics.append(
+        Metric(
+            "null_space_error_rms",
+            rms_en,
+            "rad/s",
+            f"<= max(5% of RMS ||qns|| , 1e-3 rad/s) = {bound:.3g} rad/s",
+            rms_en <= bound,
+        )
+    )
+    if d_lim is not None and "d_min" in traces:
+        late = t >= D_MIN_AFTER
+        d_late = float(traces["d_min"][late].min()) if late.any() else math.inf
+        metrics.append(
+            Metric(f"d_min_after_{D_MIN_AFTER:g}s", d_late, "m", f"> d_lim = {d_lim:g} m", d_late > d_lim)
+        )
+    metrics.append(forbidden_contacts_metric(traces))
+
+    p_end = float(traces["p_tau"][-1])
+    if p_tau_without_null_space_task is None:
+        metrics.append(Metric("p_tau_end", p_end, "N^2 m^2", "", None))
+    else:
+        metrics.append(
+            Metric(
+                "p_tau_end",
+                p_end,
+                "N^2 m^2",
+                f"< p_tau_end_without_null_space_task = {p_tau_without_null_space_task:.4g}",
+                p_end < p_tau_without_null_space_task,
+            )
+        )
+        metrics.append(
+            Metric("p_tau_end_without_null_space_task", p_tau_without_null_space_task, "N^2 m^2", "", None)
+        )
+    return metrics
+
+
+def joint_speed_metric(traces: Traces, limits: np.ndarray) -> Metric:
+    """max over the run and the joints of |q̇_i| / limit_i (≤ 1: no joint exceeds its limit)."""
+    v = np.abs(traces.block("v"))
+    finite = np.isfinite(limits)
+    if not finite.any():
+        return Metric("joint_speed_ratio_max", 0.0, "-", "no joint has a speed limit", None)
+    ratio = float(np.max(v[:, finite] / limits[finite]))
+    return Metric("joint_speed_ratio_max", ratio, "-", "<= 1 (no joint exceeds its limit)", ratio <= 1.0)
+
+
+def _intervals(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end] row indices of the runs of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
+
+
+def torque_steps(traces: Traces) -> np.ndarray:
+    """Δτ_k = max_i |τ_i(t_{k+1}) − τ_i(t_k)|, the largest change of commanded torque
+    between consecutive control periods, per row k (len = rows − 1) [N m]."""
+    return np.max(np.abs(np.diff(traces.block("tau"), axis=0)), axis=1)
+
+
+def priority_metrics(
+    traces: Traces,
+    *,
+    blend_time: float,
+    contact_threshold: float | None = None,
+    required_modes: tuple[int, ...] = (),
+) -> list[Metric]:
+    """Fig. 1's switching, from the ``mode``, ``d_min``, ``w``, ``p_tau`` and ``tau`` traces
+    (and ``q_margin`` for an arm with joint limits).
+
+    - modes visited, with the time spent in each, and whether ``required_modes`` all appear;
+    - in every interval of mode 1 (3, 4, 2) that lasts at least ``blend_time`` (so
+      its ordering is fully active), d_min (w, q_margin) grows and p_tau falls from the
+      interval's start to its end;
+    - the largest torque step Δτ in the [switch, switch + blend_time] windows,
+      against twice the 99th percentile of Δτ over the other rows, first contact
+      ± (−0.01, 0.3) s excluded.
+    """
+    t = traces["t"]
+    mode = traces["mode"].astype(int)
+    h = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    metrics = []
+    visited = sorted({int(m) for m in mode})
+    if required_modes:
+        missing = sorted(set(required_modes) - set(visited))
+        metrics.append(
+            Metric(
+                "modes_visited",
+                float(len(visited)),
+                "modes",
+                f"includes {list(required_modes)} (visited {visited}, missing {missing})",
+                not missing,
+            )
+        )
+    else:
+        metrics.append(Metric("modes_visited", float(len(visited)), "modes", f"visited {visited}", None))
+    criteria = {1: ("d_min", +1, "d_min grows"), 2: ("p_tau", -1, "p_tau falls"), 3: ("w", +1, "w grows")}
+    if "q_margin" in traces:  # an arm with joint limits: mode 4, joint-limit avoidance
+        criteria[4] = ("q_margin", +1, "the smallest joint-limit margin grows")
+    for m, (column, sign, words) in criteria.items():
+        spans = _intervals(mode == m)
+        active = float(sum((t[b] - t[a] + h) for a, b in spans))
+        metrics.append(Metric(f"mode{m}_time", active, "s", "", None))
+        judged = [(a, b) for a, b in spans if t[b] - t[a] >= blend_time]
+        if not judged:
+            continue
+        changes = [sign * (traces[column][b] - traces[column][a]) for a, b in judged]
+        worst = float(min(changes))
+        metrics.append(
+            Metric(
+                f"mode{m}_{column}_change_min",
+                worst,
+                {"d_min": "m", "p_tau": "N^2 m^2", "w": "m^2", "q_margin": "rad"}[column],
+                f"> 0 in each of the {len(judged)} mode-{m} interval(s) of >= {blend_time:g} s ({words})",
+                worst > 0,
+            )
+        )
+    steps = torque_steps(traces)
+    switches = np.flatnonzero(np.diff(mode) != 0) + 1  # rows where a new mode starts
+    at_switch = np.zeros(len(steps), dtype=bool)
+    for k in switches:
+        at_switch[(t[:-1] >= t[k] - h / 2) & (t[:-1] <= t[k] + blend_time)] = True
+    elsewhere = ~at_switch
+    if contact_threshold is not None:
+        k0 = first_contact_index(traces, contact_threshold)
+        if k0 is not None:
+            lo, hi = CONTACT_ONSET_EXCLUDED
+            elsewhere &= ~((t[:-1] >= t[k0] + lo) & (t[:-1] <= t[k0] + hi))
+    metrics.append(Metric("mode_switches", float(len(switches)), "switches", "", None))
+    if len(switches) and elsewhere.any():
+        largest = float(steps[at_switch].max())
+        p99 = float(np.percentile(steps[elsewhere], 99))
+        metrics.append(Metric("torque_step_p99_elsewhere", p99, "N m", "", None))
+        metrics.append(
+            Metric(
+                "torque_step_at_switch_max",
+                largest,
+                "N m",
+                f"<= {TORQUE_STEP_RATIO_BOUND:g} x p99 elsewhere = {TORQUE_STEP_RATIO_BOUND * p99:.4g} N m",
+                largest <= TORQUE_STEP_RATIO_BOUND * p99,
+            )
+        )
+    return metrics
+
+
+def write_metrics(path: Path, metrics: list[Metric], extra: dict | None = None) -> None:
+    """metrics.json: {"metrics": {name: {...}}, "all_passed": bool, **extra}."""
+    body = {
+        "all_passed": all(m.passed for m in metrics if m.passed is not None),
+        "metrics": {m.name: m.to_json() for m in metrics},
+    }
+    if extra:
+        body.update(extra)
+    Path(path).write_text(json.dumps(body, indent=2) + "\n")
+
+
+def _window(traces: Traces, contact_threshold: float) -> tuple[list[Metric], np.ndarray | None]:
+    """The fig3 window (from SETTLE_TIME after first contact), with its metrics; None if empty."""
+    t = traces["t"]
+    k0 = first_contact_index(traces, contact_threshold)
+    if k0 is None:
+        return [Metric("first_contact_time", math.inf, "s", "contact happens", False)], None
+    t_contact = float(t[k0])
+    window = t >= t_contact + SETTLE_TIME
+    metrics = [Metric("first_contact_time", t_contact, "s", "", None)]
+    if not window.any():
+        return metrics + [Metric("window_rows", 0, "rows", "> 0 rows after settling", False)], None
+    metrics.append(Metric("window_start", t_contact + SETTLE_TIME, "s", "", None))
+    metrics.append(Metric("window_rows", int(window.sum()), "rows", "", None))
+    return metrics, window
+
+
+def _force_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
+    f_n, f_d = traces["f_n"][window], traces["f_d"][window]
+    f_ref = float(np.max(f_d))
+    err = f_n - f_d
+    rms_f, max_f = _rms(err), float(np.max(np.abs(err)))
+    return [
+        Metric(
+            "normal_force_min",
+            float(f_n.min()),
+            "N",
+            "> 0 (tool never leaves the plate)",
+            bool(f_n.min() > 0),
+        ),
+        Metric(
+            "force_error_rms",
+            rms_f,
+            "N",
+            f"<= {FORCE_RMS_BOUND:.0%} of f_d = {FORCE_RMS_BOUND * f_ref:.4g} N",
+            rms_f <= FORCE_RMS_BOUND * f_ref,
+        ),
+        Metric(
+            "force_error_max",
+            max_f,
+            "N",
+            f"<= {FORCE_MAX_BOUND:.0%} of f_d = {FORCE_MAX_BOUND * f_ref:.4g} N",
+            max_f <= FORCE_MAX_BOUND * f_ref,
+        ),
+    ]
+
+
+def in_plane_errors(traces: Traces, normal: np.ndarray, task_axes: tuple[str, ...]) -> np.ndarray:
+    """‖(I − n nᵀ)(x − x_d)‖ per row: the position error along the surface (the normal
+    coordinate is force-controlled). (rows,) [m]."""
+    x = np.column_stack([traces[a] for a in task_axes])
+    x_d = np.column_stack([traces[f"{a}_d"] for a in task_axes])
+    e = x - x_d
+    return np.linalg.norm(e - np.outer(e @ normal, normal), axis=1)
+
+
+def _orientation_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
+    if "rot_err" not in traces:
+        return []
+    rot = np.degrees(traces["rot_err"][window])
+    rms, largest = _rms(rot), float(np.max(rot))
+    return [
+        Metric(
+            "orientation_error_rms",
+            rms,
+            "deg",
+            f"<= {ORIENTATION_RMS_BOUND:g} deg",
+            rms <= ORIENTATION_RMS_BOUND,
+        ),
+        Metric(
+            "orientation_error_max",
+            largest,
+            "deg",
+            f"<= {ORIENTATION_MAX_BOUND:g} deg",
+            largest <= ORIENTATION_MAX_BOUND,
+        ),
+    ]
+
+
+def limit_metrics(traces: Traces) -> list[Metric]:
+    """Every joint's closest approach to its position, speed and torque limits over the
+    whole run (the q_margin, v_margin, tau_margin columns; > 0: never reached), and how
+    often the task torque itself had to be clipped."""
+    metrics = []
+    words = {
+        "q": ("rad", "position"),
+        "v": ("rad/s", "speed (the model's velocity limit)"),
+        "tau": ("N m", "torque (the actuator limit)"),
+    }
+    for kind, (unit, what) in words.items():
+        block = traces.block(f"{kind}_margin")
+        for i in range(block.shape[1]):
+            closest = float(np.min(block[:, i]))
+            if not math.isfinite(closest):
+                continue
+            bound = (
+                ">= 0 (the applied torque never exceeds it)"
+                if kind == "tau"
+                else f"> 0 (never reaches its {what} limit)"
+            )
+            passed = closest >= 0 if kind == "tau" else closest > 0
+            metrics.append(Metric(f"{kind}_margin{i + 1}_min", closest, unit, bound, passed))
+    metrics.append(
+        Metric("saturated_joints_max", float(traces["saturated_joints"].max()), "joints", "", None)
+    )
+    return metrics
+
+
+def pose_metrics(
+    traces: Traces,
+    *,
+    normal: np.ndarray,
+    task_axes: tuple[str, ...],
+    contact_threshold: float,
+    d_lim: float,
+    obstacles: tuple[str, ...],
+) -> list[Metric]:
+    """The acceptance figures of a pose task on a surface (panda_wipe), from the traces.
+
+    Args:
+        traces: the run's traces (with rot_err, d_<obstacle>, the margin columns).
+        normal: (m_t,) unit push direction on the translational task axes.
+        task_axes: the translational task axes, e.g. ("x", "y", "z").
+        contact_threshold: normal force that counts as contact [N].
+        d_lim: the selector's obstacle limit; every obstacle but the plate must stay
+            farther than this from the arm's links throughout [m].
+        obstacles: names of the obstacles besides the plate.
+    """
+    metrics, window = _window(traces, contact_threshold)
+    if window is None:
+        return metrics
+    metrics += _force_metrics(traces, window)
+    rms_x = _rms(in_plane_errors(traces, normal, task_axes)[window])
+    metrics.append(
+        Metric("position_error_rms", rms_x, "m", f"<= {POSITION_RMS_BOUND:g} m", rms_x <= POSITION_RMS_BOUND)
+    )
+    metrics += _orientation_metrics(traces, window)
+    for name in obstacles:
+        closest = float(traces[f"d_{name}"].min())
+        metrics.append(Metric(f"d_{name}_min", closest, "m", f"> d_lim = {d_lim:g} m", closest > d_lim))
+    if "d_plate" in traces:
+        closest = float(traces["d_plate"].min())
+        metrics.append(Metric("d_plate_min", closest, "m", "> 0 (no link touches the plate)", closest > 0))
+    forbidden = float(traces["forbidden_contacts"].max())
+    metrics.append(
+        Metric(
+            "forbidden_contacts_max",
+            forbidden,
+            "contacts",
+            "0 (only the tool touches the plate and the obstacles)",
+            forbidden == 0,
+        )
+    )
+    clipped = float(traces["saturated_joints"][window].max())
+    metrics.append(
+        Metric(
+            "saturated_joints_max_in_window",
+            clipped,
+            "joints",
+            "0 (the task torque never clipped while in contact)",
+            clipped == 0,
+        )
+    )
+    return metrics + limit_metrics(traces)
+
+
+def self_motion_metrics(
+    traces: Traces, *, normal: np.ndarray, task_axes: tuple[str, ...], contact_threshold: float
+) -> list[Metric]:
+    """The elbow's swivel (max − min of the ``swivel`` column over the window) while the
+    tool holds its pose and force: the largest in-plane position error and the force
+    error's RMS in the same window (fig3's, from 0.5 s after first contact), the
+    orientation error, forbidden contacts, and the joints' closest approach to their
+    limits (:func:`limit_metrics`)."""
+    metrics, window = _window(traces, contact_threshold)
+    if window is None:
+        return metrics
+    swivel = traces["swivel"][window]
+    travel = float(swivel.max() - swivel.min())
+    metrics.append(
+        Metric(
+            "swivel_range",
+            travel,
+            "rad",
+            f">= {SWIVEL_RANGE_BOUND:g} rad (the elbow sweeps through the null space)",
+            travel >= SWIVEL_RANGE_BOUND,
+        )
+    )
+    largest = float(np.max(in_plane_errors(traces, normal, task_axes)[window]))
+    metrics.append(
+        Metric(
+            "position_error_max",
+            largest,
+            "m",
+            f"<= {POSITION_RMS_BOUND:g} m",
+            largest <= POSITION_RMS_BOUND,
+        )
+    )
+    metrics += [m for m in _force_metrics(traces, window) if m.name != "force_error_max"]
+    metrics += _orientation_metrics(traces, window)
+    metrics.append(forbidden_contacts_metric(traces))
+    return metrics + (limit_metrics(traces) if "q_margin1" in traces else [])
+
+
+def contact_events(traces: Traces) -> list[tuple[str, float]]:
+    """("contact", t) and ("lost", t) in time order, from the ``in_contact`` column."""
+    if "in_contact" not in traces or len(traces) == 0:
+        return []
+    c, t = traces["in_contact"], traces["t"]
+    events = [("contact", float(t[0]))] if c[0] else []
+    for k in np.flatnonzero(np.diff(c)):
+        events.append(("contact" if c[k + 1] else "lost", float(t[k + 1])))
+    return events
+
+
+def forbidden_contacts_metric(traces: Traces) -> Metric:
+    """The largest number of contacts between the plate or an obstacle and any body but
+    the tool; bound 0."""
+    forbidden = float(traces["forbidden_contacts"].max())
+    return Metric(
+        "forbidden_contacts_max", forbidden, "contacts", "0 (only the tool touches the plate)", forbidden == 0
+    )

@@ -1,0 +1,278 @@
+"""One run of a scenario into an output folder: traces, metrics, plots, the
+diagram's picture, the 3D replay and the HTML report.
+
+(The output folder rules are in nsdrake/output.py; their names are re-exported here.)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from pydrake.geometry import Meshcat
+from pydrake.systems.framework import DiagramBuilder
+
+from nsdrake.experiment.checks import check_with_model
+from nsdrake.experiment.diagram import build_diagram, speed_limit_vector
+from nsdrake.experiment.output import (  # noqa: F401 (re-exported: diagrams/fig3.py, the CLI)
+    OutputFolderError,
+    declare,
+    default_output_folder,
+    prepare_output_folder,
+    record_written,
+)
+from nsdrake.experiment.scenario import Scenario
+from nsdrake.experiment.simulate import DivergenceError, run
+from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.metrics import (
+    Metric,
+    contact_events,
+    fig3_metrics,
+    first_contact_index,
+    joint_speed_metric,
+    pose_metrics,
+    priority_metrics,
+    self_motion_metrics,
+    write_metrics,
+)
+from nsdrake.reporting.plots import plot_fig3, plot_pose, plot_priority
+from nsdrake.reporting.report import write_report
+from nsdrake.station.plant import add_station
+from nsdrake.station.visualization import start_meshcat, write_diagram_picture, write_replay
+
+
+def check_scenario(scenario: Scenario) -> None:
+    """Builds the station, then the diagram, once, so that every field checked against the
+    model (files, joint and frame names, the task's rank at the initial pose, the sampled
+    loops' stability, then what the controller refuses) fails now, before an output
+    folder is made."""
+    check_with_model(scenario, add_station(DiagramBuilder(), scenario))
+    build_diagram(scenario)
+
+
+def scenario_yaml(scenario: Scenario) -> str:
+    """The effective scenario as YAML that load_scenario_file reads back."""
+    data = dataclasses.asdict(scenario)
+    for f in dataclasses.fields(scenario):
+        if not f.metadata.get("yaml", True):
+            data.pop(f.name)
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+@dataclass
+class RunResult:
+    out: Path
+    metrics: list[Metric]
+    notes: list[str] = field(default_factory=list)  # one line each, for the user (e.g. no Graphviz)
+    failure: str | None = None  # why the run stopped early ("diverged at t = … s: …")
+
+    @property
+    def passed(self) -> bool:
+        return self.failure is None and all(m.passed for m in self.metrics if m.passed is not None)
+
+
+def run_to_folder(
+    scenario: Scenario,
+    out: Path,
+    *,
+    progress=None,
+    replay: bool = True,
+    meshcat: Meshcat | None = None,
+) -> RunResult:
+    """Simulates ``scenario`` and writes into ``out`` (which must be ready):
+
+    - traces.csv: one row per control period (see README for the columns);
+    - traces_without_null_space_task.csv: the same run with q̇_dⁿ = 0, if the
+      scenario asks for the comparison;
+    - metrics.json: the acceptance figures, computed from the CSV files;
+    - fig3.png: the Fig. 3-style plots (with the fig3 check);
+    - priority.png: mode timeline and criteria (with the priority check);
+    - pose.png: force, path on the surface, position and orientation errors, obstacle
+      distances, joint-limit margins, the elbow's swivel (with the pose or self_motion check);
+    - scenario.yaml: the scenario as run;
+    - diagram.dot and diagram.svg (if Graphviz's dot is found): the Drake diagram;
+    - replay.html: the main run in Meshcat, self-contained (unless not ``replay``);
+    - report.html: all of the above on one page.
+
+    With a ``meshcat`` (a live viewer), the main run is shown in it as it runs,
+    at real time; the comparison run is never shown nor recorded. A run that
+    diverges (:class:`nsdrake.experiment.simulate.DivergenceError`) writes the same files up
+    to that moment, marked failed, and returns with ``failure`` set. In a folder
+    claimed by prepare_output_folder or default_output_folder, the manifest then
+    lists these files.
+    """
+    out = Path(out)
+    try:
+        return _run_to_folder(scenario, out, progress=progress, replay=replay, meshcat=meshcat)
+    finally:  # done or failed: the manifest lists what the run wrote, for a later --overwrite
+        record_written(out)
+
+
+# Every file a run may write into its folder, declared in the manifest before any is written.
+RUN_FILES = (
+    "scenario.yaml",
+    "traces.csv",
+    "traces_without_null_space_task.csv",
+    "replay.html",
+    "diagram.dot",
+    "diagram.svg",
+    "metrics.json",
+    "fig3.png",
+    "priority.png",
+    "pose.png",
+    "report.html",
+)
+
+
+def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, meshcat) -> RunResult:
+    declare(out, RUN_FILES)
+    (out / "scenario.yaml").write_text(scenario_yaml(scenario))
+    compare = scenario.report.compare_without_null_space_task
+    stages = 2 if compare else 1
+    report = (lambda k: lambda f: progress((k + f) / stages)) if progress else (lambda k: None)
+    live = meshcat is not None
+    if meshcat is None and replay:
+        meshcat = start_meshcat(live=False)
+    failure = None
+    try:
+        traces, built = run(scenario, progress=report(0), meshcat=meshcat, live=live)
+    except DivergenceError as e:
+        traces, built, failure = e.traces, e.built, str(e)
+        if built.visualizers is not None:
+            built.visualizers.publish_recording()
+    traces.write_csv(out / "traces.csv")
+    replay_path = write_replay(meshcat, out / "replay.html") if replay else None
+    picture = write_diagram_picture(built.diagram, out)
+    baseline = None
+    if compare and failure is None:
+        try:
+            baseline_traces, _ = run(scenario, null_space_task=False, progress=report(1))
+        except DivergenceError as e:
+            failure = f"the comparison run (q̇_dⁿ = 0) {e}"
+        else:
+            baseline_traces.write_csv(out / "traces_without_null_space_task.csv")
+            baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
+    traces = Traces.read_csv(out / "traces.csv")
+    metrics = compute_metrics(scenario, built.station, traces, baseline) if failure is None else []
+    events = contact_events(traces)
+    extra = {
+        "scenario": scenario.source,
+        "duration": scenario.duration,
+        "status": "failed" if failure else "ok",
+        "contact_events": [{"event": e, "t": t} for e, t in events],
+    }
+    if failure:
+        extra["failure"] = failure
+    write_metrics(out / "metrics.json", metrics, extra)
+    plots = write_plots(scenario, built, traces, baseline, out)
+    notes = [contact_note(events)] if any(e == "lost" for e, _ in events) else []
+    notes += [picture.note] if picture.note else []
+    write_report(
+        out,
+        title=f"nsdrake run {out.resolve().name}",
+        description=f"{scenario.description} (scenario: {scenario.source or 'built in code'})",
+        parameters=yaml.safe_load(scenario_yaml(scenario)),
+        metrics=metrics,
+        plots=plots,
+        diagram=picture,
+        replay=replay_path.name if replay_path else None,
+        notes=notes,
+        failure=failure,
+    )
+    return RunResult(out=out, metrics=metrics, notes=notes, failure=failure)
+
+
+def contact_note(events: list[tuple[str, float]]) -> str:
+    """One line: when contact was made, lost and regained."""
+    words = {"contact": "made", "lost": "lost"}
+    parts, seen = [], False
+    for event, t in events:
+        word = "regained" if event == "contact" and seen else words[event]
+        seen = seen or event == "contact"
+        parts.append(f"{word} at t = {t:.3f} s")
+    return "contact " + ", ".join(parts) + " (the force command falls to 0 while contact is lost)"
+
+
+def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | None, out: Path) -> list[Path]:
+    """fig3.png, priority.png and pose.png, as the scenario's checks ask (none for an empty trace)."""
+    if len(traces) < 2:
+        return []
+    k0 = first_contact_index(traces, scenario.reference.contact_threshold)
+    contact_time = float(traces["t"][k0]) if k0 is not None else None
+    plots = []
+    if "fig3" in scenario.report.checks:
+        plots.append(out / "fig3.png")
+        plot_fig3(
+            traces,
+            out / "fig3.png",
+            task_axes=built.station.arm_model.task_axes[: built.station.arm_model.m_t],
+            title=scenario.description,
+            baseline=baseline,
+            contact_time=contact_time,
+            selector=scenario.desired_null_space.selector,
+        )
+    if "priority" in scenario.report.checks:
+        plots.append(out / "priority.png")
+        plot_priority(
+            traces,
+            out / "priority.png",
+            title=scenario.description,
+            selector=scenario.desired_null_space.selector,
+        )
+    if {"pose", "self_motion"} & set(scenario.report.checks):
+        arm = built.station.arm_model
+        plots.append(out / "pose.png")
+        plot_pose(
+            traces,
+            out / "pose.png",
+            normal=built.station.normal,
+            task_axes=arm.task_axes[: arm.m_t],
+            title=scenario.description,
+            baseline=baseline,
+            contact_time=contact_time,
+            d_lim=scenario.desired_null_space.selector.d_lim,
+        )
+    return plots
+
+
+def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Traces | None) -> list[Metric]:
+    """The figures the scenario's ``report.checks`` ask for, from the traces (and the
+    station's plate directions and arm model)."""
+    selector = scenario.desired_null_space.selector
+    threshold = scenario.reference.contact_threshold
+    metrics: list[Metric] = []
+    if "fig3" in scenario.report.checks:
+        metrics += fig3_metrics(
+            traces,
+            tangent=station.tangent,
+            task_axes=station.arm_model.task_axes,
+            contact_threshold=threshold,
+            p_tau_without_null_space_task=float(baseline["p_tau"][-1]) if baseline is not None else None,
+            d_lim=selector.d_lim,
+        )
+    if "priority" in scenario.report.checks:
+        metrics += priority_metrics(
+            traces,
+            blend_time=selector.blend_time,
+            contact_threshold=threshold,
+            required_modes=tuple(scenario.report.required_modes),
+        )
+    arm = station.arm_model
+    translational = arm.task_axes[: arm.m_t]
+    if "pose" in scenario.report.checks:
+        metrics += pose_metrics(
+            traces,
+            normal=station.normal,
+            task_axes=translational,
+            contact_threshold=threshold,
+            d_lim=selector.d_lim,
+            obstacles=tuple(ob.name for ob in scenario.obstacles),
+        )
+    if "self_motion" in scenario.report.checks:
+        metrics += self_motion_metrics(
+            traces, normal=station.normal, task_axes=translational, contact_threshold=threshold
+        )
+    metrics.append(joint_speed_metric(traces, speed_limit_vector(scenario, station.arm_model)))
+    return metrics

@@ -1,0 +1,644 @@
+"""Families of runs that put the paper's claims side by side (``nsdrake compare``).
+
+A family (``nsdrake/families/NAME.yaml``) names a shipped base scenario, a measure
+and a list of variants, each a set of scenario overrides::
+
+    description: "…"
+    scenario: force_step          # the base scenario
+    measure: contact_force_into_null_space
+    variants:
+      - name: dynamically consistent
+        overrides: {null_space: {pseudo_inverse: dynamically_consistent}}
+
+Each variant's scenario is the base, then the user's ``--config`` file, then the
+variant's overrides (the variant's defining switch always wins). Every variant
+is simulated, its traces written to ``variants/NN-slug/traces.csv``, and the
+measure computes one table row from those traces alone. The table is written as
+``table.md`` and ``table.csv``, and ``compare.png`` overlays the variants.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import multiprocessing
+import multiprocessing.connection
+import os
+import re
+import signal
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nsdrake.control.dynamics import ArmModel
+from nsdrake.experiment.output import declare, record_written
+from nsdrake.experiment.scenario import (
+    Scenario,
+    ScenarioError,
+    _cut,
+    _name,
+    _show,
+    check_shape,
+    load_scenario,
+    normalised_yaml,
+    read_yaml,
+)
+from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.metrics import SETTLE_TIME, first_contact_index, torque_steps
+from nsdrake.studies.measures import (
+    MODE_CRITERION,
+    MODE_NAME,
+    commanded_step_rates,
+    force_oscillation,
+    wrong_way_share,
+)
+
+FAMILY_DIR = Path(__file__).resolve().parent / "families"
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    overrides: dict
+
+
+@dataclass(frozen=True)
+class Family:
+    name: str
+    description: str
+    scenario: str
+    measure: str
+    variants: tuple[Variant, ...]
+    source: str
+
+
+def shipped_families() -> list[str]:
+    return sorted(p.stem for p in FAMILY_DIR.glob("*.yaml"))
+
+
+def load_family(name: str) -> Family:
+    """A shipped family, checked: base scenario, measure, variant names and overrides."""
+    known = shipped_families()
+    if name not in known:
+        raise ScenarioError(f"unknown family '{name}'; the shipped families are {', '.join(known)}")
+    path = FAMILY_DIR / f"{name}.yaml"
+    _, data = read_yaml(path, "family")
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{path}: must be a mapping with description, scenario, measure, variants")
+    unknown = set(data) - {"description", "scenario", "measure", "variants"}
+    if unknown:
+        raise ScenarioError(f"{path}: {_name(sorted(unknown, key=str)[0])}: unknown field")
+    if data.get("measure") not in MEASURES:
+        raise ScenarioError(
+            f"{path}: measure: must be one of {', '.join(MEASURES)}, got {_show(data.get('measure'))}"
+        )
+    variants = []
+    for i, v in enumerate(data.get("variants") or []):
+        if (
+            not isinstance(v, dict)
+            or not isinstance(v.get("name"), str)
+            or not isinstance(v.get("overrides", {}), dict)
+        ):
+            raise ScenarioError(f"{path}: variants[{i}]: needs a name and a mapping of overrides")
+        problem = check_shape(v.get("overrides", {}), Scenario, "")
+        if problem:
+            raise ScenarioError(f"{path}: variants[{i}].overrides.{problem}")
+        variants.append(Variant(v["name"], v.get("overrides", {})))
+    if not variants:
+        raise ScenarioError(f"{path}: variants: a family needs at least one variant")
+    names = [v.name for v in variants]
+    if len(set(names)) != len(names):
+        raise ScenarioError(f"{path}: variants: names must be distinct")
+    return Family(
+        name=name,
+        description=str(data.get("description", "")),
+        scenario=str(data.get("scenario", "")),
+        measure=data["measure"],
+        variants=tuple(variants),
+        source=str(path),
+    )
+
+
+def variant_scenario(family: Family, index: int, config: Path | None, duration: float | None) -> Scenario:
+    """The base scenario, then ``config``, then the variant's overrides; validated."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    from nsdrake.experiment.scenario import validate
+
+    base = load_scenario(family.scenario, config=config, duration=duration)
+    variant = family.variants[index]
+    try:
+        scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(variant.overrides), defaults=base)
+    except Exception as e:
+        raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_cut(e)}") from None
+    if duration is not None:
+        scenario = dataclasses.replace(scenario, duration=duration)
+    scenario.source = f"{family.source} [{variant.name}]"
+    scenario.base_dir = base.base_dir
+    validate(scenario)
+    return scenario
+
+
+def slug(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")
+
+
+# --- measures: one table row from one variant's traces --------------------------------
+
+
+@dataclass(frozen=True)
+class RunFacts:
+    """What a measure may know besides the traces: the scenario and the station."""
+
+    scenario: Scenario
+    station: object  # nsdrake.station.plant.Station
+
+    @property
+    def arm(self) -> ArmModel:
+        return self.station.arm_model
+
+    @property
+    def tangent(self) -> np.ndarray:
+        return self.station.tangent
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.station.normal
+
+
+def _rms(x) -> float:
+    x = np.asarray(x)
+    return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
+
+
+def _norms(traces: Traces, prefix: str) -> np.ndarray:
+    return np.linalg.norm(traces.block(prefix), axis=1)
+
+
+def dc_null_space_speed(traces: Traces, arm: ArmModel) -> np.ndarray:
+    """‖(I − J̄ J) q̇‖ per row, with the dynamically consistent projector, recomputed
+    from the logged q and q̇ (the same measure whichever inverse the run used)."""
+    from nsdrake.control.pseudo_inverse import GeneralizedInverse
+
+    context = arm.plant.CreateDefaultContext()
+    dc = GeneralizedInverse()
+    q, v = traces.block("q"), traces.block("v")
+    out = np.empty(len(traces))
+    for k in range(len(traces)):
+        terms = arm.terms(context, q[k], v[k], coriolis=False)
+        out[k] = np.linalg.norm(dc.at(terms).N @ v[k])
+    return out
+
+
+def measure_contact_force_into_null_space(traces: Traces, ctx: RunFacts) -> dict:
+    """Eq. 26. Null-space velocity after the desired-force step (1 s window) and before it
+    (0.5 s of steady pressing: the floor of the contact model's own transient)."""
+    s = ctx.scenario
+    t = traces["t"]
+    k0 = first_contact_index(traces, s.reference.contact_threshold)
+    if k0 is None:
+        return {"contact": False}
+    t_step = t[k0] + s.reference.step_time
+    after = (t >= t_step) & (t < t_step + 1.0)
+    before = (t >= t_step - 0.5) & (t < t_step)
+    en = _norms(traces, "en")
+    dc = dc_null_space_speed(traces, ctx.arm)
+    f_err = traces["f_n"] - traces["f_d"]
+    return {
+        "pseudo_inverse": s.null_space.pseudo_inverse,
+        "control_period": s.control_period,
+        "en_peak_after_step": float(en[after].max()),
+        "en_rms_after_step": _rms(en[after]),
+        "en_peak_before_step": float(en[before].max()),
+        "dc_null_space_speed_peak_after_step": float(dc[after].max()),
+        "dc_null_space_speed_peak_before_step": float(dc[before].max()),
+        "force_error_rms_after_step": _rms(f_err[after]),
+    }
+
+
+def measure_null_space_motion_into_task(traces: Traces, ctx: RunFacts) -> dict:
+    """Eq. 11. Disturbance of force and position while the self-motion sweep runs
+    (from the end of its ramp to the end of the run), against the 0.5 s before it."""
+    s = ctx.scenario
+    t = traces["t"]
+    sw = s.desired_null_space.sweep
+    during = t >= sw.start_time + sw.ramp_time
+    before = (t >= sw.start_time - 0.5) & (t < sw.start_time)
+    f_err = traces["f_n"] - traces["f_d"]
+    axes = ctx.arm.task_axes
+    pos_err = np.column_stack([traces[a] - traces[f"{a}_d"] for a in axes])
+    tangential = pos_err @ ctx.tangent
+    normal = pos_err @ ctx.normal
+    return {
+        "null_space_speed_rms": _rms(_norms(traces, "qns")[during]),
+        "en_rms": _rms(_norms(traces, "en")[during]),
+        "force_error_peak": float(np.abs(f_err[during]).max()),
+        "force_error_rms": _rms(f_err[during]),
+        "force_error_rms_before": _rms(f_err[before]),
+        "tangential_error_peak": float(np.abs(tangential[during]).max()),
+        "tangential_error_rms": _rms(tangential[during]),
+        "normal_deviation_peak": float(np.abs(normal[during] - normal[before].mean()).max())
+        if before.any()
+        else math.nan,
+    }
+
+
+def measure_lyapunov(traces: Traces, ctx: RunFacts) -> dict:
+    """Eqs. 23–24. The largest increase of ν between consecutive control periods."""
+    nu = traces["nu"]
+    dnu = np.diff(nu)
+    return {
+        "nu_initial": float(nu[1]) if len(nu) > 1 else math.nan,
+        "nu_final": float(nu[-1]),
+        "nu_increase_max": float(dnu.max()),
+        "nu_increase_max_relative": float(dnu.max() / max(nu.max(), 1e-300)),
+        "periods_with_nu_increase": int(np.sum(dnu > 1e-12 * max(nu.max(), 1e-300))),
+        "en_final": float(_norms(traces, "en")[-1]),
+    }
+
+
+def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
+    """The fig3 acceptance figures (primary task and null space), and the largest torque step."""
+    from nsdrake.reporting.run_folder import compute_metrics
+
+    s = dataclasses.replace(ctx.scenario, report=dataclasses.replace(ctx.scenario.report, checks=["fig3"]))
+    metrics = compute_metrics(s, ctx.station, traces, None)
+    row = {
+        m.name: m.value
+        for m in metrics
+        if m.name not in ("window_start", "window_rows", "p_tau_end_without_null_space_task")
+    }
+    row["all_bounds_met"] = all(m.passed for m in metrics if m.passed is not None)
+    row["torque_step_max"] = float(torque_steps(traces).max())
+    return row
+
+
+def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
+    """The realism ladder (nsdrake/realism.py), in the fig3 window (from 0.5 s after first
+    contact to the end): the measured normal force's error (what the controller and the
+    paper's Fig. 3 see) and the true contact force's, how the force oscillates around
+    f_d (:func:`nsdrake.studies.measures.force_oscillation`), the tangential position
+    error, ‖eⁿ‖ and ν."""
+    s = ctx.scenario
+    t = traces["t"]
+    row: dict = {}
+    k0 = first_contact_index(traces, s.reference.contact_threshold)
+    if k0 is None:
+        return {**row, "first_contact_time": math.inf}
+    window = t >= t[k0] + SETTLE_TIME
+    row["first_contact_time"] = float(t[k0])
+    if window.sum() < 8:
+        return row
+    error = (traces["f_n"] - traces["f_d"])[window]
+    row["force_error_rms"] = _rms(error)
+    row["force_error_peak"] = float(np.abs(error).max())
+    row["force_error_mean"] = float(error.mean())
+    true = traces["f_n_true"] if "f_n_true" in traces else traces["f_n"]
+    true_error = (true - traces["f_d"])[window]
+    row["true_force_error_rms"] = _rms(true_error)
+    row["true_force_error_mean"] = float(true_error.mean())
+    frequency, rms, p2p = force_oscillation(t[window], error)
+    row["force_oscillation_frequency"] = frequency
+    row["force_oscillation_rms"] = rms
+    row["force_oscillation_p2p"] = p2p
+    pos_err = np.column_stack([traces[a] - traces[f"{a}_d"] for a in ctx.arm.task_axes])[window]
+    row["tangential_position_error_rms"] = _rms(pos_err @ ctx.tangent)
+    row["en_rms"] = _rms(_norms(traces, "en")[window])
+    row["nu_rms"] = _rms(traces["nu"][window])
+    return row
+
+
+def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
+    """Section 3.4 in closed loop. For each criterion while it is the active level-2
+    criterion (Fig. 1's mode) and q̇_dⁿ ≠ 0: the share of control periods in which its
+    logged value moved against the sign of its gain (task motion included), the share
+    in which the commanded step alone, Φᵀ q̇_dⁿ, points the wrong way (the paper's
+    claim; joint torque and manipulability, Φ recomputed from q), and its value at
+    the start and the end of the run; and the smallest link–obstacle distance and the
+    most contacts of links with obstacles (a criterion can improve by driving a link
+    into the plate when nothing guards it)."""
+    s = ctx.scenario
+    d = s.desired_null_space
+    gains = {1: d.criteria.obstacle.gain, 2: d.criteria.joint_torque.gain, 3: d.criteria.manipulability.gain}
+    mode = traces["mode"]
+    commanded = _norms(traces, "qns") > 0.0
+    row: dict = {"pseudo_inverse": s.null_space.pseudo_inverse, "rotate_gradient": d.rotate_gradient}
+    for m, column in MODE_CRITERION.items():
+        active = (mode == m) & commanded
+        if not active[:-1].any() or gains[m] == 0.0:
+            continue
+        name = MODE_NAME[m]
+        values = traces[column]
+        share, periods = wrong_way_share(values, gains[m], active)
+        row[f"{name}_active_periods"] = periods
+        row[f"{name}_wrong_way_share"] = share
+        if m in (2, 3):
+            rates = commanded_step_rates(traces, ctx.arm, m, s.reference.force * ctx.normal)
+            wrong = (np.sign(rates) == -np.sign(gains[m])) & active
+            row[f"{name}_commanded_step_wrong_share"] = float(wrong[:-1].sum()) / periods
+        row[f"{name}_start"] = float(values[0])
+        row[f"{name}_end"] = float(values[-1])
+    # Whether the criterion's optimum was reached by pushing a link into an obstacle.
+    row["d_min_min"] = float(traces["d_min"].min())
+    row["forbidden_contacts_max"] = int(traces["forbidden_contacts"].max())
+    return row
+
+
+MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
+    "contact_force_into_null_space": measure_contact_force_into_null_space,
+    "null_space_motion_into_task": measure_null_space_motion_into_task,
+    "lyapunov": measure_lyapunov,
+    "fig3": measure_fig3,
+    "realism": measure_realism,
+    "gradient_projection": measure_gradient_projection,
+}
+
+
+# --- running ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Task:
+    family: Family
+    index: int
+    config: Path | None
+    duration: float | None
+    folder: Path
+
+
+FAULT_VARIABLE = "NSDRAKE_TEST_FAULT"
+
+
+def _injected_fault(index: int) -> None:
+    """Test hook: with NSDRAKE_TEST_FAULT=INDEX:exit (or INDEX:raise) in the environment,
+    variant INDEX dies as a segfault would, leaving no result (or raises). The tests use it
+    to check that ``nsdrake compare`` survives a crashing variant; unset, it does nothing."""
+    spec = os.environ.get(FAULT_VARIABLE, "")
+    if spec.partition(":")[0] != str(index):
+        return
+    if spec.partition(":")[2] == "exit":
+        os._exit(70)
+    raise RuntimeError(f"{FAULT_VARIABLE} asked variant {index} to fail")
+
+
+def _run_variant(task: _Task) -> dict:
+    """Simulates one variant, writes its traces and measures them (from the file)."""
+    from nsdrake.experiment.simulate import DivergenceError, run
+
+    _injected_fault(task.index)
+    scenario = variant_scenario(task.family, task.index, task.config, task.duration)
+    diverged = None
+    try:
+        traces, built = run(scenario)
+    except DivergenceError as e:  # a row that says so, with what it measured up to then
+        traces, built, diverged = e.traces, e.built, f"{e.t:.4g} s: {e.reason}"
+    task.folder.mkdir(parents=True, exist_ok=True)
+    traces.write_csv(task.folder / "traces.csv")
+    traces = Traces.read_csv(task.folder / "traces.csv")
+    row = MEASURES[task.family.measure](traces, RunFacts(scenario=scenario, station=built.station))
+    return {"diverged_at": diverged, **row} if diverged else row
+
+
+def _failure(e: BaseException) -> str:
+    return f"failed: {type(e).__name__}: {_cut(e, 200)}"
+
+
+def _variant_process(task: _Task, conn) -> None:
+    """Worker process: one variant; sends ("ok", row) or ("failed", reason), then exits."""
+    try:
+        message = ("ok", _run_variant(task))
+    except BaseException as e:  # every failure, Ctrl-C included, becomes the variant's row
+        message = ("failed", _failure(e))
+    conn.send(message)
+    conn.close()
+
+
+def _crash(exitcode: int | None) -> str:
+    """Why a worker that sent nothing ended."""
+    if exitcode is not None and exitcode < 0:
+        try:
+            return f"crashed: killed by signal {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"crashed: killed by signal {-exitcode}"
+    return f"crashed: the process exited with status {exitcode} without a result"
+
+
+def _run_in_processes(tasks: list[_Task], jobs: int, done: Callable[[int, str, object], None]) -> None:
+    """Runs each task in a process of its own, ``jobs`` at a time. A worker reports through
+    a pipe; one that dies without reporting (segfault, os._exit, killed) closes its pipe, so
+    the wait always ends and the variant is reported as crashed."""
+    ctx = multiprocessing.get_context("spawn")
+    pending = list(tasks)
+    running: dict = {}  # receiving end of the pipe -> (variant index, process)
+    try:
+        while pending or running:
+            while pending and len(running) < jobs:
+                task = pending.pop(0)
+                receive, send = ctx.Pipe(duplex=False)
+                process = ctx.Process(target=_variant_process, args=(task, send), daemon=True)
+                process.start()
+                send.close()  # the worker holds the only writing end: its death means EOF here
+                running[receive] = (task.index, process)
+            for receive in multiprocessing.connection.wait(list(running)):
+                index, process = running.pop(receive)
+                try:
+                    status, value = receive.recv()
+                except (EOFError, OSError):
+                    status, value = "failed", None
+                receive.close()
+                process.join()
+                done(index, status, value if value is not None else _crash(process.exitcode))
+    finally:  # on Ctrl-C or an error here: no worker outlives the command
+        for _, process in running.values():
+            process.terminate()
+        for _, process in running.values():
+            process.join()
+
+
+@dataclass
+class FamilyResult:
+    family: Family
+    rows: list[dict]  # one per variant, in the family's order, with "variant" first
+    out: Path
+
+    @property
+    def failures(self) -> dict[str, str]:
+        """Variant name -> why it has no figures (its row's "error")."""
+        return {row["variant"]: row["error"] for row in self.rows if "error" in row}
+
+
+def run_family(
+    family: Family,
+    out: Path,
+    *,
+    config: Path | None = None,
+    duration: float | None = None,
+    jobs: int = 1,
+    isolate: bool | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> FamilyResult:
+    """Runs every variant, writes the table and the overlay plot.
+
+    With ``isolate`` (the default when ``jobs`` > 1) each variant runs in a process of its
+    own, ``jobs`` at a time; otherwise one after the other in this process. A variant that
+    raises, or whose process dies, becomes a row with its reason under "error"; the others
+    run on, and the table is written with every row.
+    """
+    for i in range(len(family.variants)):
+        variant_scenario(family, i, config, duration)  # every input error before any simulation
+    folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
+    declare(out, [*COMPARE_FILES, *(f"{f.relative_to(out).as_posix()}/traces.csv" for f in folders)])
+    try:
+        return _run_family(family, out, folders, config, duration, jobs, isolate, progress)
+    finally:  # done or failed: the manifest lists what the run wrote, for a later --overwrite
+        record_written(out)
+
+
+# The files a comparison writes beside its variants' traces (declared before any is written).
+COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png")
+
+
+def _run_family(family, out, folders, config, duration, jobs, isolate, progress) -> FamilyResult:
+    tasks = [_Task(family, i, config, duration, folders[i]) for i in range(len(family.variants))]
+    rows: dict[int, dict] = {}
+
+    def done(index: int, status: str, value) -> None:
+        rows[index] = value if status == "ok" else {"error": value}
+        if progress:
+            progress(len(rows) / len(tasks))
+
+    if isolate or (isolate is None and jobs > 1):
+        _run_in_processes(tasks, max(1, jobs), done)
+    else:
+        for task in tasks:
+            try:
+                row = _run_variant(task)
+            except Exception as e:  # the variant's row says why; the others still run
+                done(task.index, "failed", _failure(e))
+            else:
+                done(task.index, "ok", row)
+    table = [{"variant": family.variants[i].name, **rows[i]} for i in range(len(tasks))]
+    _add_ratios(family, table)
+    write_table(out, family, table)
+    ran = [(v, f) for v, f, row in zip(family.variants, folders, table, strict=True) if "error" not in row]
+    if ran:
+        plot_family(
+            out / "compare.png",
+            family,
+            [v for v, _ in ran],
+            [Traces.read_csv(f / "traces.csv") for _, f in ran],
+        )
+        if family.measure == "realism" and len(ran) == len(folders):
+            plot_force_panels(out / "force.png", family, [Traces.read_csv(f / "traces.csv") for f in folders])
+    return FamilyResult(family=family, rows=table, out=out)
+
+
+def _add_ratios(family: Family, table: list[dict]) -> None:
+    """For the Eq. 26 family: each row's null-space peak over that of the dynamically
+    consistent row with the same control period, the ratio the paper's claim is about."""
+    if family.measure != "contact_force_into_null_space":
+        return
+    reference = {
+        row["control_period"]: row
+        for row in table
+        if row.get("pseudo_inverse") == "dynamically_consistent" and "en_peak_after_step" in row
+    }
+    for row in table:
+        ref = reference.get(row.get("control_period"))
+        if ref is None or "en_peak_after_step" not in row:
+            continue
+        for key in ("en_peak_after_step", "dc_null_space_speed_peak_after_step"):
+            row[f"{key}_vs_dc"] = row[key] / ref[key] if ref[key] > 0 else math.inf
+
+
+def _format(value) -> str:
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return " ".join(str(value).split()).replace("|", "\\|")  # one table cell
+
+
+def write_table(out: Path, family: Family, table: list[dict]) -> None:
+    """table.csv (full precision) and table.md (4 significant digits)."""
+    columns = list(dict.fromkeys(key for row in table for key in row))
+    if "error" in columns:  # why a variant has no figures, next to its name
+        columns.remove("error")
+        columns.insert(1, "error")
+    with (out / "table.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, columns)
+        writer.writeheader()
+        for row in table:
+            writer.writerow({k: row.get(k, "") for k in columns})
+    lines = [f"# {family.name}", "", family.description, ""]
+    lines.append("| " + " | ".join(columns) + " |")
+    lines.append("|" + "---|" * len(columns))
+    for row in table:
+        lines.append("| " + " | ".join(_format(row.get(k, "")) for k in columns) + " |")
+    (out / "table.md").write_text("\n".join(lines) + "\n")
+
+
+def plot_family(path: Path, family: Family, variants: list[Variant], traces: list[Traces]) -> None:
+    """Overlays ``variants`` (those of ``family`` that ran): normal force, position error,
+    ‖eⁿ‖ and ν over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(4, 1, figsize=(9, 10), sharex=True, constrained_layout=True)
+    for variant, tr in zip(variants, traces, strict=True):
+        t = tr["t"]
+        axes[0].plot(t, tr["f_n"], label=variant.name, lw=1)
+        error = np.sqrt(sum((tr[a] - tr[f"{a}_d"]) ** 2 for a in tr.task_axes))
+        axes[1].semilogy(t, np.maximum(error, 1e-9), lw=1)
+        axes[2].semilogy(t, np.maximum(_norms(tr, "en"), 1e-9), lw=1)
+        axes[3].semilogy(t, np.maximum(tr["nu"], 1e-15), lw=1)
+    axes[0].plot(traces[0]["t"], traces[0]["f_d"], "k--", lw=0.8, label="desired $f_d$")
+    axes[0].set_ylabel("normal force [N]")
+    axes[0].legend(fontsize=7, loc="best")
+    axes[1].set_ylabel(r"$\|x - x_d\|$ [m]")
+    axes[2].set_ylabel(r"$\|e^n\|$ [rad/s]")
+    axes[3].set_ylabel(r"$\nu$ [J]")
+    axes[3].set_xlabel("time [s]")
+    fig.suptitle(f"{family.name}: {family.description}", fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_force_panels(path: Path, family: Family, traces: list[Traces]) -> None:
+    """Fig. 3's force plot once per variant, stacked on a shared time axis and force
+    scale: the measured normal force and f_d (and the true contact force, where the
+    sensor model makes them differ)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    k = len(traces)
+    fig, axes = plt.subplots(
+        k, 1, figsize=(9, 1.6 * k + 0.8), sharex=True, squeeze=False, constrained_layout=True
+    )
+    top = max(float(np.nanmax(tr["f_d"])) for tr in traces) * 1.6
+    t_end = max(float(tr["t"][-1]) for tr in traces)
+    for ax, variant, tr in zip(axes[:, 0], family.variants, traces, strict=True):
+        t = tr["t"]
+        if t[-1] < 0.99 * t_end:  # the run stopped early (diverged)
+            ax.text(0.5, 0.5, f"diverged at t = {t[-1]:.3g} s", transform=ax.transAxes, ha="center")
+        if "f_n_true" in tr and np.any(tr["f_n_true"] != tr["f_n"]):
+            ax.plot(t, tr["f_n_true"], color="0.6", lw=0.6, label="true contact force")
+        ax.plot(t, tr["f_n"], lw=0.7, label="measured $f_n$")
+        ax.plot(t, tr["f_d"], "k--", lw=0.7, label="$f_d$")
+        ax.set_ylim(-0.1 * top, top)
+        ax.set_ylabel("[N]")
+        ax.set_title(variant.name, fontsize=8, loc="left")
+    axes[0, 0].legend(fontsize=7, loc="upper left", ncol=3)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"{family.name}: normal force in the style of Fig. 3", fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
