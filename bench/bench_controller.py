@@ -39,10 +39,10 @@ from pydrake.trajectories import PiecewisePolynomial
 from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
 from nsdrake.experiment.diagram import build_controller, build_diagram
 from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.experiment.simulate import collect_traces
 from nsdrake.station.force_sensor import ForceSensor
 from nsdrake.station.models import models_dir
-from nsdrake.station.plant import add_station
 
 
 def simulate_cpu(diagram, plant, q0, v0, duration: float) -> tuple[float, object]:
@@ -75,7 +75,7 @@ def tick_us(scenario) -> float:
 
 def baseline_run(scenario, traces) -> float:
     builder = DiagramBuilder()
-    station = add_station(builder, scenario)
+    station = add_scenario_station(builder, scenario)
     plant, n = station.plant, station.arm_model.n
     sensor = builder.AddNamedSystem(
         "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
@@ -126,7 +126,7 @@ def step_cost(controller: NullSpaceImpedanceController, q0: np.ndarray, steps: i
 
 def fig3_controller():
     scenario = load_scenario("fig3")
-    station = add_station(DiagramBuilder(), scenario)
+    station = add_scenario_station(DiagramBuilder(), scenario)
     sensor = ForceSensor(plant=station.plant, sensor_joint=station.sensor_joint)  # for its wrench point
     return build_controller(scenario, station, sensor.p_WSo), station.q0
 

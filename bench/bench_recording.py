@@ -26,8 +26,9 @@ from pathlib import Path
 
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.simulate import run
+from nsdrake.reporting.replay import write_replay
 from nsdrake.reporting.run_folder import run_to_folder
-from nsdrake.station.visualization import start_meshcat, write_replay
+from nsdrake.station.visualization import start_meshcat
 
 
 def simulation(scenario, recorded: bool, folder: Path) -> float:

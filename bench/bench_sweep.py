@@ -26,7 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from nsdrake.studies.sweep import load_sweep, plan_runs, run_sweep
+from nsdrake.studies.sweep import run_sweep
+from nsdrake.studies.sweep_spec import load_sweep, plan_runs
 
 
 def timed(spec, runs, out: Path, **engine) -> float:

@@ -24,8 +24,9 @@ from nsdrake.experiment.scenario import ScenarioError, load_scenario, shipped_sc
 from nsdrake.reporting.run_folder import check_scenario, run_to_folder
 from nsdrake.station.visualization import start_meshcat
 from nsdrake.studies.compare import load_family, run_family, shipped_families, variant_scenario
-from nsdrake.studies.sweep import shipped_sweeps, sweep_command
+from nsdrake.studies.sweep import sweep_command
 from nsdrake.studies.sweep_engines import ENGINES
+from nsdrake.studies.sweep_spec import shipped_sweeps
 
 
 class _Parser(argparse.ArgumentParser):

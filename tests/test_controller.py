@@ -25,16 +25,16 @@ from nsdrake.control.systems.criteria import unpack_criterion
 from nsdrake.experiment.diagram import build_controller
 from nsdrake.experiment.reference import SlideAndPress
 from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.experiment.simulate import moving_link_geometries
 from nsdrake.station.force_sensor import ForceSensor
-from nsdrake.station.plant import add_station
 
 TOL = 1e-10
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def fig3_controller(scenario):
-    station = add_station(DiagramBuilder(), scenario)
+    station = add_scenario_station(DiagramBuilder(), scenario)
     sensor = ForceSensor(plant=station.plant, sensor_joint=station.sensor_joint)
     return build_controller(scenario, station, sensor.p_WSo), station, sensor.p_WSo
 
@@ -328,7 +328,7 @@ def test_diagnostic_ports_are_the_criteria_they_name():
     # d_min from Drake's own signed-distance queries on the simulated station's geometry
     # (its GJK distance for a capsule and a box is good to about 1e-5 m).
     builder = DiagramBuilder()
-    sim_station = add_station(builder, scenario)
+    sim_station = add_scenario_station(builder, scenario)
     diagram = builder.Build()
     root = diagram.CreateDefaultContext()
     sim_station.plant.SetPositions(sim_station.plant.GetMyMutableContextFromRoot(root), q)

@@ -23,7 +23,7 @@ from pydrake.systems.framework import DiagramBuilder
 from nsdrake.control.criteria.joint_torque import joint_torque_criterion
 from nsdrake.control.criteria.manipulability import manipulability
 from nsdrake.control.criteria.obstacle import ObstacleDistances, obstacle_potential
-from nsdrake.station.plant import add_station
+from nsdrake.experiment.scenario_station import add_scenario_station
 
 AD_TOL = 1e-7
 FD_TOL = 1e-6
@@ -145,7 +145,7 @@ class ObstacleScene:
         path.write_text(OBSTACLE_SCENE)
         scenario = load_scenario("fig3", config=path)
         builder = DiagramBuilder()
-        self.station = add_station(builder, scenario)
+        self.station = add_scenario_station(builder, scenario, sensing=False)
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         plant, sg = self.station.plant, self.station.scene_graph

@@ -23,7 +23,7 @@ from nsdrake.control.criteria.obstacle import ObstacleDistances, obstacle_potent
 from nsdrake.control.null_space import null_space_torque
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 from nsdrake.experiment.scenario import load_scenario
-from nsdrake.station.plant import add_station
+from nsdrake.experiment.scenario_station import add_scenario_station
 
 FD_TOL = 1e-6
 EXACT = 1e-10
@@ -116,7 +116,7 @@ class PandaScene:
         path.write_text(SCENE)
         scenario = load_scenario("panda_wipe", config=path)
         builder = DiagramBuilder()
-        self.station = add_station(builder, scenario)
+        self.station = add_scenario_station(builder, scenario, sensing=False)
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         plant, sg = self.station.plant, self.station.scene_graph

@@ -18,11 +18,12 @@ from nsdrake.control.orientation import orientation_error
 from nsdrake.experiment.diagram import build_diagram
 from nsdrake.experiment.reference import CircleOnSurface, there_and_back
 from nsdrake.experiment.scenario import ScenarioError, load_scenario
+from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.experiment.simulate import run
 from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.metrics import pose_metrics, self_motion_metrics
 from nsdrake.reporting.run_folder import compute_metrics
-from nsdrake.station.plant import add_station, desired_tool_orientation, tool_orientation
+from nsdrake.station.plant import desired_tool_orientation, tool_orientation
 
 
 def circle(**overrides):
@@ -138,7 +139,7 @@ def test_desired_orientation_is_perpendicular_to_the_table(wipe):
     by 0.05 rad about joint 6 by exactly that tilt and no spin about the tool axis.
     Catches a desired orientation that keeps the start's tilt, or one that also spins
     the tool about its axis."""
-    station = add_station(DiagramBuilder(), wipe)
+    station = add_scenario_station(DiagramBuilder(), wipe)
     R0 = tool_orientation(station, station.q0)
     assert np.linalg.norm(orientation_error(desired_tool_orientation(station, "perpendicular"), R0)) < 1e-12
     tilted = dataclasses.replace(station, q0=station.q0 + [0, 0, 0, 0, 0, 0.05, 0])

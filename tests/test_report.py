@@ -11,8 +11,8 @@ from pathlib import Path
 import yaml
 
 from nsdrake.reporting.metrics import Metric
+from nsdrake.reporting.replay import DiagramPicture
 from nsdrake.reporting.report import flatten, render_report
-from nsdrake.station.visualization import DiagramPicture
 
 
 class _Page(HTMLParser):

@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 
 from nsdrake.cli import main
-from nsdrake.studies.sweep import CRASH_ENV, METRICS, SweepProgress, expand, load_sweep
+from nsdrake.studies.sweep import SweepProgress
+from nsdrake.studies.sweep_spec import METRICS, expand, load_sweep
+from nsdrake.studies.sweep_worker import CRASH_ENV
 
 SPEC = """\
 base: fig3
@@ -152,7 +154,7 @@ def test_a_missing_dask_or_a_scheduler_without_dask_is_one_line(tmp_path, capsys
 def test_the_shipped_sweep_loads_and_every_run_passes_the_checks(capsys):
     """Catches a shipped sweep broken by a renamed field or metric, or with a run the
     checks refuse; and `nsdrake list` not showing the sweeps."""
-    from nsdrake.studies.sweep import plan_runs
+    from nsdrake.studies.sweep_spec import plan_runs
 
     spec = load_sweep("robustness")
     assert len(plan_runs(spec)) == 18

@@ -17,12 +17,8 @@ from nsdrake.experiment.diagram import build_diagram
 from nsdrake.experiment.simulate import run
 from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.metrics import first_contact_index
-from nsdrake.station.visualization import (
-    start_meshcat,
-    visual_body_paths,
-    visualizer_period,
-    write_diagram_picture,
-)
+from nsdrake.reporting.replay import write_diagram_picture
+from nsdrake.station.visualization import start_meshcat, visual_body_paths, visualizer_period
 
 # The contact-force arrow between the tool sphere and the plate: Drake names the pair by
 # geometry (body.geometry) because the tool body carries two collision shapes.

@@ -1,11 +1,15 @@
-"""Wiring: the station, the reference, the controller and the loggers in one diagram.
+"""Assembly: a scenario flows one way through the diagram it builds::
 
-::
+    scenario ─► station (plant, plate on its sensor, contact monitor, actuation map)
+             ─► realism rungs plugged into the station's ports (nsdrake.realism.wiring)
+             ─► reference (reads the station's wrench)
+             ─► controller (station.ports.state, .wrench, the reference ─► .actuation)
+             ─► loggers (once per control period)
 
     ┌──────────────── station ────────────────┐
-    │ plant ──state────────────────────────────┼──► controller.estimated_state
+    │ plant ──state───────────── ports.state ──┼──► controller.estimated_state
     │   ▲  └─reaction_forces─► force_sensor ───┼──► controller.measured_wrench
-    │   │                          └─ wrench ──┼──► reference.measured_wrench
+    │   │                       ports.wrench ──┼──► reference.measured_wrench
     │   └── actuation ◄─ actuation_map ◄───────┼─── controller.generalized_force
     └─────────────────────────────────────────┘
     reference ─► controller.desired_position / _velocity / _acceleration / _force
@@ -31,7 +35,6 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import (
     ConstantVectorSource,
     LogVectorOutput,
-    MatrixGain,
     VectorLogSink,
 )
 
@@ -47,11 +50,16 @@ from nsdrake.control.orientation import rotation_to_quaternion
 from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
 from nsdrake.experiment.reference_system import SurfaceReference
 from nsdrake.experiment.scenario import Scenario, ScenarioError
+from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.realism.model_error import scale_urdf_masses
-from nsdrake.realism.wiring import add_force_sensor_model, add_realism_loggers, connect_realistic_controller
-from nsdrake.station.contact_monitor import ContactMonitor
-from nsdrake.station.force_sensor import ForceSensor
-from nsdrake.station.plant import Station, add_station, desired_tool_orientation, station_obstacles
+from nsdrake.realism.wiring import add_realism_loggers, plug_realism
+from nsdrake.station.plant import (
+    Station,
+    desired_tool_orientation,
+    has_joint_limits,
+    initial_task_position,
+    station_obstacles,
+)
 from nsdrake.station.visualization import Visualizers, add_visualizers, visualizer_period
 
 
@@ -73,22 +81,6 @@ class ControlledStation:
         if self.diagram.HasSubsystemNamed(name):
             return self.diagram.GetSubsystemByName(name)
         return self.controller.GetSubsystemByName(name)
-
-
-def initial_task_position(station: Station) -> np.ndarray:
-    """x = p(q0), the tool's task position at the initial pose. (m,) [m]."""
-    plant = station.arm_model.plant  # the station's plant, or the rigid arm's beside an elastic one
-    context = plant.CreateDefaultContext()
-    plant.SetPositions(context, station.q0)
-    return station.arm_model.task_position(context)
-
-
-def has_joint_limits(station: Station) -> bool:
-    """Whether the arm has any finite joint position limit (the Panda; not the paper's arm)."""
-    plant = station.plant
-    return bool(
-        np.isfinite(plant.GetPositionLowerLimits()).any() or np.isfinite(plant.GetPositionUpperLimits()).any()
-    )
 
 
 def speed_limit_vector(scenario: Scenario, arm: ArmModel) -> np.ndarray:
@@ -164,8 +156,9 @@ def arm_reach(station: Station, samples: int = 2000) -> tuple[np.ndarray, float]
     return centre, farthest
 
 
-def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station, sensor) -> SurfaceReference:
-    """The task reference the scenario's ``reference.path`` names, fed by the force sensor."""
+def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station) -> SurfaceReference:
+    """The task reference the scenario's ``reference.path`` names, fed by the station's
+    measured wrench."""
     r = scenario.reference
     common = {
         "task_rows": station.arm_model.rows,
@@ -207,7 +200,7 @@ def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station,
             reach=(1.0 - r.reach_margin) * reach,
         )
     reference = builder.AddNamedSystem("reference", SurfaceReference(reference=path, **common))
-    builder.Connect(sensor.GetOutputPort("wrench"), reference.GetInputPort("measured_wrench"))
+    builder.Connect(station.ports.wrench, reference.GetInputPort("measured_wrench"))
     return reference
 
 
@@ -223,36 +216,6 @@ def add_orientation_reference(builder, controller, R_d: np.ndarray) -> None:
         builder.Connect(source.get_output_port(), controller.GetInputPort(port))
 
 
-def add_sensing(builder: DiagramBuilder, station: Station) -> tuple[ForceSensor, ContactMonitor]:
-    """The force sensor under the plate, and the monitor of contacts other than the tool's."""
-    plant = station.plant
-    sensor = builder.AddNamedSystem(
-        "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
-    )
-    builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
-    monitor = builder.AddNamedSystem(
-        "contact_monitor",
-        ContactMonitor(
-            plant=plant,
-            watched={*plant.GetBodyIndices(station.plate), *(b.index() for b in station.obstacle_bodies)},
-            allowed={station.tool_body.index()},
-        ),
-    )
-    builder.Connect(plant.get_contact_results_output_port(), monitor.get_input_port())
-    return sensor, monitor
-
-
-def connect_controller(builder, station: Station, controller, sensor, reference) -> None:
-    plant = station.plant
-    builder.Connect(plant.get_state_output_port(), controller.GetInputPort("estimated_state"))
-    builder.Connect(sensor.GetOutputPort("wrench"), controller.GetInputPort("measured_wrench"))
-    connect_reference(builder, controller, reference)
-    # τ = B u with B the plant's actuation matrix (a permutation here): u = Bᵀ τ.
-    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(plant.MakeActuationMatrix().T))
-    builder.Connect(controller.GetOutputPort("generalized_force"), actuation.get_input_port())
-    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
-
-
 def connect_reference(builder, controller, reference) -> None:
     for port, ref in (
         ("desired_position", "x_d"),
@@ -263,16 +226,15 @@ def connect_reference(builder, controller, reference) -> None:
         builder.Connect(reference.GetOutputPort(ref), controller.GetInputPort(port))
 
 
-def add_loggers(
-    builder, station, controller, sensor, reference, monitor, period, state_port=None
-) -> dict[str, VectorLogSink]:
-    """``state_port``: the arm's [q; q̇] when the plant's state is not (the belt rung)."""
+def add_loggers(builder, station, controller, reference, period) -> dict[str, VectorLogSink]:
+    """The traces' signals, logged once per control period: the measured wrench and the
+    link state from the station's ports, the reference, the controller's outputs."""
     signals = {
         "x_d": reference.GetOutputPort("x_d"),
-        "wrench": sensor.GetOutputPort("wrench"),
+        "wrench": station.ports.wrench,
         "f_d": reference.GetOutputPort("f_d"),
-        "state": state_port if state_port is not None else station.plant.get_state_output_port(),
-        "forbidden_contacts": monitor.get_output_port(),
+        "state": station.ports.link_state,
+        "forbidden_contacts": station.monitor.get_output_port(),
         "in_contact": reference.GetOutputPort("in_contact"),
     }
     for name, port in {
@@ -299,6 +261,15 @@ def add_loggers(
     return loggers
 
 
+def connect_controller(builder, station: Station, controller, reference) -> None:
+    """The controller between the station's ports and the reference."""
+    ports = station.ports
+    builder.Connect(ports.state, controller.GetInputPort("estimated_state"))
+    builder.Connect(ports.wrench, controller.GetInputPort("measured_wrench"))
+    connect_reference(builder, controller, reference)
+    builder.Connect(controller.GetOutputPort("generalized_force"), ports.actuation)
+
+
 def build_diagram(
     scenario: Scenario, *, null_space_task: bool = True, meshcat: Meshcat | None = None
 ) -> ControlledStation:
@@ -309,32 +280,20 @@ def build_diagram(
     ``meshcat``, the diagram also has the Meshcat visualizers.
     """
     builder = DiagramBuilder()
-    station = add_station(builder, scenario)
-    sensor, monitor = add_sensing(builder, station)
-    realism = scenario.realism
-    # What the controller and the reference read: the ideal sensor, or its realistic model.
-    measured = (
-        add_force_sensor_model(builder, scenario, station, sensor) if realism.force_sensor.enabled else sensor
-    )
-    reference = add_reference(builder, scenario, station, measured)
-    controller = build_controller(scenario, station, sensor.p_WSo, null_space_task=null_space_task)
+    station = add_scenario_station(builder, scenario)
+    if scenario.realism.any:
+        plug_realism(builder, station, scenario.realism, scenario.control_period)
+    reference = add_reference(builder, scenario, station)
+    controller = build_controller(scenario, station, station.sensor.p_WSo, null_space_task=null_space_task)
     builder.AddSystem(controller)
-    state_port = None
-    if realism.any:
-        state_port = connect_realistic_controller(
-            builder, scenario, station, controller, measured, reference, connect_reference
-        )
-    else:
-        connect_controller(builder, station, controller, sensor, reference)
+    connect_controller(builder, station, controller, reference)
     R_d = None
     if station.arm_model.m_r:
         R_d = desired_tool_orientation(station, scenario.reference.orientation)
         add_orientation_reference(builder, controller, R_d)
-    loggers = add_loggers(
-        builder, station, controller, measured, reference, monitor, scenario.control_period, state_port
-    )
-    if realism.any:
-        loggers.update(add_realism_loggers(builder, station, sensor, scenario.control_period))
+    loggers = add_loggers(builder, station, controller, reference, scenario.control_period)
+    if scenario.realism.any:
+        loggers.update(add_realism_loggers(builder, station, scenario.control_period))
     visualizers = None
     if meshcat is not None:
         visualizers = add_visualizers(

@@ -13,10 +13,11 @@ from pydrake.systems.framework import EventStatus
 from nsdrake.control.controller import torque_limits
 from nsdrake.control.criteria.obstacle import ObstacleDistances
 from nsdrake.control.orientation import orientation_error
-from nsdrake.experiment.diagram import ControlledStation, build_diagram, has_joint_limits
+from nsdrake.experiment.diagram import ControlledStation, build_diagram
 from nsdrake.experiment.scenario import Scenario
 from nsdrake.experiment.traces import Traces
 from nsdrake.realism.wiring import add_realism_columns
+from nsdrake.station.plant import has_joint_limits
 
 
 class DivergenceError(RuntimeError):

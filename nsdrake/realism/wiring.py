@@ -1,7 +1,7 @@
 """Wiring of the realism ladder (:mod:`nsdrake.realism.config`) into the fig3 diagram.
 
-With any rung on, :func:`nsdrake.experiment.diagram.build_diagram` connects the controller
-through :func:`connect_realistic_controller` instead of the direct wiring::
+With any rung on, :func:`plug_realism` plugs the rungs into the station's ports
+(:class:`nsdrake.station.plant.StationPorts`) before the controller is connected to them::
 
     plant ─state─► [motor encoders: θ_m, θ̇_m (belt)] ─────────────► controller.estimated_state
     force_sensor ─► [bias + noise → sample → low-pass (force_sensor)] ─► controller.measured_wrench
@@ -30,7 +30,7 @@ from pydrake.systems.primitives import (
     ZeroOrderHold,
 )
 
-from nsdrake.realism.config import ForceSensorConfig
+from nsdrake.realism.config import ForceSensorConfig, FrictionConfig, RealismConfig
 from nsdrake.station.control_hold import ControlHold
 from nsdrake.station.joint_friction import JointFriction
 
@@ -89,79 +89,56 @@ class ForceSensorModel(Diagram):
         builder.BuildInto(self)
 
 
-def add_force_sensor_model(builder, scenario, station, sensor) -> ForceSensorModel:
-    """The measured sensor (noise, bias, sampling, filter) after the ideal one."""
-    plant = station.plant
-    R_WS = station.sensor_joint.frame_on_child().CalcPoseInWorld(plant.CreateDefaultContext()).rotation()
-    model = builder.AddSystem(ForceSensorModel(config=scenario.realism.force_sensor, R_WS=R_WS.matrix()))
-    model.set_name("force_sensor_model")
-    builder.Connect(sensor.GetOutputPort("wrench"), model.GetInputPort("true_wrench"))
-    return model
-
-
-def connect_realistic_controller(
-    builder, scenario, station, controller, measured, reference, connect_reference
-):
-    """Wires the controller to the station through the rungs that are on (module
-    docstring); returns the port of the arm's link state [q; q̇] for the loggers."""
-    plant = station.plant
-    realism = scenario.realism
-    n = station.arm_model.n
-    state = plant.get_state_output_port()
-    link_state = state
-    if station.elastic is not None:
-        encoders = builder.AddNamedSystem("motor_encoders", MatrixGain(station.elastic.motor_state_matrix()))
-        builder.Connect(state, encoders.get_input_port())
-        builder.Connect(encoders.get_output_port(), controller.GetInputPort("estimated_state"))
-        links = builder.AddNamedSystem("link_state", MatrixGain(station.elastic.link_state_matrix()))
-        builder.Connect(state, links.get_input_port())
-        link_state = links.get_output_port()
-    else:
-        builder.Connect(state, controller.GetInputPort("estimated_state"))
-    builder.Connect(measured.GetOutputPort("wrench"), controller.GetInputPort("measured_wrench"))
-    connect_reference(builder, controller, reference)
-
+def plug_realism(builder, station, realism: RealismConfig, control_period: float) -> None:
+    """Plugs the rungs that are on into the station's ports (module docstring), so that
+    a controller connected to ``station.ports`` afterwards reads the modelled sensor and
+    drives the plant through the hold (and delay), with friction in the joints."""
+    ports = station.ports
+    if realism.force_sensor.enabled:  # the measured sensor (noise, bias, sampling, filter)
+        plant = station.plant
+        R_WS = station.sensor_joint.frame_on_child().CalcPoseInWorld(plant.CreateDefaultContext()).rotation()
+        model = builder.AddSystem(ForceSensorModel(config=realism.force_sensor, R_WS=R_WS.matrix()))
+        model.set_name("force_sensor_model")
+        builder.Connect(ports.true_wrench, model.GetInputPort("true_wrench"))
+        ports.wrench = model.GetOutputPort("wrench")
     # Always held: with one plant step per period and no delay the hold passes the
     # torque through at every plant step, and it keeps the controller from being
     # evaluated at the events in between (finer plant steps, the sensor's samples).
     delay = realism.delay.periods if realism.delay.enabled else 0
     hold = builder.AddNamedSystem(
-        "control_hold", ControlHold(size=n, period=scenario.control_period, delay_periods=delay)
+        "control_hold", ControlHold(size=station.arm_model.n, period=control_period, delay_periods=delay)
     )
-    builder.Connect(controller.GetOutputPort("generalized_force"), hold.get_input_port())
-    torque = hold.get_output_port()
-    # τ in the arm's joint order → the plant's actuators (Bᵀ; the motors with the belt).
-    B_T = station.elastic.actuation if station.elastic is not None else plant.MakeActuationMatrix().T
-    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(B_T))
-    builder.Connect(torque, actuation.get_input_port())
-    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
-
+    builder.Connect(hold.get_output_port(), ports.actuation)
+    ports.actuation = hold.get_input_port()
     if realism.friction.enabled:
-        f = realism.friction
-        if station.elastic is not None:  # in the gears: on the motor side of the belt
-            dofs = station.elastic.motor_v
-        else:
-            dofs = [j.velocity_start() for j in station.arm_model.joints]
-        friction = builder.AddNamedSystem(
-            "joint_friction",
-            JointFriction(
-                nq=plant.num_positions(),
-                nv=plant.num_velocities(),
-                dofs=dofs,
-                coulomb=f.coulomb,
-                viscous=f.viscous,
-                smoothing_speed=f.smoothing_speed,
-            ),
-        )
-        builder.Connect(state, friction.get_input_port())
-        builder.Connect(friction.get_output_port(), plant.get_applied_generalized_force_input_port())
-    return link_state
+        _add_friction(builder, station, realism.friction)
 
 
-def add_realism_loggers(builder, station, sensor, period: float) -> dict:
+def _add_friction(builder, station, f: FrictionConfig) -> None:
+    plant = station.plant
+    if station.elastic is not None:  # in the gears: on the motor side of the belt
+        dofs = station.elastic.motor_v
+    else:
+        dofs = [j.velocity_start() for j in station.arm_model.joints]
+    friction = builder.AddNamedSystem(
+        "joint_friction",
+        JointFriction(
+            nq=plant.num_positions(),
+            nv=plant.num_velocities(),
+            dofs=dofs,
+            coulomb=f.coulomb,
+            viscous=f.viscous,
+            smoothing_speed=f.smoothing_speed,
+        ),
+    )
+    builder.Connect(plant.get_state_output_port(), friction.get_input_port())
+    builder.Connect(friction.get_output_port(), plant.get_applied_generalized_force_input_port())
+
+
+def add_realism_loggers(builder, station, period: float) -> dict:
     """Loggers of the true force, the applied torque and the motor side (belt)."""
     ports = {
-        "f_true": sensor.GetOutputPort("force"),
+        "f_true": station.sensor.GetOutputPort("force"),
         "tau_applied": builder.GetSubsystemByName("actuation_map").get_output_port(),
     }
     if station.elastic is not None:

@@ -16,7 +16,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from nsdrake.reporting.metrics import Metric
-from nsdrake.station.visualization import DiagramPicture
+from nsdrake.reporting.replay import DiagramPicture
 
 _STYLE = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 2em auto;

@@ -24,6 +24,7 @@ from nsdrake.experiment.output import (  # noqa: F401 (re-exported: diagrams/fig
     record_written,
 )
 from nsdrake.experiment.scenario import Scenario
+from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.experiment.simulate import DivergenceError, run
 from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.metrics import (
@@ -38,9 +39,9 @@ from nsdrake.reporting.metrics import (
     write_metrics,
 )
 from nsdrake.reporting.plots import plot_fig3, plot_pose, plot_priority
+from nsdrake.reporting.replay import write_diagram_picture, write_replay
 from nsdrake.reporting.report import write_report
-from nsdrake.station.plant import add_station
-from nsdrake.station.visualization import start_meshcat, write_diagram_picture, write_replay
+from nsdrake.station.visualization import start_meshcat
 
 
 def check_scenario(scenario: Scenario) -> None:
@@ -48,7 +49,7 @@ def check_scenario(scenario: Scenario) -> None:
     model (files, joint and frame names, the task's rank at the initial pose, the sampled
     loops' stability, then what the controller refuses) fails now, before an output
     folder is made."""
-    check_with_model(scenario, add_station(DiagramBuilder(), scenario))
+    check_with_model(scenario, add_scenario_station(DiagramBuilder(), scenario))
     build_diagram(scenario)
 
 

@@ -1,14 +1,30 @@
 """The simulated station: the arm, the plate on its force sensor, compliant contact.
 
-A discrete ``MultibodyPlant`` whose time step is the control period, point
-contact with Coulomb friction between the tool and the plate (the contact
-properties live in the URDFs; urdf/README.md says where each comes from), and
-the plate welded to the world by a fixed joint named ``force_sensor``, whose
-reaction force the force sensor reads.
+A discrete ``MultibodyPlant`` whose time step is the control period (or a power-of-two
+fraction of it), point contact with Coulomb friction between the tool and the plate
+(the contact properties live in the URDFs; urdf/README.md says where each comes from),
+and the plate welded to the world by a fixed joint named ``force_sensor``, whose
+reaction force the force sensor reads::
+
+    ┌──────────────────────────── station ─────────────────────────────┐
+    │ plant ─state─[motor_encoders (belts)]──────────► ports.state       │
+    │   │   └─reaction_forces─► force_sensor ─wrench─► ports.wrench      │
+    │   │   └─contact_results─► contact_monitor                          │
+    │   └── actuation ◄─ actuation_map (Bᵀ) ◄────────── ports.actuation  │
+    └───────────────────────────────────────────────────────────────────┘
+
+A controller reads ``ports.state`` ([q; q̇] of the arm, in its joint order) and
+``ports.wrench``, and writes τ (arm joint order) into ``ports.actuation``. The rungs of
+the realism ladder (:mod:`nsdrake.realism.wiring`) plug into these ports: a sensor
+chain after the wrench, a hold and delay before the actuation, friction on the plant.
+
+Everything here reads the station's own settings (:mod:`nsdrake.station.config`), not
+a scenario; every problem is a one-line :class:`StationError` naming ``source``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,19 +35,31 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia, WeldJoint
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder, InputPort, OutputPort
+from pydrake.systems.primitives import MatrixGain
 
 from nsdrake.control.criteria.obstacle import proximity_geometries
 from nsdrake.control.dynamics import ArmModel
 from nsdrake.control.model import Obstacle
-from nsdrake.experiment.checks import check_model_file
-from nsdrake.experiment.scenario import Scenario, ScenarioError, check_against_plant
-from nsdrake.realism.config import substeps
+from nsdrake.station.config import ArmConfig, ContactConfig, ObstacleConfig, PlateConfig, StationError
+from nsdrake.station.contact_monitor import ContactMonitor
 from nsdrake.station.elastic import ElasticMap, add_elastic_arm, rigid_arm_plant
+from nsdrake.station.force_sensor import ForceSensor
+from nsdrake.station.model_checks import check_model_file
 from nsdrake.station.models import resolve_model
 
 SENSOR_JOINT = "force_sensor"
-GRAVITY = 9.81  # [m/s²]
+
+
+@dataclass
+class StationPorts:
+    """Where a controller meets the station (and where the realism rungs plug in)."""
+
+    state: OutputPort  # [q; q̇] the controller reads (motor encoders behind belts) [rad, rad/s]
+    link_state: OutputPort  # [q; q̇] of the links themselves, for the traces [rad, rad/s]
+    wrench: OutputPort  # [M_So; f] the controller and the reference read, world [N m, N]
+    true_wrench: OutputPort  # the ideal sensor's wrench (the contact itself) [N m, N]
+    actuation: InputPort  # τ in the arm's joint order [N m]
 
 
 @dataclass
@@ -59,28 +87,21 @@ class Station:
     obstacle_geometries: list = field(default_factory=list)
     # Pose of the plate frame in the world (its +y is the push direction).
     X_WP: RigidTransform | None = None
-    # With the belt rung (nsdrake/elastic.py): the plant has motor and belt coordinates,
+    # With belts (nsdrake/station/elastic.py): the plant has motor and belt coordinates,
     # arm_model is the rigid arm on a plant of its own (link coordinates), and this maps
     # between them. None: the plant's state is the arm's [q; q̇].
     elastic: ElasticMap | None = None
     # The plant's initial positions and velocities (q0, v0 unless elastic).
     plant_q0: np.ndarray | None = None
     plant_v0: np.ndarray | None = None
+    sensor: ForceSensor | None = None  # the ideal six-axis sensor under the plate
+    monitor: ContactMonitor | None = None  # contacts of the plate and obstacles with anything but the tool
+    ports: StationPorts | None = None
 
     @property
     def tool_body(self):
         """The tool's body in the simulated plant."""
         return self.plant.GetFrameByName(self.arm_model.tool_frame.name(), self.arm).body()
-
-
-def gravity_vector(scenario: Scenario) -> np.ndarray:
-    """World gravity: the scenario's ``gravity`` if given, else along −z for a
-    horizontal arm's plane and −y for a vertical one. (3,) [m/s²]."""
-    if scenario.gravity:
-        return np.asarray(scenario.gravity, dtype=float)
-    return (
-        np.array([0.0, 0.0, -GRAVITY]) if scenario.plane == "horizontal" else np.array([0.0, -GRAVITY, 0.0])
-    )
 
 
 def surface_directions(R_WP: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -98,103 +119,76 @@ def surface_directions(R_WP: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, 
     return normal, (tangent / size if size > 1e-9 else np.zeros_like(tangent))
 
 
-def _model_file(scenario: Scenario, where: str, name: str) -> Path:
+def _model_file(src: str, where: str, name: str, base_dir: Path | None) -> Path:
     try:
-        return resolve_model(name, Path(scenario.base_dir) if scenario.base_dir else None)
+        path = resolve_model(name, base_dir)
     except FileNotFoundError as e:
-        raise ScenarioError(f"{scenario.source or 'scenario'}: {where}: {e}") from None
+        raise StationError(f"{src}: {where}: {e}") from None
+    try:
+        check_model_file(path)
+    except StationError as e:
+        raise StationError(f"{src}: {e}") from None
+    return path
 
 
-def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
-    """Adds the plant and scene graph for ``scenario`` to ``builder``; finalizes the plant."""
-    src = scenario.source or "scenario"
+def add_station(
+    builder: DiagramBuilder,
+    *,
+    arm: ArmConfig,
+    plate: PlateConfig,
+    contact: ContactConfig,
+    task_axes: Sequence[str],
+    gravity: Sequence[float],
+    time_step: float,
+    obstacles: Sequence[ObstacleConfig] = (),
+    belt=None,
+    base_dir: Path | None = None,
+    source: str = "station",
+    sensing: bool = True,
+) -> Station:
+    """Adds the plant and scene graph, the force sensor, the contact monitor and the
+    actuation map to ``builder``; finalizes the plant.
+
+    ``belt``: with an object holding ``stiffness``, ``damping``, ``rotor_inertia`` and
+    ``gear_ratio`` (:class:`nsdrake.realism.config.BeltConfig`), every joint is driven
+    through a belt (:mod:`nsdrake.station.elastic`). Model paths are resolved against
+    ``base_dir``; every problem is a one-line StationError naming ``source``. Without
+    ``sensing``, only the plant and its scene graph (no ports): a diagram Drake can
+    convert to AutoDiffXd, for geometry queries."""
     config = MultibodyPlantConfig(
-        time_step=scenario.control_period / substeps(scenario.realism),
-        contact_model=scenario.contact.model,
-        discrete_contact_approximation=scenario.contact.approximation,
+        time_step=time_step,
+        contact_model=contact.model,
+        discrete_contact_approximation=contact.approximation,
     )
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
     scene_graph.set_name("scene_graph")
-    parser = Parser(plant)
-    arm_file = _model_file(scenario, "arm.urdf", scenario.arm.urdf)
-    plate_file = _model_file(scenario, "plate.urdf", scenario.plate.urdf)
-    for path in (arm_file, plate_file):
-        try:
-            check_model_file(path)
-        except ScenarioError as e:
-            raise ScenarioError(f"{src}: {e}") from None
-    belt = scenario.realism.belt
-    try:
-        (arm,) = (
-            add_elastic_arm(plant, parser, arm_file, belt)
-            if belt.enabled
-            else parser.AddModels(str(arm_file))
-        )
-        (plate,) = parser.AddModels(str(plate_file))
-    except Exception as e:
-        raise ScenarioError(f"{src}: cannot parse a model: {' '.join(str(e).split())}") from None
-    plate_bodies = plant.GetBodyIndices(plate)
-    if len(plate_bodies) != 1:
-        raise ScenarioError(f"{src}: plate.urdf: the plate model must have exactly one body")
-    plate_body = plant.get_body(plate_bodies[0])
-    pl = scenario.plate
-    X_WP = RigidTransform(RollPitchYaw(pl.roll, pl.pitch, pl.yaw), np.asarray(pl.position))
+    arm_file = _model_file(source, "arm.urdf", arm.urdf, base_dir)
+    plate_file = _model_file(source, "plate.urdf", plate.urdf, base_dir)
+    arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, source)
+    plate_body = _the_one_body(plant, plate_instance, source)
+    X_WP = RigidTransform(RollPitchYaw(plate.roll, plate.pitch, plate.yaw), np.asarray(plate.position))
     sensor_joint = plant.AddJoint(WeldJoint(SENSOR_JOINT, plant.world_frame(), plate_body.body_frame(), X_WP))
-    obstacle_bodies = _add_obstacles(plant, scene_graph, scenario, plate_body)
-    gravity = gravity_vector(scenario)
+    obstacle_bodies = _add_obstacles(plant, scene_graph, obstacles, plate_body)
+    gravity = np.asarray(gravity, dtype=float)
     plant.mutable_gravity_field().set_gravity_vector(gravity)
     plant.Finalize()
 
-    if not plant.HasFrameNamed(scenario.arm.tool_frame, arm):
-        raise ScenarioError(f"{src}: arm.tool_frame: no frame '{scenario.arm.tool_frame}' in {arm_file.name}")
-    tool = plant.GetFrameByName(scenario.arm.tool_frame, arm)
-    if belt.enabled:  # the link coordinates' kinematics and dynamics: the rigid arm alone
-        rigid = rigid_arm_plant(arm_file, gravity)
-        tool = rigid.GetFrameByName(scenario.arm.tool_frame)
-    try:
-        arm_model = ArmModel(tool.GetParentPlant(), tool, scenario.task.axes)
-    except ValueError as e:
-        raise ScenarioError(f"{src}: arm.urdf: {e}") from None
-    check_against_plant(scenario, arm_model.joint_names)
-    for name in scenario.report.swivel_frames:
-        if not plant.HasFrameNamed(name, arm):
-            raise ScenarioError(f"{src}: report.swivel_frames: no frame '{name}' in {arm_file.name}")
-    if plant.num_actuators() != arm_model.n:
-        raise ScenarioError(
-            f"{src}: arm.urdf: the arm needs one actuator per joint ({arm_model.n}), "
-            f"it has {plant.num_actuators()}"
-        )
-    names = arm_model.joint_names
-    q0 = np.array([scenario.arm.initial_positions[j] for j in names])
-    v0 = np.array([scenario.arm.initial_velocities.get(j, 0.0) for j in names])
+    arm_model = _arm_model(plant, arm_instance, arm, arm_file, task_axes, belt, gravity, source)
+    q0, v0 = _initial_state(arm, arm_model.joint_names, source)
     elastic, plant_q0, plant_v0 = None, q0, v0
-    if belt.enabled:
-        elastic = ElasticMap.build(plant, arm, names, belt.stiffness)
-        # Belts preloaded by gravity, so that the arm starts at rest: the gravity torque on
-        # each belt coordinate (links and rotors beyond it) does not depend on δ at fixed q.
-        context = plant.CreateDefaultContext()
-        plant.SetPositions(context, elastic.plant_positions(q0))
-        tau_g = plant.CalcGravityGeneralizedForces(context)[elastic.belt_v]
-        plant_q0 = elastic.plant_positions(q0, elastic.static_deflection(tau_g))
-        plant_v0 = elastic.plant_velocities(v0)
+    if belt is not None:
+        elastic, plant_q0, plant_v0 = _preloaded_belts(plant, arm_instance, arm_model, belt, q0, v0)
     plant.SetDefaultPositions(plant_q0)  # survives context resets (DRAKE_NOTES)
-
     try:
         normal, tangent = surface_directions(X_WP.rotation().matrix(), arm_model.rows)
     except ValueError as e:
-        raise ScenarioError(f"{src}: plate: {e} {scenario.task.axes}") from None
-    if scenario.reference.path == "circle" and np.linalg.norm(tangent) < 0.99:
-        raise ScenarioError(f"{src}: plate: the plate's x axis leaves the task axes {scenario.task.axes}")
-    inspector = scene_graph.model_inspector()
-    tool = plant.GetFrameByName(scenario.arm.tool_frame, arm).body().index()
-    arm_bodies = [b for b in plant.GetBodyIndices(arm) if b != tool]
-    obstacle_indices = [plate_body.index(), *(b.index() for b in obstacle_bodies)]
-    return Station(
+        raise StationError(f"{source}: plate: {e} {list(task_axes)}") from None
+    station = Station(
         plant=plant,
         scene_graph=scene_graph,
-        arm=arm,
-        plate=plate,
+        arm=arm_instance,
+        plate=plate_instance,
         arm_model=arm_model,
         sensor_joint=sensor_joint,
         normal=normal,
@@ -204,26 +198,158 @@ def add_station(builder: DiagramBuilder, scenario: Scenario) -> Station:
         arm_file=arm_file,
         gravity=gravity,
         obstacle_bodies=obstacle_bodies,
-        link_geometries=proximity_geometries(inspector, plant, arm_bodies),
-        obstacle_geometries=proximity_geometries(inspector, plant, obstacle_indices),
         X_WP=X_WP,
         elastic=elastic,
         plant_q0=plant_q0,
         plant_v0=plant_v0,
     )
+    _add_geometries(station, plate_body)
+    if sensing:
+        _add_sensing_and_actuation(builder, station)
+    return station
 
 
-def _add_obstacles(plant: MultibodyPlant, scene_graph, scenario: Scenario, plate_body) -> list:
-    """Welds each scenario obstacle to the world (joint obstacle_<name>), with the
-    plate's contact properties, so that a link that hits one is stopped physically."""
-    if not scenario.obstacles:
+def _parse(plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, src: str):
+    parser = Parser(plant)
+    try:
+        (arm,) = (
+            add_elastic_arm(plant, parser, arm_file, belt)
+            if belt is not None
+            else parser.AddModels(str(arm_file))
+        )
+        (plate,) = parser.AddModels(str(plate_file))
+    except Exception as e:
+        raise StationError(f"{src}: cannot parse a model: {' '.join(str(e).split())}") from None
+    return arm, plate
+
+
+def _the_one_body(plant: MultibodyPlant, plate: ModelInstanceIndex, src: str):
+    plate_bodies = plant.GetBodyIndices(plate)
+    if len(plate_bodies) != 1:
+        raise StationError(f"{src}: plate.urdf: the plate model must have exactly one body")
+    return plant.get_body(plate_bodies[0])
+
+
+def _arm_model(plant, arm_instance, arm: ArmConfig, arm_file, task_axes, belt, gravity, src) -> ArmModel:
+    """The arm's kinematics and dynamics on the task axes: on the station's plant, or on a
+    rigid arm of its own beside belts (link coordinates)."""
+    if not plant.HasFrameNamed(arm.tool_frame, arm_instance):
+        raise StationError(f"{src}: arm.tool_frame: no frame '{arm.tool_frame}' in {arm_file.name}")
+    tool = plant.GetFrameByName(arm.tool_frame, arm_instance)
+    if belt is not None:
+        tool = rigid_arm_plant(arm_file, gravity).GetFrameByName(arm.tool_frame)
+    try:
+        arm_model = ArmModel(tool.GetParentPlant(), tool, tuple(task_axes))
+    except ValueError as e:
+        raise StationError(f"{src}: arm.urdf: {e}") from None
+    if plant.num_actuators() != arm_model.n:
+        raise StationError(
+            f"{src}: arm.urdf: the arm needs one actuator per joint ({arm_model.n}), "
+            f"it has {plant.num_actuators()}"
+        )
+    return arm_model
+
+
+def _short(name) -> str:
+    text = " ".join(str(name).split())
+    return text if len(text) <= 80 else text[:79] + "…"
+
+
+def _initial_state(arm: ArmConfig, names: tuple[str, ...], src: str) -> tuple[np.ndarray, np.ndarray]:
+    """(q0, v0) in the arm's joint order from the settings keyed by joint name."""
+    for where, table in (
+        ("arm.initial_positions", arm.initial_positions),
+        ("arm.initial_velocities", arm.initial_velocities),
+    ):
+        for name in table:
+            if name not in names:
+                raise StationError(
+                    f"{src}: {where}.{_short(name)}: unknown joint; the arm's joints are {', '.join(names)}"
+                )
+    missing = [j for j in names if j not in arm.initial_positions]
+    if missing:
+        raise StationError(f"{src}: arm.initial_positions: no position for joint(s) {', '.join(missing)}")
+    q0 = np.array([arm.initial_positions[j] for j in names])
+    v0 = np.array([arm.initial_velocities.get(j, 0.0) for j in names])
+    return q0, v0
+
+
+def _preloaded_belts(plant, arm_instance, arm_model: ArmModel, belt, q0, v0):
+    """The belts' map and the plant's initial state, the belts preloaded by gravity so that
+    the arm starts at rest: the gravity torque on each belt coordinate (links and rotors
+    beyond it) does not depend on δ at fixed q."""
+    elastic = ElasticMap.build(plant, arm_instance, arm_model.joint_names, belt.stiffness)
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, elastic.plant_positions(q0))
+    tau_g = plant.CalcGravityGeneralizedForces(context)[elastic.belt_v]
+    return (
+        elastic,
+        elastic.plant_positions(q0, elastic.static_deflection(tau_g)),
+        elastic.plant_velocities(v0),
+    )
+
+
+def _add_geometries(station: Station, plate_body) -> None:
+    plant = station.plant
+    inspector = station.scene_graph.model_inspector()
+    tool = station.tool_body.index()
+    arm_bodies = [b for b in plant.GetBodyIndices(station.arm) if b != tool]
+    obstacle_indices = [plate_body.index(), *(b.index() for b in station.obstacle_bodies)]
+    station.link_geometries = proximity_geometries(inspector, plant, arm_bodies)
+    station.obstacle_geometries = proximity_geometries(inspector, plant, obstacle_indices)
+
+
+def _add_sensing_and_actuation(builder: DiagramBuilder, station: Station) -> None:
+    """The force sensor under the plate, the monitor of contacts other than the tool's,
+    the motor encoders behind belts, and τ = B u's map u = Bᵀ τ (a permutation, or the
+    motors behind the belts); sets ``station.ports``."""
+    plant = station.plant
+    sensor = builder.AddNamedSystem(
+        "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
+    )
+    builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
+    monitor = builder.AddNamedSystem(
+        "contact_monitor",
+        ContactMonitor(
+            plant=plant,
+            watched={*plant.GetBodyIndices(station.plate), *(b.index() for b in station.obstacle_bodies)},
+            allowed={station.tool_body.index()},
+        ),
+    )
+    builder.Connect(plant.get_contact_results_output_port(), monitor.get_input_port())
+    state = link_state = plant.get_state_output_port()
+    if station.elastic is not None:
+        encoders = builder.AddNamedSystem("motor_encoders", MatrixGain(station.elastic.motor_state_matrix()))
+        builder.Connect(plant.get_state_output_port(), encoders.get_input_port())
+        links = builder.AddNamedSystem("link_state", MatrixGain(station.elastic.link_state_matrix()))
+        builder.Connect(plant.get_state_output_port(), links.get_input_port())
+        state, link_state = encoders.get_output_port(), links.get_output_port()
+    B_T = station.elastic.actuation if station.elastic is not None else plant.MakeActuationMatrix().T
+    actuation = builder.AddNamedSystem("actuation_map", MatrixGain(B_T))
+    builder.Connect(actuation.get_output_port(), plant.get_actuation_input_port())
+    station.sensor, station.monitor = sensor, monitor
+    station.ports = StationPorts(
+        state=state,
+        link_state=link_state,
+        wrench=sensor.GetOutputPort("wrench"),
+        true_wrench=sensor.GetOutputPort("wrench"),
+        actuation=actuation.get_input_port(),
+    )
+
+
+def _add_obstacles(
+    plant: MultibodyPlant, scene_graph, obstacles: Sequence[ObstacleConfig], plate_body
+) -> list:
+    """Welds each obstacle to the world (joint obstacle_<name>), with the plate's contact
+    properties, so that a link that hits one is stopped physically."""
+    if not obstacles:
         return []
     instance = plant.AddModelInstance("obstacles")
     inspector = scene_graph.model_inspector()
     (plate_geometry,) = plant.GetCollisionGeometriesForBody(plate_body)
     properties = inspector.GetProximityProperties(plate_geometry)
     bodies = []
-    for ob in scenario.obstacles:
+    for ob in obstacles:
         shape = {
             "box": lambda s: Box(*s),
             "sphere": lambda s: Sphere(s[0]),
@@ -253,6 +379,22 @@ def station_obstacles(station: Station) -> list[Obstacle]:
     return out
 
 
+def initial_task_position(station: Station) -> np.ndarray:
+    """x = p(q0), the tool's task position at the initial pose. (m,) [m]."""
+    plant = station.arm_model.plant  # the station's plant, or the rigid arm's beside an elastic one
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, station.q0)
+    return station.arm_model.task_position(context)
+
+
+def has_joint_limits(station: Station) -> bool:
+    """Whether the arm has any finite joint position limit (the Panda; not the paper's arm)."""
+    plant = station.plant
+    return bool(
+        np.isfinite(plant.GetPositionLowerLimits()).any() or np.isfinite(plant.GetPositionUpperLimits()).any()
+    )
+
+
 def tool_orientation(station: Station, q: np.ndarray) -> np.ndarray:
     """R_WT, the tool frame's orientation in the world at joint positions q. (3, 3)."""
     context = station.plant.CreateDefaultContext()
@@ -261,9 +403,9 @@ def tool_orientation(station: Station, q: np.ndarray) -> np.ndarray:
 
 
 def desired_tool_orientation(station: Station, how: str) -> np.ndarray:
-    """R_d for a pose task (scenario ``reference.orientation``): the tool's orientation at
-    q0 ("start"), or that one turned by the smallest rotation that points the tool frame's
-    z axis along the plate's push direction ("perpendicular"). (3, 3)."""
+    """R_d for a pose task: the tool's orientation at q0 ("start"), or that one turned by
+    the smallest rotation that points the tool frame's z axis along the plate's push
+    direction ("perpendicular"). (3, 3)."""
     R0 = tool_orientation(station, station.q0)
     if how == "start":
         return R0

@@ -1,10 +1,10 @@
 """Where a sweep's runs are simulated: in this process, in a pool of local processes,
 or on a Dask distributed cluster.
 
-Every engine takes the runs' plain parameters (:meth:`nsdrake.studies.sweep.Run.task`: the
+Every engine takes the runs' plain parameters (:meth:`nsdrake.studies.sweep_spec.Run.task`: the
 scenario as YAML text, its index, its seed) and yields plain results as runs finish,
 in any order: a Drake diagram cannot be pickled, so each worker builds its own. A run
-that raises is a failed result (``nsdrake.studies.sweep.simulate_run`` catches it); a worker
+that raises is a failed result (``nsdrake.studies.sweep_worker.simulate_run`` catches it); a worker
 process that dies is a failed result too, marked ``crashed`` (tried again on resume),
 and the other runs go on.
 """
@@ -17,7 +17,8 @@ import signal
 from collections.abc import Iterator
 from multiprocessing.connection import wait
 
-from nsdrake.studies.sweep import SweepError, crash_if_asked, simulate_run
+from nsdrake.studies.sweep_spec import SweepError
+from nsdrake.studies.sweep_worker import crash_if_asked, simulate_run
 
 ENGINES = ("process", "dask")
 DASK_MISSING = "--engine dask needs Dask: pip install 'nsdrake[cluster]'"
