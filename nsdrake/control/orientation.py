@@ -26,7 +26,7 @@ since R_e and the (left) Jacobian of the logarithm leave e_o's own axis unchange
     e_oᵀ ė_o = e_oᵀ (ω_d − ω),   i.e.  θ̇ = uᵀ (ω_d − ω),
 
 exactly, at any angle below π: the error angle changes at the rate of the angular
-velocity error along its axis (tests/test_pose_task.py checks both the derivative
+velocity error along its axis (tests/control/test_pose_task.py checks both the derivative
 and this identity). With scalar gains k_p, k_v > 0 the energy
 V = ½ ‖ω_d − ω‖² + ½ k_p ‖e_o‖² then decreases along the closed loop, V̇ = −k_v
 ‖ω_d − ω‖², for any desired motion, and by LaSalle ω → ω_d and e_o → 0: the same

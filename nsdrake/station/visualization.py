@@ -10,7 +10,7 @@
   with a time slider; it opens from the file system with no network.
 
 The visualizers only read the plant's outputs in publish events: a run with them
-steps the plant exactly as one without (tests/test_visualization.py compares the
+steps the plant exactly as one without (tests/reporting/test_visualization.py compares the
 traces byte for byte).
 """
 

@@ -31,7 +31,7 @@ from nsdrake.experiment.traces import Traces
 CHROMIUM = os.environ.get("NSDRAKE_CHROMIUM", "/usr/bin/chromium")
 CHROMEDRIVER = os.environ.get("NSDRAKE_CHROMEDRIVER", "/usr/bin/chromedriver")
 ARTIFACTS = Path(
-    os.environ.get("NSDRAKE_TEST_ARTIFACTS", Path(__file__).resolve().parents[1] / "test-artifacts")
+    os.environ.get("NSDRAKE_TEST_ARTIFACTS", Path(__file__).resolve().parents[2] / "test-artifacts")
 )
 
 # The contact-force arrow between the tool sphere and the plate: Drake names the pair by

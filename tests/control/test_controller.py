@@ -30,7 +30,7 @@ from nsdrake.experiment.simulate import moving_link_geometries
 from nsdrake.station.force_sensor import ForceSensor
 
 TOL = 1e-10
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def fig3_controller(scenario):
