@@ -41,7 +41,6 @@ from nsdrake.experiment.diagram import build_controller, build_diagram
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.experiment.simulate import collect_traces
-from nsdrake.station.force_sensor import ForceSensor
 from nsdrake.station.models import models_dir
 
 
@@ -77,10 +76,6 @@ def baseline_run(scenario, traces) -> float:
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario)
     plant, n = station.plant, station.arm_model.n
-    sensor = builder.AddNamedSystem(
-        "force_sensor", ForceSensor(plant=plant, sensor_joint=station.sensor_joint)
-    )
-    builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port())
     trajectory = PiecewisePolynomial.FirstOrderHold(
         traces["t"], np.vstack([traces.block("q").T, traces.block("v").T])
     )
@@ -88,9 +83,9 @@ def baseline_run(scenario, traces) -> float:
     controller = builder.AddSystem(JointStiffnessController(plant, np.full(n, 20.0), np.full(n, 0.5)))
     builder.Connect(plant.get_state_output_port(), controller.get_input_port_estimated_state())
     builder.Connect(desired.get_output_port(), controller.get_input_port_desired_state())
-    builder.Connect(controller.get_output_port_actuation(), plant.get_actuation_input_port())
+    builder.Connect(controller.get_output_port_actuation(), station.ports.actuation)
     LogVectorOutput(plant.get_state_output_port(), builder, publish_period=scenario.control_period)
-    LogVectorOutput(sensor.GetOutputPort("force"), builder, publish_period=scenario.control_period)
+    LogVectorOutput(station.ports.wrench, builder, publish_period=scenario.control_period)
     cpu, _ = simulate_cpu(builder.Build(), plant, station.q0, station.v0, scenario.duration)
     return cpu
 
@@ -127,8 +122,7 @@ def step_cost(controller: NullSpaceImpedanceController, q0: np.ndarray, steps: i
 def fig3_controller():
     scenario = load_scenario("fig3")
     station = add_scenario_station(DiagramBuilder(), scenario)
-    sensor = ForceSensor(plant=station.plant, sensor_joint=station.sensor_joint)  # for its wrench point
-    return build_controller(scenario, station, sensor.p_WSo), station.q0
+    return build_controller(scenario, station, station.sensor.p_WSo), station.q0
 
 
 PANDA_Q0 = np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.3, 0.8])  # elbow up, tool in front of the base

@@ -19,7 +19,7 @@ import statistics
 
 from bench_controller import fig3_controller, panda_controller, step_cost
 
-from nsdrake import systems
+from nsdrake.control import systems
 from nsdrake.control.systems import criteria
 
 
