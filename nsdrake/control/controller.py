@@ -9,35 +9,35 @@ from pathlib import Path
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer
+from pydrake.systems.primitives import Demultiplexer, Multiplexer
 
 from nsdrake.control.config import ControllerConfig
-from nsdrake.control.impedance import ImpedanceGains
+from nsdrake.control.layout import tick_parts
 from nsdrake.control.model import ControllerModel
-from nsdrake.control.priority import Criterion, SelectorLimits
-from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.control.plan import ControllerPlan, generalized_inverse, speed_limits, torque_limits
 from nsdrake.control.systems import (
     ActuatorLimitsSystem,
+    CriteriaSystem,
+    FusedController,
     ImpedanceController,
-    JointLimitsCriterionSystem,
-    JointTorqueCriterionSystem,
-    ManipulabilityCriterionSystem,
     NullSpaceController,
-    ObstacleCriterionSystem,
     PrioritySelector,
     RobotTermsSystem,
     SelfMotionSweep,
 )
-from nsdrake.control.systems.criteria import criterion_parts, pack_criterion
+
+__all__ = [
+    "ControllerConfigError",
+    "NullSpaceImpedanceController",
+    "generalized_inverse",
+    "speed_limits",
+    "torque_limits",
+    "without_null_space_task",
+]
 
 
 class ControllerConfigError(ValueError):
     """A configuration that does not fit the controller model; the message is one line."""
-
-
-def generalized_inverse(config: ControllerConfig) -> GeneralizedInverse:
-    ns = config.null_space
-    return GeneralizedInverse(PseudoInverseKind(ns.pseudo_inverse), ns.damping)
 
 
 def without_null_space_task(config: ControllerConfig) -> ControllerConfig:
@@ -154,6 +154,17 @@ class NullSpaceImpedanceController(Diagram):
         config: gains, inverse, switches, criteria, selector and speed limits.
         wrench_point: p_WSo (3,), the point the measured moment is about [m];
             None: the tool point itself.
+        fused: False (default): the paper's structure, one named system per stage of
+            the tick (robot_terms, criteria, priority_selector or self_motion_sweep,
+            impedance_controller, null_space_controller, actuator_limits), each with
+            its own ports, what ``diagram.svg`` shows; True: the same stages in one
+            LeafSystem (``fused_controller``) between a Multiplexer of the inputs and a
+            Demultiplexer of the outputs, with the same ports and the same τ at every
+            tick, about a third of the cost per tick (README, "Speed").
+
+    Timing and state: :mod:`nsdrake.control.stages` (the stages, their order, the
+    discrete state and Drake's event order, which both structures keep).
+    :class:`nsdrake.ControllerStep` runs the same stages without a Simulator.
 
     Preconditions: the controller model's joints are revolute or prismatic, one
     actuator each; J has full row rank m along the way (redundancy n > m).
@@ -168,82 +179,46 @@ class NullSpaceImpedanceController(Diagram):
         tool_frame: str = "tool",
         task_axes: Sequence[str] = ("x", "y"),
         wrench_point: Sequence[float] | None = None,
+        fused: bool = False,
     ):
         super().__init__()
         model = as_controller_model(controller_model, tool_frame, task_axes)
-        self.model = model
-        self.config = config
-        normal = np.asarray(normal, dtype=float)
-        m_t = model.arm.m_t
-        if normal.shape != (m_t,) or not np.linalg.norm(normal) > 0:
-            raise ControllerConfigError(
-                f"normal must be a non-zero vector on the {m_t} translational task axes, "
-                f"got {normal.tolist()}"
-            )
-        self.normal = normal / np.linalg.norm(normal)
-        check_config(config, model)
-        # n on every task axis: zero on the rotational rows.
-        task_normal = np.concatenate([self.normal, np.zeros(model.arm.m_r)])
-        builder = DiagramBuilder()
-        terms = _add_robot_terms(builder, model, config)
-        model_terms = model.terms(model.create_scratch(), np.zeros(model.n), np.zeros(model.n), True)
-        impedance = _add_impedance(builder, terms, config, self.normal, wrench_point, model, model_terms)
-        qdot_ns, diagnostics = _add_desired_null_space(
-            builder, terms, config, task_normal, model, model_terms
+        self.model, self.config, self.fused = model, config, fused
+        self.normal = checked_normal(normal, model)
+        self.wrench_point = None if wrench_point is None else np.asarray(wrench_point, dtype=float)
+        check_config(config, model)  # every refusal, in one line, before anything is built
+        self.plan = ControllerPlan(
+            model=model, config=config, normal=self.normal, wrench_point=self.wrench_point
         )
-        null_space = _add_null_space(builder, terms, qdot_ns, config, model_terms)
-        limits = _add_actuator_limits(builder, impedance, null_space["generalized_force"], config, model)
-        builder.ExportInput(terms.GetInputPort("estimated_state"), "estimated_state")
-        builder.ExportInput(impedance.GetInputPort("measured_wrench"), "measured_wrench")
-        for name, port in (
-            ("desired_position", "x_d"),
-            ("desired_velocity", "xdot_d"),
-            ("desired_acceleration", "xddot_d"),
-            ("desired_force", "f_d"),
-        ):
-            builder.ExportInput(impedance.GetInputPort(port), name)
-        if model.arm.m_r:
-            for name, port in (
-                ("desired_orientation", "R_d"),
-                ("desired_angular_velocity", "omega_d"),
-                ("desired_angular_acceleration", "omegadot_d"),
-            ):
-                builder.ExportInput(impedance.GetInputPort(port), name)
-        builder.ExportOutput(limits["generalized_force"], "generalized_force")
-        builder.ExportOutput(limits["saturation"], "saturation")
-        builder.ExportOutput(null_space["null_space_velocity_error"], "null_space_velocity_error")
-        builder.ExportOutput(null_space["lyapunov"], "lyapunov")
-        builder.ExportOutput(qdot_ns, "desired_null_space_velocity")
-        for name, port in diagnostics.items():
-            builder.ExportOutput(port, name)
-        builder.ExportOutput(terms.GetOutputPort("task_position"), "task_position")
+        builder = DiagramBuilder()
+        inputs, outputs = (_add_fused if fused else _add_named)(builder, self.plan)
+        for name in INPUTS[: len(inputs)]:
+            builder.ExportInput(inputs[name], name)
+        for name in OUTPUTS:
+            builder.ExportOutput(outputs[name], name)
         builder.BuildInto(self)
         self.set_name("controller")
 
 
-def torque_limits(config: ControllerConfig, model: ControllerModel) -> np.ndarray:
-    """|τ| limit per joint (velocity order): the configuration's, else the model's
-    actuator effort limit, else unlimited. [N m]."""
-    plant = model.plant
-    effort = {}
-    for index in plant.GetJointActuatorIndices():
-        actuator = plant.get_joint_actuator(index)
-        effort[actuator.joint().name()] = actuator.effort_limit()
-    return np.array([config.actuator_limits.torque.get(j, effort.get(j, np.inf)) for j in model.joint_names])
-
-
-def speed_limits(config: ControllerConfig, model: ControllerModel) -> np.ndarray:
-    """Joint-speed limit per joint (velocity order) for q̇_dⁿ's scaling: the configuration's,
-    else the model's velocity limit (URDF ``<limit velocity>``; zero or none counts as
-    unlimited, as URDF writers use 0 for "not given"). [rad/s]."""
-    model_limits = model.plant.GetVelocityUpperLimits()
-    table = config.desired_null_space.joint_speed_limits
-    return np.array(
-        [
-            table.get(j, limit if limit > 0 else np.inf)
-            for j, limit in zip(model.joint_names, model_limits, strict=True)
-        ]
-    )
+# The controller's ports, in order (the rotational inputs only with rotational task axes).
+INPUTS = (
+    "estimated_state", "measured_wrench", "desired_position", "desired_velocity", "desired_acceleration",
+    "desired_force", "desired_orientation", "desired_angular_velocity", "desired_angular_acceleration",
+)  # fmt: skip
+OUTPUTS = (
+    "generalized_force", "saturation", "null_space_velocity_error", "lyapunov", "desired_null_space_velocity",
+    "mode", "speed_scale", "manipulability", "joint_torque_criterion", "joint_limits_criterion",
+    "joint_limit_margin", "d_min", "obstacle_potential", "task_position",
+)  # fmt: skip
+# Diagnostic output → the criterion part it is (nsdrake.control.systems.criteria.criteria_parts).
+CRITERION_OUTPUTS = {
+    "manipulability": "manipulability_value",
+    "joint_torque_criterion": "joint_torque_value",
+    "joint_limits_criterion": "joint_limits_value",
+    "joint_limit_margin": "joint_limits_switching",
+    "d_min": "obstacle_switching",
+    "obstacle_potential": "obstacle_value",
+}
 
 
 def as_controller_model(source, tool_frame: str, task_axes: Sequence[str]) -> ControllerModel:
@@ -252,6 +227,18 @@ def as_controller_model(source, tool_frame: str, task_axes: Sequence[str]) -> Co
     if isinstance(source, MultibodyPlant):
         return ControllerModel.from_plant(source, tool_frame=tool_frame, task_axes=task_axes)
     return ControllerModel.from_urdf(source, tool_frame=tool_frame, task_axes=task_axes)
+
+
+def checked_normal(normal: Sequence[float], model: ControllerModel) -> np.ndarray:
+    """The unit task direction n (m_t,); ControllerConfigError unless a non-zero vector on
+    the translational task axes."""
+    normal = np.asarray(normal, dtype=float)
+    m_t = model.arm.m_t
+    if normal.shape != (m_t,) or not np.linalg.norm(normal) > 0:
+        raise ControllerConfigError(
+            f"normal must be a non-zero vector on the {m_t} translational task axes, got {normal.tolist()}"
+        )
+    return normal / np.linalg.norm(normal)
 
 
 def check_config(config: ControllerConfig, model: ControllerModel) -> None:
@@ -315,70 +302,6 @@ def check_task_span(model: ControllerModel, seed: int = 0) -> None:
     )
 
 
-def _add_robot_terms(builder, model: ControllerModel, config: ControllerConfig):
-    ns = config.null_space
-    return builder.AddNamedSystem(
-        "robot_terms",
-        RobotTermsSystem(
-            model=model,
-            coriolis_matrix=ns.task_velocity_compensation or ns.coriolis_compensation,
-            max_task_inertia=config.impedance.max_task_inertia,
-        ),
-    )
-
-
-def _add_impedance(builder, terms, config, normal, wrench_point, model, model_terms):
-    imp = config.impedance
-    impedance = builder.AddNamedSystem(
-        "impedance_controller",
-        ImpedanceController(
-            gains=ImpedanceGains.along_surface(
-                normal,
-                imp.K_p_tangent,
-                imp.K_p_normal,
-                imp.K_v_tangent,
-                imp.K_v_normal,
-                imp.K_f,
-                imp.K_p_rotation,
-                imp.K_v_rotation,
-                model.arm.m_r,
-            ),
-            task_rows=model.arm.rows,
-            p_WSo=wrench_point,
-            gravity_compensation=imp.gravity_compensation,
-            model_terms=model_terms,
-            rot_rows=model.arm.rot_rows,
-        ),
-    )
-    builder.Connect(terms.GetOutputPort("robot_terms"), impedance.GetInputPort("robot_terms"))
-    return impedance
-
-
-def _add_criteria(builder, terms_port, config, normal, model, model_terms) -> dict:
-    crit = config.desired_null_space.criteria
-    systems = {
-        Criterion.joint_torque: JointTorqueCriterionSystem(
-            F_d=config.nominal_force * normal, model_terms=model_terms
-        ),
-        Criterion.manipulability: ManipulabilityCriterionSystem(model_terms=model_terms),
-    }
-    if model.has_geometry:
-        systems[Criterion.obstacle] = ObstacleCriterionSystem(
-            model=model, influence_distance=crit.obstacle.influence_distance, model_terms=model_terms
-        )
-    lower, upper = model.plant.GetPositionLowerLimits(), model.plant.GetPositionUpperLimits()
-    if np.isfinite(lower).any() or np.isfinite(upper).any():
-        systems[Criterion.joint_limits] = JointLimitsCriterionSystem(
-            lower=lower, upper=upper, influence=crit.joint_limits.influence, model_terms=model_terms
-        )
-    added = {}
-    for c in Criterion:
-        if c in systems:
-            added[c] = builder.AddNamedSystem(f"{c.value}_criterion", systems[c])
-            builder.Connect(terms_port, added[c].GetInputPort("robot_terms"))
-    return added
-
-
 def _split(builder, name: str, port, sizes: dict[str, int]) -> dict:
     """A packed port's parts as named ports, through Drake's (C++) Demultiplexer."""
     demux = builder.AddNamedSystem(name, Demultiplexer(list(sizes.values())))
@@ -386,130 +309,64 @@ def _split(builder, name: str, port, sizes: dict[str, int]) -> dict:
     return {part: demux.get_output_port(k) for k, part in enumerate(sizes)}
 
 
-def _add_desired_null_space(builder, terms, config, normal, model, model_terms):
-    """Criteria → priority selector (or a prescribed sweep) → q̇_dⁿ; returns its port and
-    the diagnostic ports to export."""
-    n = model.n
+def _add_named(builder, plan: ControllerPlan) -> tuple[dict, dict]:
+    """The stages as the paper's named systems, wired in their order (data flows
+    terms → criteria → selector → impedance, null space → limits); returns the ports to
+    export, by the controller's port names."""
+    terms = builder.AddNamedSystem("robot_terms", RobotTermsSystem(plan=plan))
+    criteria = builder.AddNamedSystem("criteria", CriteriaSystem(plan=plan))
+    selector = builder.AddNamedSystem("priority_selector", PrioritySelector(plan=plan))
+    impedance = builder.AddNamedSystem("impedance_controller", ImpedanceController(plan=plan))
+    null_space = builder.AddNamedSystem("null_space_controller", NullSpaceController(plan=plan))
+    limits = builder.AddNamedSystem("actuator_limits", ActuatorLimitsSystem(plan=plan))
     terms_port = terms.GetOutputPort("robot_terms")
-    criteria = {
-        c: system.GetOutputPort("criterion")
-        for c, system in _add_criteria(builder, terms_port, config, normal, model, model_terms).items()
-    }
-    # No obstacle geometry (d_min = ∞), no joint limits (margin = ∞): the criterion's
-    # constant value, without a system to evaluate at every tick.
-    for c in (Criterion.obstacle, Criterion.joint_limits):
-        if c not in criteria:
-            criteria[c] = builder.AddNamedSystem(
-                f"no_{c.value}", ConstantVectorSource(pack_criterion(np.zeros(n), 0.0, np.inf, 0.0))
-            ).get_output_port()
-    selector = _add_selector(builder, config, model, model_terms)
-    builder.Connect(terms_port, selector.GetInputPort("robot_terms"))
-    parts = {}
-    for c, port in criteria.items():
-        builder.Connect(port, selector.GetInputPort(c.value))
-        parts[c] = _split(builder, f"{c.value}_parts", port, criterion_parts(n))
+    for system in (criteria, selector, impedance, null_space):
+        builder.Connect(terms_port, system.GetInputPort("robot_terms"))
+    builder.Connect(criteria.GetOutputPort("criteria"), selector.GetInputPort("criteria"))
     selection = _split(
         builder, "selection_parts", selector.GetOutputPort("selection"), selector.output_parts()
     )
-    diagnostics = {
-        "mode": selection["mode"],
-        "speed_scale": selection["speed_scale"],
-        "manipulability": parts[Criterion.manipulability]["value"],
-        "joint_torque_criterion": parts[Criterion.joint_torque]["value"],
-        "joint_limits_criterion": parts[Criterion.joint_limits]["value"],
-        "joint_limit_margin": parts[Criterion.joint_limits]["switching"],
-        "d_min": parts[Criterion.obstacle]["switching"],
-        "obstacle_potential": parts[Criterion.obstacle]["value"],
-    }
-    if config.desired_null_space.source != "sweep":
-        return selection["desired_null_space_velocity"], diagnostics
-    sweep = _add_sweep(builder, config, model, model_terms)
-    builder.Connect(terms_port, sweep.get_input_port())
-    return sweep.get_output_port(), diagnostics
-
-
-def _add_selector(builder, config, model, model_terms) -> PrioritySelector:
-    d = config.desired_null_space
-    sel = d.selector
-    return builder.AddNamedSystem(
-        "priority_selector",
-        PrioritySelector(
-            inverse=generalized_inverse(config),
-            gains={
-                Criterion.obstacle: d.criteria.obstacle.gain,
-                Criterion.joint_torque: d.criteria.joint_torque.gain,
-                Criterion.manipulability: d.criteria.manipulability.gain,
-                Criterion.joint_limits: d.criteria.joint_limits.gain,
-            },
-            limits=SelectorLimits(
-                d_lim=sel.d_lim,
-                w_lim=sel.w_lim,
-                d_band=sel.d_band,
-                w_band=sel.w_band,
-                q_lim=sel.q_lim,
-                q_band=sel.q_band,
-            ),
-            blend_time=sel.blend_time,
-            rotate_gradient=d.rotate_gradient,
-            speed_limits=speed_limits(config, model),
-            speed_headroom=d.speed_headroom,
-            period=config.period,
-            model_terms=model_terms,
-        ),
-    )
-
-
-def _add_sweep(builder, config, model, model_terms) -> SelfMotionSweep:
-    """A prescribed self-motion in place of the selector's q̇_dⁿ (``source: sweep``)."""
-    sw = config.desired_null_space.sweep
-    return builder.AddNamedSystem(
-        "self_motion_sweep",
-        SelfMotionSweep(
-            inverse=generalized_inverse(config),
-            direction=np.array([sw.direction.get(j, 0.0) for j in model.joint_names]),
-            amplitude=sw.amplitude,
-            frequency=sw.frequency,
-            start_time=sw.start_time,
-            ramp_time=sw.ramp_time,
-            model_terms=model_terms,
-        ),
-    )
-
-
-def _add_actuator_limits(builder, impedance, null_space_torque, config, model) -> dict:
-    """τ = τ_task + s τ₀ within the actuator limits; returns the generalized_force and
-    saturation ports."""
-    rates = config.actuator_limits.torque_rate
-    limits = builder.AddNamedSystem(
-        "actuator_limits",
-        ActuatorLimitsSystem(
-            torque_limits=torque_limits(config, model),
-            rate_limits=np.array([rates.get(j, np.inf) for j in model.joint_names]),
-            period=config.period,
-        ),
-    )
-    builder.Connect(impedance.get_output_port(), limits.GetInputPort("task_torque"))
-    builder.Connect(null_space_torque, limits.GetInputPort("null_space_torque"))
-    return _split(builder, "limited_parts", limits.GetOutputPort("limited"), limits.output_parts())
-
-
-def _add_null_space(builder, terms, qdot_ns, config, model_terms) -> dict:
-    """The null-space controller; returns its τ₀, eⁿ and ν ports."""
-    ns = config.null_space
-    null_space = builder.AddNamedSystem(
-        "null_space_controller",
-        NullSpaceController(
-            inverse=generalized_inverse(config),
-            K_n=ns.K_n,
-            period=config.period,
-            task_velocity_compensation=ns.task_velocity_compensation,
-            coriolis_compensation=ns.coriolis_compensation,
-            acceleration_feedforward=ns.acceleration_feedforward,
-            model_terms=model_terms,
-        ),
-    )
-    builder.Connect(terms.GetOutputPort("robot_terms"), null_space.GetInputPort("robot_terms"))
-    builder.Connect(qdot_ns, null_space.GetInputPort("desired_null_space_velocity"))
-    return _split(
+    qdot = selection["desired_null_space_velocity"]
+    if plan.config.desired_null_space.source == "sweep":
+        sweep = builder.AddNamedSystem("self_motion_sweep", SelfMotionSweep(plan=plan))
+        builder.Connect(terms_port, sweep.GetInputPort("robot_terms"))
+        qdot = sweep.get_output_port()
+    builder.Connect(qdot, null_space.GetInputPort("desired_null_space_velocity"))
+    ns = _split(
         builder, "null_space_parts", null_space.GetOutputPort("null_space"), null_space.output_parts()
     )
+    builder.Connect(impedance.get_output_port(), limits.GetInputPort("task_torque"))
+    builder.Connect(ns["generalized_force"], limits.GetInputPort("null_space_torque"))
+    limited = _split(builder, "limited_parts", limits.GetOutputPort("limited"), limits.output_parts())
+    parts = _split(builder, "criteria_parts", criteria.GetOutputPort("criteria"), criteria.output_parts())
+    inputs = {"estimated_state": terms.GetInputPort("estimated_state")}
+    impedance_inputs = ("measured_wrench", "x_d", "xdot_d", "xddot_d", "f_d", "R_d", "omega_d", "omegadot_d")
+    for name, port in zip(INPUTS[1:], impedance_inputs[: 8 if plan.m_r else 5], strict=False):
+        inputs[name] = impedance.GetInputPort(port)
+    outputs = {
+        "generalized_force": limited["generalized_force"],
+        "saturation": limited["saturation"],
+        "null_space_velocity_error": ns["null_space_velocity_error"],
+        "lyapunov": ns["lyapunov"],
+        "desired_null_space_velocity": qdot,
+        "mode": selection["mode"],
+        "speed_scale": selection["speed_scale"],
+        "task_position": terms.GetOutputPort("task_position"),
+    }
+    return inputs, outputs | {name: parts[part] for name, part in CRITERION_OUTPUTS.items()}
+
+
+def _add_fused(builder, plan: ControllerPlan) -> tuple[dict, dict]:
+    """The stages in one FusedController between a Multiplexer of the inputs other than the
+    state and a Demultiplexer of its tick; returns the ports to export."""
+    m_t = plan.m_t
+    sizes = [6, m_t, m_t, m_t, 1] + ([4, 3, 3] if plan.m_r else [])
+    commands = builder.AddNamedSystem("commands", Multiplexer(sizes))
+    fused = builder.AddNamedSystem("fused_controller", FusedController(plan=plan, commands_size=sum(sizes)))
+    builder.Connect(commands.get_output_port(), fused.GetInputPort("commands"))
+    parts = _split(builder, "tick_parts", fused.GetOutputPort("tick"), tick_parts(plan.n, m_t))
+    inputs = {"estimated_state": fused.GetInputPort("estimated_state")}
+    for k, name in enumerate(INPUTS[1 : 1 + len(sizes)]):
+        inputs[name] = commands.get_input_port(k)
+    outputs = {name: parts[name] for name in OUTPUTS if name in parts}
+    return inputs, outputs | {name: parts[part] for name, part in CRITERION_OUTPUTS.items()}

@@ -165,7 +165,7 @@ def task_inertia(A: np.ndarray, floor: float) -> np.ndarray:
         lam_min = np.linalg.eigvalsh(A)[0]
         if lam_min < floor:
             A = A + floor * (1.0 - lam_min / floor) ** 2 * np.eye(A.shape[0])
-    return np.linalg.inv(A)
+    return np.ascontiguousarray(np.linalg.inv(A))
 
 
 class JacobianPartials:
@@ -329,23 +329,7 @@ class ArmModel:
 
         ``coriolis`` also computes the full matrix C (2n more bias evaluations).
         """
-        plant = self.plant
-        plant.SetPositionsAndVelocities(context, np.concatenate([q, v]))
-        H = plant.CalcMassMatrix(context)
-        H_inv = inv(H)
-        Cv = plant.CalcBiasTerm(context)
-        g = -plant.CalcGravityGeneralizedForces(context)
-        J_spatial = plant.CalcJacobianSpatialVelocity(
-            context, JacobianWrtVariable.kV, self.tool_frame, self._origin, self._world, self._world
-        )
-        J_w, J_v = J_spatial[:3], J_spatial[3:]
-        dJ = self._partials(J_w, J_v)
-        p_WT = self.plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)[:, 0]
-        R_WT = self.tool_frame.CalcPoseInWorld(context).rotation().matrix() if self.m_r else None
-        C = None
-        if coriolis:
-            C = coriolis_matrix(lambda w: self._bias(context, w), v)
-            plant.SetVelocities(context, v)
+        H, H_inv, Cv, g, J_spatial, p_WT, R_WT, C = self.plant_terms(context, q, v, coriolis)
         return RobotTerms(
             q=q.copy(),
             v=v.copy(),
@@ -357,11 +341,30 @@ class ArmModel:
             p_WT=p_WT,
             J=J_spatial[self.spatial_rows],
             J_spatial=J_spatial,
-            dJ_dq=dJ,
+            dJ_dq=self._partials(J_spatial[:3], J_spatial[3:]),
             C=C,
             R_WT=R_WT,
             max_task_inertia=max_task_inertia,
         )
+
+    def plant_terms(self, context: Context, q: np.ndarray, v: np.ndarray, coriolis: bool) -> tuple:
+        """(H, H⁻¹, C q̇, g, [J_w; J_v] (6, n), p_WT, R_WT or None, C or None) from the plant's
+        own calls at (q, q̇), set into ``context`` (module docstring)."""
+        plant = self.plant
+        plant.SetPositionsAndVelocities(context, np.concatenate([q, v]))
+        H = plant.CalcMassMatrix(context)
+        Cv = plant.CalcBiasTerm(context)
+        g = -plant.CalcGravityGeneralizedForces(context)
+        J_spatial = plant.CalcJacobianSpatialVelocity(
+            context, JacobianWrtVariable.kV, self.tool_frame, self._origin, self._world, self._world
+        )
+        p_WT = plant.CalcPointsPositions(context, self.tool_frame, self._origin, self._world)[:, 0]
+        R_WT = self.tool_frame.CalcPoseInWorld(context).rotation().matrix() if self.m_r else None
+        C = None
+        if coriolis:
+            C = coriolis_matrix(lambda w: self._bias(context, w), v)
+            plant.SetVelocities(context, v)
+        return H, inv(H), Cv, g, J_spatial, p_WT, R_WT, C
 
     def _bias(self, context: Context, v: np.ndarray) -> np.ndarray:
         self.plant.SetVelocities(context, v)

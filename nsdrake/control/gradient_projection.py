@@ -22,11 +22,18 @@ from numba import njit
 
 
 @njit(cache=True)
-def gradient_step(N: np.ndarray, W_inv: np.ndarray, Phi: np.ndarray, K: float, rotate: bool) -> np.ndarray:
-    """q̇_dⁿ = N K W⁻¹ Φ (``rotate``) or N K Φ. (n,) [rad/s].
+def projected_direction(N: np.ndarray, W_inv: np.ndarray, Phi: np.ndarray) -> np.ndarray:
+    """N W⁻¹ Φ: Eq. 30's direction, the gradient rotated by the metric W⁻¹ of the
+    generalised inverse behind N (H⁻¹ for J̄, I for J⁺) and projected into its null
+    space. (n,). :mod:`nsdrake.control.priority` also removes this direction from the
+    levels below a criterion."""
+    return N @ (W_inv @ Phi)
 
-    W⁻¹ is the metric of the generalised inverse behind N: H⁻¹ for J̄, which makes
-    this Eq. 30; I for J⁺, where Eq. 28 needs no rotation.
-    """
-    direction = W_inv @ Phi if rotate else Phi
-    return K * (N @ direction)
+
+@njit(cache=True)
+def gradient_step(N: np.ndarray, W_inv: np.ndarray, Phi: np.ndarray, K: float, rotate: bool) -> np.ndarray:
+    """q̇_dⁿ = K N W⁻¹ Φ (``rotate``, Eq. 30 for J̄; :func:`projected_direction`) or
+    K N Φ (Eq. 28's form). (n,) [rad/s]."""
+    if rotate:
+        return K * projected_direction(N, W_inv, Phi)
+    return K * (N @ Phi)

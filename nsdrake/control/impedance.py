@@ -147,20 +147,20 @@ def _command_acceleration(error, xdot, xdot_d, xddot_d, F, f_d, K_p, K_v, K_f, n
     return xddot_d + K_v @ (xdot_d - xdot) + K_p @ error + normal * (K_f * (f_d - f_n))
 
 
+@njit(cache=True)
 def pose_error(
     x: np.ndarray, x_d: np.ndarray, R_WT: np.ndarray, R_d: np.ndarray, rot_rows: np.ndarray
 ) -> np.ndarray:
     """e = [x_d − x; e_o[rot_rows]], e_o = log(R_d R_WTᵀ) (:mod:`nsdrake.control.orientation`).
     (m,) [m, rad]."""
-    return np.concatenate([x_d - x, orientation_error(R_d, R_WT)[rot_rows]])
+    return np.concatenate((x_d - x, orientation_error(R_d, R_WT)[rot_rows]))
 
 
+@njit(cache=True)
 def task_wrench(W_T: np.ndarray, rows: np.ndarray, rot_rows: np.ndarray) -> np.ndarray:
     """F on the task axes from the wrench [M_T; f] at the tool point: the force on the
     translational rows, the moment on the rotational ones. (m,) [N, N m]."""
-    if not len(rot_rows):
-        return W_T[3:][rows]
-    return np.concatenate([W_T[3:][rows], W_T[:3][rot_rows]])
+    return np.concatenate((W_T[3:][rows], W_T[:3][rot_rows]))
 
 
 @njit(cache=True)
@@ -229,4 +229,20 @@ def _position_task_torque(
 ):  # fmt: skip
     F = W_T[3:][rows]
     xddot_c = _command_acceleration(x_d - x, xdot, xdot_d, xddot_d, F, f_d, K_p, K_v, K_f, normal)
+    return _primary_torque(J, Lambda, Jdot_v, J_spatial, Cv, g, xddot_c, W_T, gravity_compensation)
+
+
+@njit(cache=True)
+def pose_task_torque(
+    x, xdot, R_WT, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, W_T, rows, rot_rows,
+    K_p, K_v, K_f, normal, J, Lambda, Jdot_v, J_spatial, Cv, g, gravity_compensation,
+):  # fmt: skip
+    """τ − τ₀ of a pose task in one compiled call: :func:`command_acceleration_from_error`
+    with the pose error (:func:`pose_error`), ẋ_d = [ẋ_d; ω_d], ẍ_d = [ẍ_d; ω̇_d] on the
+    rotational rows and F = :func:`task_wrench`, then :func:`primary_torque`. (n,) [N m]."""
+    error = pose_error(x, x_d, R_WT, R_d, rot_rows)
+    xdot_d_task = np.concatenate((xdot_d, omega_d[rot_rows]))
+    xddot_d_task = np.concatenate((xddot_d, omegadot_d[rot_rows]))
+    F = task_wrench(W_T, rows, rot_rows)
+    xddot_c = _command_acceleration(error, xdot, xdot_d_task, xddot_d_task, F, f_d, K_p, K_v, K_f, normal)
     return _primary_torque(J, Lambda, Jdot_v, J_spatial, Cv, g, xddot_c, W_T, gravity_compensation)

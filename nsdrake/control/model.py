@@ -157,13 +157,25 @@ class ControllerModel:
     def has_geometry(self) -> bool:
         return bool(self.link_geometries) and bool(self.obstacle_geometries)
 
-    def create_scratch(self):
-        """Per-context scratch memory for :meth:`terms` and the geometry queries: a
-        context of the model's diagram (or of the plant alone)."""
-        return (self.diagram or self.plant).CreateDefaultContext()
+    @property
+    def pinocchio(self) -> PinocchioDynamics | None:
+        """The Pinocchio model when the terms come from Pinocchio, else None."""
+        return self._pinocchio
 
-    def plant_context(self, scratch):
-        return self.plant.GetMyMutableContextFromRoot(scratch) if self.diagram else scratch
+    def create_scratch(self) -> ModelScratch:
+        """Per-context scratch memory for :meth:`terms`, the controller's stages and the
+        geometry queries: a context of the model's diagram (or of the plant alone) and,
+        with Pinocchio, a Pinocchio ``Data`` with its arrays viewed in place."""
+        context = (self.diagram or self.plant).CreateDefaultContext()
+        return ModelScratch(context, self._pinocchio.create_data() if self._pinocchio else None)
+
+    def plant_context(self, scratch: ModelScratch):
+        return self.plant.GetMyMutableContextFromRoot(scratch.context) if self.diagram else scratch.context
+
+    def query_object(self, scratch: ModelScratch):
+        """The scene graph's QueryObject at the positions set in :meth:`plant_context`."""
+        scene_graph = self.scene_graph
+        return scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(scratch.context))
 
     def terms(
         self, scratch, q: np.ndarray, v: np.ndarray, coriolis: bool, max_task_inertia: float = math.inf
@@ -172,6 +184,15 @@ class ControllerModel:
         if self._pinocchio is not None:
             return self._pinocchio.terms(q, v, coriolis, max_task_inertia)
         return self.arm.terms(self.plant_context(scratch), q, v, coriolis, max_task_inertia)
+
+
+class ModelScratch:
+    """What :meth:`ControllerModel.create_scratch` returns: ``context``, a context of the
+    model's diagram (or plant), and ``pinocchio``, a :class:`PinocchioScratch` or None."""
+
+    def __init__(self, context, pinocchio: PinocchioScratch | None):
+        self.context = context
+        self.pinocchio = pinocchio
 
 
 def _moving_bodies(plant: MultibodyPlant) -> list:
@@ -215,6 +236,42 @@ def pinocchio_urdf(text: str) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+class PinocchioScratch:
+    """A Pinocchio ``Data`` and its arrays, viewed in place once (they keep their memory
+    for the Data's life): after :meth:`PinocchioDynamics.update`, ``M`` (upper triangle
+    at least), ``nle``, ``g``, ``C`` (if asked for), ``J`` the world joint Jacobians
+    [v_O; ω] (6, nv), ``X`` the joint poses (nj, 3, 4) [R | p], and the tool's pose
+    ``R_tool``, ``p_tool`` hold the state's values, in Pinocchio's joint order."""
+
+    def __init__(self, model, data, tool: int):
+        self.data = data
+        self.M, self.nle, self.g, self.C, self.J = data.M, data.nle, data.g, data.C, data.J
+        self.R_tool, self.p_tool = data.oMf[tool].rotation, data.oMf[tool].translation
+        self.X = _stacked_placements(data.oMi)
+
+
+SE3_STRIDES = (96, 8, 24)  # [R (3 × 3, column-major) | p (3)] per SE3: element (i, j) at 8 (i + 3 j)
+
+
+def _stacked_placements(placements):
+    """The placements of a Pinocchio ``StdVec_SE3`` as one (k, 3, 4) array [R | p]: a view
+    of the vector's own memory where its elements lie as Pinocchio lays out SE3 (checked
+    here element by element), else None (:meth:`PinocchioDynamics.joint_poses` copies)."""
+    first = placements[0].rotation
+    base = first.__array_interface__["data"][0]
+    for i in range(len(placements)):
+        R, p = placements[i].rotation, placements[i].translation
+        if (
+            R.__array_interface__["data"][0] != base + i * SE3_STRIDES[0]
+            or p.__array_interface__["data"][0] != base + i * SE3_STRIDES[0] + 9 * 8
+            or R.strides != (8, 24)
+        ):
+            return None
+    return np.lib.stride_tricks.as_strided(
+        first, shape=(len(placements), 3, 4), strides=SE3_STRIDES, writeable=False
+    )
+
+
 class PinocchioDynamics:
     """Model terms from Pinocchio, in the joint order of the Drake ``arm``."""
 
@@ -241,6 +298,51 @@ class PinocchioDynamics:
         self._rotation = arm.m_r > 0
         self._drake_rows = np.array([3, 4, 5, 0, 1, 2])
         self._partials = arm._partials
+
+    @property
+    def order(self) -> np.ndarray:
+        """order[j]: Pinocchio's velocity index of the model's joint j."""
+        return np.arange(self._model.nv) if self._order is None else self._order
+
+    @property
+    def num_joint_poses(self) -> int:
+        return self._model.njoints
+
+    def tool_support(self) -> np.ndarray:
+        """(n,) 1 where the model's joint j moves the tool frame, else 0."""
+        return self._support(self._model.frames[self._tool].parentJoint)
+
+    def _support(self, joint: int) -> np.ndarray:
+        moving = {self._model.joints[j].idx_v for j in self._model.supports[joint] if j > 0}
+        return np.array([1 if k in moving else 0 for k in self.order], dtype=np.int64)
+
+    def body_in_joint(self, body: str) -> tuple[int, np.ndarray, np.ndarray]:
+        """(joint, X_JB, support) of the URDF link ``body``: the Pinocchio joint that carries
+        it, its pose in that joint's frame as [R | p] (3, 4), and :meth:`tool_support`'s mask
+        for it."""
+        frame = self._model.frames[self._model.getFrameId(body, self._pin.BODY)]
+        X, joint = frame.placement, frame.parentJoint
+        return joint, np.hstack([X.rotation, X.translation[:, None]]), self._support(joint)
+
+    def create_data(self) -> PinocchioScratch:
+        return PinocchioScratch(self._model, self._model.createData(), self._tool)
+
+    def update(self, scratch: PinocchioScratch, q: np.ndarray, v: np.ndarray, coriolis: bool) -> None:
+        """Pinocchio's passes at (q, q̇) (the model's joint order) into ``scratch``'s arrays."""
+        pin, model, data = self._pin, self._model, scratch.data
+        if self._order is not None:
+            q, v = self._to_pin(q), self._to_pin(v)
+        pin.computeAllTerms(model, data, q, v)  # M, nle, g, joint Jacobians, joint poses
+        if coriolis:
+            pin.computeCoriolisMatrix(model, data, q, v)
+        pin.updateFramePlacement(model, data, self._tool)
+
+    def joint_poses(self, scratch: PinocchioScratch) -> np.ndarray:
+        """The joint poses (nj, 3, 4) after :meth:`update`: the in-place view, or a copy."""
+        if scratch.X is not None:
+            return scratch.X
+        oMi = scratch.data.oMi
+        return np.array([np.hstack([X.rotation, X.translation[:, None]]) for X in oMi])
 
     def _to_pin(self, x: np.ndarray) -> np.ndarray:
         if self._order is None:

@@ -73,8 +73,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from nsdrake.control.gradient_projection import gradient_step
-from nsdrake.control.smoothing import smoothstep
+from nsdrake.control.gradient_projection import gradient_step, projected_direction
+from nsdrake.control.smoothing import compiled_smoothstep
 
 
 class Criterion(str, enum.Enum):
@@ -111,20 +111,33 @@ class SelectorLimits:
     q_lim: float = 0.0  # [rad] a joint closer than this to a limit puts joint-limit avoidance on level 2
     q_band: float = 0.0  # [rad] hysteresis on q_lim
 
+    def as_array(self) -> np.ndarray:
+        """[d_lim, d_band, w_lim, w_band, q_lim, q_band], as the compiled selector takes them."""
+        return np.array([self.d_lim, self.d_band, self.w_lim, self.w_band, self.q_lim, self.q_band])
+
 
 def select_mode(
     d_min: float, w: float, previous: Mode, limits: SelectorLimits, margin: float = np.inf
 ) -> Mode:
     """Fig. 1's decision tree, extended by the joint-limit branch, with hysteresis (see
     the module docstring); ``margin`` is the smallest distance of a joint to its limits."""
-    staying = previous == Mode.obstacle_avoidance and d_min < limits.d_lim + limits.d_band
-    if d_min < limits.d_lim or staying:
-        return Mode.obstacle_avoidance
-    staying = previous == Mode.joint_limits and margin < limits.q_lim + limits.q_band
-    if margin < limits.q_lim or staying:
-        return Mode.joint_limits
-    low = w < limits.w_lim or (previous == Mode.manipulability and w < limits.w_lim + limits.w_band)
-    return Mode.manipulability if low else Mode.joint_torque
+    return Mode(select_mode_code(d_min, w, margin, int(previous), limits.as_array()))
+
+
+@njit(cache=True)
+def select_mode_code(d_min: float, w: float, margin: float, previous: int, limits: np.ndarray) -> int:
+    """:func:`select_mode` on plain numbers: modes as their ints, ``limits`` as
+    :meth:`SelectorLimits.as_array`."""
+    d_lim, d_band, w_lim, w_band = limits[0], limits[1], limits[2], limits[3]
+    q_lim, q_band = limits[4], limits[5]
+    staying = previous == 1 and d_min < d_lim + d_band
+    if d_min < d_lim or staying:
+        return 1  # Mode.obstacle_avoidance
+    staying = previous == 4 and margin < q_lim + q_band
+    if margin < q_lim or staying:
+        return 4  # Mode.joint_limits
+    low = w < w_lim or (previous == 3 and w < w_lim + w_band)
+    return 3 if low else 2  # Mode.manipulability, Mode.joint_torque
 
 
 @dataclass(frozen=True)
@@ -178,7 +191,7 @@ def stacked_prioritized_velocity(N, W, W_inv, gradients, gains, activations, rot
             qdot = qdot + gradient_step(N, W_inv, Phi, gains[k], rotate)  # Eq. 30 (or 28)
         if k == last or activations[k] <= 0.0:
             continue
-        v = N @ (W_inv @ Phi)  # the row this level removes from the levels below
+        v = projected_direction(N, W_inv, Phi)  # the row this level removes from the levels below
         denom = Phi @ v + rank_damping * (Phi @ Phi) * metric_scale
         if denom > 0.0:
             N = N - (activations[k] / denom) * np.outer(v, v @ W)
@@ -253,15 +266,56 @@ class SwitchState:
     previous: Mode  # the mode being blended away from
     switch_time: float  # [s] time of the last switch (−∞ if none)
 
+    def as_array(self) -> np.ndarray:
+        """[mode, previous, switch_time], the selector's discrete state as the kernels take it."""
+        return np.array([float(self.mode), float(self.previous), self.switch_time])
+
+    @classmethod
+    def from_array(cls, x) -> SwitchState:
+        return cls(Mode(int(x[0])), Mode(int(x[1])), float(x[2]))
+
+
+# The selector's discrete state before the first selection: mode 0, so that the first
+# selection blends in from rest.
+INITIAL_SWITCH_STATE = (0.0, 0.0, -np.inf)  # [mode, previous, switch time]
+
 
 def update_switch_state(state: SwitchState, t: float, new_mode: Mode) -> SwitchState:
-    if new_mode == state.mode:
-        return state
-    return SwitchState(mode=new_mode, previous=state.mode, switch_time=t)
+    out = np.empty(3)
+    switch_state_update(state.as_array(), t, int(new_mode), out)
+    return SwitchState.from_array(out)
+
+
+@njit(cache=True)
+def switch_state_update(state: np.ndarray, t: float, new_mode: int, out: np.ndarray) -> None:
+    """out = the switch state [mode, previous, switch time] after selecting ``new_mode`` at
+    time t: unchanged if it is the current mode, else (new, current, t)."""
+    if new_mode == int(state[0]):
+        out[:] = state
+    else:
+        out[0], out[1], out[2] = float(new_mode), state[0], t
 
 
 def blend_weight(state: SwitchState, t: float, blend_time: float) -> float:
     """σ ∈ [0, 1]: the share of the current mode's ordering (1 once the blend is over)."""
-    if blend_time <= 0.0 or not np.isfinite(state.switch_time):
+    return blend_weight_code(state.switch_time, t, blend_time)
+
+
+@njit(cache=True)
+def blend_weight_code(switch_time: float, t: float, blend_time: float) -> float:
+    """:func:`blend_weight` from the time of the last switch."""
+    if blend_time <= 0.0 or not np.isfinite(switch_time):
         return 1.0
-    return smoothstep((t - state.switch_time) / blend_time)
+    return compiled_smoothstep((t - switch_time) / blend_time)
+
+
+def ordering_table() -> tuple[np.ndarray, np.ndarray]:
+    """:data:`ORDERINGS` for the compiled selector: (rows, counts), rows[mode, :counts[mode]]
+    the indices in ``list(Criterion)`` of the mode's levels, highest priority first."""
+    order = list(Criterion)
+    rows = np.zeros((len(Mode), len(order)), dtype=np.int64)
+    counts = np.zeros(len(Mode), dtype=np.int64)
+    for mode, levels in ORDERINGS.items():
+        counts[mode] = len(levels)
+        rows[mode, : len(levels)] = [order.index(c) for c in levels]
+    return rows, counts

@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from pydrake.math import inv
 
 
 class PseudoInverseKind(str, enum.Enum):
@@ -73,18 +72,42 @@ class GeneralizedInverse:
         return terms.memo(("inverse", self), lambda: self._at(terms))
 
     def _at(self, terms) -> InverseAtState:
-        J, n = terms.J, terms.n
-        if self.inertia_weighted:
-            W_inv, A_inv = terms.H_inv, terms.Lambda
-            J_pinv, N = right_inverse_and_projector(terms.H_inv_Jt, A_inv, J)
-        else:
-            W_inv = np.eye(n)
-            A = J @ J.T
-            if self.damping:
-                A = A + self.damping**2 * np.eye(J.shape[0])
-            A_inv = inv(A)
-            J_pinv, N = right_inverse_and_projector(np.ascontiguousarray(J.T), A_inv, J)
+        weighted = self.inertia_weighted
+        A_inv = terms.Lambda if weighted else _NO_MATRIX
+        J_pinv, N, A_inv = inverse_at_state(weighted, self.damping, terms.H_inv_Jt, A_inv, terms.J)
+        W_inv = terms.H_inv if weighted else np.eye(terms.n)
         return InverseAtState(J_pinv=J_pinv, N=N, A_inv=A_inv, W_inv=W_inv)
+
+
+_NO_MATRIX = np.zeros((0, 0))  # stands for Λ where the inverse does not use it
+
+
+@njit(cache=True)
+def gram_and_inverse(J: np.ndarray, damping: float) -> tuple[np.ndarray, np.ndarray]:
+    """(A, A⁻¹) for A = J Jᵀ + λ² I (λ = ``damping``): the Gram matrix of the unweighted
+    inverses (J⁺ = Jᵀ (J Jᵀ)⁻¹, damped least squares) and of the manipulability
+    w = √det(J Jᵀ) (:mod:`nsdrake.control.criteria.manipulability`). (m, m) each; A⁻¹ is
+    NaN where A is singular (det A = 0: J loses rank and λ = 0)."""
+    A = J @ np.ascontiguousarray(J.T)
+    if damping != 0.0:
+        for i in range(A.shape[0]):
+            A[i, i] += damping * damping
+    if np.linalg.det(A) == 0.0:
+        return A, np.full(A.shape, np.nan)
+    return A, np.ascontiguousarray(np.linalg.inv(A))
+
+
+@njit(cache=True)
+def inverse_at_state(inertia_weighted: bool, damping: float, H_inv_Jt, Lambda, J):
+    """(J^#, N, A⁻¹) of the module docstring's family: for the dynamically consistent
+    inverse (Eq. 13) A⁻¹ = Λ (given, with H⁻¹ Jᵀ), else A⁻¹ = (J Jᵀ + λ² I)⁻¹ and W = I."""
+    if inertia_weighted:
+        A_inv, W_inv_Jt = Lambda, H_inv_Jt
+    else:
+        A_inv = gram_and_inverse(J, damping)[1]
+        W_inv_Jt = np.ascontiguousarray(J.T)
+    J_pinv, N = right_inverse_and_projector(W_inv_Jt, A_inv, J)
+    return J_pinv, N, A_inv
 
 
 @njit(cache=True)

@@ -200,9 +200,9 @@ def test_selector_blends_from_the_old_ordering_after_a_switch():
         Criterion.joint_limits: crit.joint_limits.gain,
     }
     levels = {}
-    for c in Criterion:
-        packed = selector.GetInputPort(c.value).Eval(sel_context)  # a criterion system, or a constant
-        gradient, _, _, a = unpack_criterion(packed)
+    rows = selector.GetInputPort("criteria").Eval(sel_context).reshape(len(Criterion), -1)
+    for k, c in enumerate(Criterion):  # the criteria system's rows, in Criterion's order
+        gradient, _, _, a = unpack_criterion(rows[k])
         levels[c] = Level(gradient, gains[c], a if gains[c] else 0.0)
 
     def ordering(mode):
@@ -215,10 +215,10 @@ def test_selector_blends_from_the_old_ordering_after_a_switch():
 
 
 def test_obstacle_activation_fades_in_between_the_influence_distance_and_its_half():
-    """The obstacle level's weight (nsdrake.control.criteria.obstacle.activation): 0 beyond the
+    """The obstacle level's weight (nsdrake.control.smoothing.activation): 0 beyond the
     influence distance d_∞, 1 inside d_∞/2, the smoothstep in between. Replacing the
     fade by a constant, or by a hard switch at d_∞, fails."""
-    from nsdrake.control.criteria.obstacle import activation
+    from nsdrake.control.smoothing import activation
 
     d_inf = 0.1
     assert activation(0.2, d_inf) == 0.0
@@ -235,17 +235,18 @@ def test_obstacle_activation_fades_in_between_the_influence_distance_and_its_hal
 def test_controller_reports_the_obstacle_activation_it_uses():
     """The obstacle criterion's activation is the fade of its own d_min, and the controller's
     d_min port is that same distance."""
-    from nsdrake.control.criteria.obstacle import activation
+    from nsdrake.control.smoothing import activation
 
     scenario = load_scenario("fig3")
     controller, station, _ = fig3_controller(scenario)
     context = controller.CreateDefaultContext()
-    obstacle = controller.GetSubsystemByName("obstacle_criterion")
-    sub = obstacle.GetMyContextFromRoot(context)
+    criteria = controller.GetSubsystemByName("criteria")
+    sub = criteria.GetMyContextFromRoot(context)
     influence = scenario.desired_null_space.criteria.obstacle.influence_distance
     for q in (station.q0, station.q0 + [0.0, 0.3, 0.3, 0.3]):
         controller.GetInputPort("estimated_state").FixValue(context, np.concatenate([q, np.zeros(4)]))
-        _, _, d_min, got = unpack_criterion(obstacle.GetOutputPort("criterion").Eval(sub))
+        obstacle_row = criteria.GetOutputPort("criteria").Eval(sub).reshape(len(Criterion), -1)[0]
+        _, _, d_min, got = unpack_criterion(obstacle_row)
         assert got == activation(d_min, influence)
         assert controller.GetOutputPort("d_min").Eval(context)[0] == d_min
 
@@ -308,7 +309,7 @@ def test_controller_on_an_arm_nsdrake_did_not_build():
 
 
 def test_diagnostic_ports_are_the_criteria_they_name():
-    """Each criterion's one packed port [Φ; p; s; a] is split by a Demultiplexer into the
+    """The criteria system's packed rows [Φ; p; s; a] are split by a Demultiplexer into the
     controller's named ports: manipulability is w = √det(J Jᵀ), joint_torque_criterion is
     ‖Jᵀ F_d‖², d_min is the smallest link–plate distance, all at the measured state and
     against plain plant calls. A split out of order (value and switching quantity
@@ -340,7 +341,7 @@ def test_diagnostic_ports_are_the_criteria_they_name():
         for obstacle in sim_station.obstacle_geometries
     )
     assert abs(port("d_min") - want) < 1e-4
-    obstacle = controller.GetSubsystemByName("obstacle_criterion")
-    packed = obstacle.GetOutputPort("criterion").Eval(obstacle.GetMyContextFromRoot(context))
-    _, p, s, _ = unpack_criterion(packed)
+    criteria = controller.GetSubsystemByName("criteria")
+    packed = criteria.GetOutputPort("criteria").Eval(criteria.GetMyContextFromRoot(context))
+    _, p, s, _ = unpack_criterion(packed.reshape(len(Criterion), -1)[0])
     assert (s, p) == (port("d_min"), port("obstacle_potential"))

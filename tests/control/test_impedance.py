@@ -13,8 +13,11 @@ from drake_reference import plant_terms
 from models import random_states
 from pydrake.common.value import AbstractValue
 
+from nsdrake import ControllerConfig, ControllerModel
 from nsdrake.control.impedance import ImpedanceGains, command_acceleration, primary_torque, wrench_at_tool
+from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.systems import ImpedanceController
+from nsdrake.control.systems._values import TermsValue
 
 TOL = 1e-9
 
@@ -48,20 +51,31 @@ def test_command_acceleration_signs_follow_eq10():
     assert np.isclose(a[1], 1.5 * (10.0 - 5.0))
 
 
+def impedance_plan(arm, p_WSo) -> ControllerPlan:
+    """The plan of a controller on ``arm`` (Drake terms) with :func:`gains`' values."""
+    config = ControllerConfig()
+    imp = config.impedance
+    imp.K_p_tangent, imp.K_p_normal, imp.K_v_tangent, imp.K_v_normal, imp.K_f = 400.0, 100.0, 40.0, 200.0, 1.5
+    imp.max_task_inertia = np.inf
+    model = ControllerModel.from_plant(arm.plant, tool_frame="tool", task_axes=("x", "y"))
+    return ControllerPlan(model=model, config=config, normal=np.array([0.0, 1.0]), wrench_point=p_WSo)
+
+
 def test_impedance_system_matches_an_independent_rebuild(arm4):
     rng = np.random.default_rng(51 + 1000)
     p_WSo = np.array([0.1, 0.6, 0.0])
+    plan = impedance_plan(arm4, p_WSo)
+    system = ImpedanceController(plan=plan)
+    scratch = plan.create_scratch()
     for q, v in random_states(4, 10, seed=51):
-        T = terms_at(arm4, q, v, coriolis=False)
+        terms = plan.allocate_terms()
+        plan.terms(scratch, q, v, terms)  # stage 1, the system's input
         ref = plant_terms(arm4, q, v)
         x_d, xd_d, xdd_d = rng.standard_normal((3, 2))
         f_d = 8.0
         W_So = rng.standard_normal(6)
-        system = ImpedanceController(
-            gains=gains(), task_rows=np.array([0, 1]), p_WSo=p_WSo, gravity_compensation=True, model_terms=T
-        )
         context = system.CreateDefaultContext()
-        system.GetInputPort("robot_terms").FixValue(context, AbstractValue.Make(T))
+        system.GetInputPort("robot_terms").FixValue(context, AbstractValue.Make(TermsValue(terms)))
         for name, value in (
             ("x_d", x_d),
             ("xdot_d", xd_d),

@@ -12,8 +12,9 @@ import pytest
 from conftest import PANDA_Q0, panda_arm, panda_configurations
 
 from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
-from nsdrake.control.criteria.joint_limits import activation, joint_limits_criterion
+from nsdrake.control.criteria.joint_limits import joint_limits_criterion
 from nsdrake.control.priority import ORDERINGS, Criterion, Mode, SelectorLimits, select_mode
+from nsdrake.control.smoothing import activation
 from nsdrake.station.models import models_dir
 
 FD = 1e-7

@@ -105,9 +105,8 @@ def test_diagram_dot_names_every_system_after_its_role(short_run, tmp_path):
         "impedance_controller",
         "null_space_controller",
         "priority_selector",
-        "joint_torque_criterion",
-        "manipulability_criterion",
-        "obstacle_criterion",
+        "criteria",
+        "actuator_limits",
         "meshcat_visualizer",
         "contact_visualizer",
     }

@@ -47,28 +47,37 @@ def _dot(x, y):
 def _rotate(R, x, transpose):
     """R x, or Rᵀ x (3-vectors; no BLAS inside numba)."""
     out = np.empty(3)
+    _rotate_into(R, x, transpose, out)
+    return out
+
+
+@njit(cache=True)
+def _rotate_into(R, x, transpose, out):
+    """out = R x, or Rᵀ x (3-vectors)."""
     for i in range(3):
         if transpose:
             out[i] = R[0, i] * x[0] + R[1, i] * x[1] + R[2, i] * x[2]
         else:
             out[i] = R[i, 0] * x[0] + R[i, 1] * x[1] + R[i, 2] * x[2]
-    return out
 
 
 @njit(cache=True)
 def segments_sphere(A, B, C, R):
     """Rows [φ, ∇φ, S] (module docstring) for segments A[k]B[k] and the sphere (C, R)."""
     out = np.empty((A.shape[0], 7))
+    b, c, d = np.empty(3), np.empty(3), np.empty(3)  # reused: no allocation per segment
     for k in range(A.shape[0]):
-        b = B[k] - A[k]
-        c = C - A[k]
+        for i in range(3):
+            b[i], c[i] = B[k, i] - A[k, i], C[i] - A[k, i]
         bb = _dot(b, b)
         s = 0.0 if bb == 0.0 else min(1.0, max(0.0, _dot(c, b) / bb))
-        d = A[k] + s * b - C
+        for i in range(3):
+            out[k, 4 + i] = A[k, i] + s * b[i]
+            d[i] = out[k, 4 + i] - C[i]
         norm = math.sqrt(_dot(d, d))
         out[k, 0] = norm - R if norm - R > TOUCH else np.nan
-        out[k, 1:4] = d / norm if norm > 0.0 else d
-        out[k, 4:7] = A[k] + s * b
+        for i in range(3):
+            out[k, 1 + i] = d[i] / norm if norm > 0.0 else d[i]
     return out
 
 
@@ -77,46 +86,72 @@ def segments_box(A, B, R_WO, p_WO, h):
     """Rows [φ, ∇φ, S] (module docstring) for segments A[k]B[k] and the box of
     half-sizes h (3,) at pose (R_WO (3, 3), p_WO (3,))."""
     out = np.empty((A.shape[0], 7))
-    cuts = np.empty(8)
+    a, b, x, cuts = np.empty(3), np.empty(3), np.empty(3), np.empty(8)  # reused per segment
     for k in range(A.shape[0]):
-        a = _rotate(R_WO, A[k] - p_WO, True)  # the segment in the box frame: a + s b
-        b = _rotate(R_WO, B[k] - A[k], True)
-        cuts[0], cuts[1] = 0.0, 1.0
-        count = 2
         for i in range(3):
-            if b[i] != 0.0:
-                for edge in (h[i], -h[i]):
-                    s = (edge - a[i]) / b[i]
-                    if 0.0 < s < 1.0:
-                        cuts[count] = s
-                        count += 1
-        pieces = np.sort(cuts[:count])
-        best_f, best_s = np.inf, 0.0
-        for j in range(count - 1):
-            lo, hi = pieces[j], pieces[j + 1]
-            if hi <= lo:
-                continue
-            mid = 0.5 * (lo + hi)
-            qa = qb = qc = 0.0  # f(s) = qa s² + qb s + qc on this piece
-            for i in range(3):
-                u = a[i] + mid * b[i]
-                if u > h[i]:
-                    c = a[i] - h[i]
-                elif u < -h[i]:
-                    c = a[i] + h[i]
-                else:
-                    continue
-                qa += b[i] * b[i]
-                qb += 2.0 * c * b[i]
-                qc += c * c
-            s = lo if qa == 0.0 else min(hi, max(lo, -qb / (2.0 * qa)))
-            f = (qa * s + qb) * s + qc
-            if f < best_f:
-                best_f, best_s = f, s
-        u = a + best_s * b
-        diff = u - np.minimum(h, np.maximum(-h, u))
-        norm = math.sqrt(_dot(diff, diff))
+            x[i] = A[k, i] - p_WO[i]
+        _rotate_into(R_WO, x, True, a)  # the segment in the box frame: a + s b
+        for i in range(3):
+            x[i] = B[k, i] - A[k, i]
+        _rotate_into(R_WO, x, True, b)
+        best_s = _box_minimiser(a, b, h, cuts)
+        for i in range(3):
+            u = a[i] + best_s * b[i]
+            x[i] = u - min(h[i], max(-h[i], u))  # u minus its projection on the box
+        norm = math.sqrt(_dot(x, x))
         out[k, 0] = norm if norm > TOUCH else np.nan
-        out[k, 1:4] = _rotate(R_WO, diff / norm, False) if norm > 0.0 else diff
-        out[k, 4:7] = A[k] + best_s * (B[k] - A[k])
+        if norm > 0.0:
+            for i in range(3):
+                x[i] = x[i] / norm
+            _rotate_into(R_WO, x, False, b)
+            out[k, 1:4] = b
+        else:
+            out[k, 1:4] = x
+        for i in range(3):
+            out[k, 4 + i] = A[k, i] + best_s * (B[k, i] - A[k, i])
     return out
+
+
+@njit(cache=True)
+def _box_minimiser(a, b, h, cuts):
+    """The s ∈ [0, 1] minimising φ² along a + s b (box frame): φ² is one quadratic between
+    the breakpoints where a coordinate crosses ±h_i, minimised exactly on each piece.
+    ``cuts`` (8,) is scratch."""
+    cuts[0], cuts[1] = 0.0, 1.0
+    count = 2
+    for i in range(3):
+        if b[i] != 0.0:
+            for edge in (h[i], -h[i]):
+                s = (edge - a[i]) / b[i]
+                if 0.0 < s < 1.0:
+                    cuts[count] = s
+                    count += 1
+    for j in range(1, count):  # insertion sort of the few breakpoints
+        value, i = cuts[j], j - 1
+        while i >= 0 and cuts[i] > value:
+            cuts[i + 1] = cuts[i]
+            i -= 1
+        cuts[i + 1] = value
+    best_f, best_s = np.inf, 0.0
+    for j in range(count - 1):
+        lo, hi = cuts[j], cuts[j + 1]
+        if hi <= lo:
+            continue
+        mid = 0.5 * (lo + hi)
+        qa = qb = qc = 0.0  # f(s) = qa s² + qb s + qc on this piece
+        for i in range(3):
+            u = a[i] + mid * b[i]
+            if u > h[i]:
+                c = a[i] - h[i]
+            elif u < -h[i]:
+                c = a[i] + h[i]
+            else:
+                continue
+            qa += b[i] * b[i]
+            qb += 2.0 * c * b[i]
+            qc += c * c
+        s = lo if qa == 0.0 else min(hi, max(lo, -qb / (2.0 * qa)))
+        f = (qa * s + qb) * s + qc
+        if f < best_f:
+            best_f, best_s = f, s
+    return best_s

@@ -15,7 +15,8 @@ there, and the feed-forward of q̈_dⁿ would turn it into a torque step. Joints
 without limits (±∞, e.g. the paper's continuous joints) never contribute.
 
 The smallest margin min_i min(δ⁻_i, δ⁺_i) is what Fig. 1's extended tree compares
-with its limit q_lim (:mod:`nsdrake.control.priority`), and :func:`activation` weighs the
+with its limit q_lim (:mod:`nsdrake.control.priority`), and
+:func:`nsdrake.control.smoothing.activation` weighs the
 criterion's level in the projection of the levels below it.
 """
 
@@ -23,8 +24,6 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-from nsdrake.control.smoothing import smoothstep
 
 
 @njit(cache=True)
@@ -55,10 +54,3 @@ def joint_limits_criterion(
             p -= depth_upper**3 / 3.0
             Phi[i] -= depth_upper * depth_upper
     return p, Phi, margin
-
-
-def activation(margin: float, influence: float) -> float:
-    """Weight of the joint-limit level in the projection of the levels below it: 0 while
-    every joint is more than ρ from its limits, rising with a smoothstep to 1 once a
-    joint is within ρ/2 (as :func:`nsdrake.control.criteria.obstacle.activation`)."""
-    return smoothstep(2.0 * (influence - margin) / influence)

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from nsdrake.control.pseudo_inverse import gram_and_inverse
+
 
 @njit(cache=True)
 def manipulability(J: np.ndarray, dJ_dq: np.ndarray) -> tuple[float, np.ndarray]:
@@ -25,10 +27,10 @@ def manipulability(J: np.ndarray, dJ_dq: np.ndarray) -> tuple[float, np.ndarray]
         w [mᵐ per radᵐ, m the number of task axes: m² for the planar task] and
         Φ (n,) [w's unit per rad].
     """
-    A = J @ J.T
+    A, A_inv = gram_and_inverse(J, 0.0)
     w = np.sqrt(max(np.linalg.det(A), 0.0))
     n, m = dJ_dq.shape[0], J.shape[0]
     if w == 0.0:
         return 0.0, np.zeros(n)
-    J_pinv_T = np.linalg.inv(A) @ J  # (J⁺)ᵀ, (m, n)
+    J_pinv_T = A_inv @ J  # (J⁺)ᵀ, (m, n)
     return w, w * (np.ascontiguousarray(dJ_dq).reshape(n, m * J.shape[1]) @ J_pinv_T.ravel())

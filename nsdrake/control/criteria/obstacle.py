@@ -52,7 +52,6 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import Context
 
 from nsdrake.control.criteria.distance import _rotate, segments_box, segments_sphere
-from nsdrake.control.smoothing import smoothstep
 
 
 class DistancePair(NamedTuple):
@@ -63,13 +62,6 @@ class DistancePair(NamedTuple):
     d_distance_dq: np.ndarray | None  # (n,) ∂d/∂q [m/rad], None when not needed (out of range)
     link: str  # link geometry name
     obstacle: str  # obstacle geometry name
-
-
-def activation(d_min: float, influence: float) -> float:
-    """How much the obstacle level counts in the projection of the levels below it
-    (:mod:`nsdrake.control.priority`): 0 while every link is beyond the influence distance
-    d_∞, rising with a smoothstep to 1 once a link is at d_∞/2 or closer."""
-    return smoothstep(2.0 * (influence - d_min) / influence)
 
 
 def obstacle_potential(pairs: list[DistancePair], influence: float, n: int) -> tuple[float, np.ndarray]:

@@ -1,13 +1,10 @@
-"""The controller's Drake LeafSystems: thin shells that read ports, call the math of
-:mod:`nsdrake.control`, and write one packed output each."""
+"""The controller's Drake LeafSystems: thin shells that read ports, call one stage of
+:mod:`nsdrake.control.stages`, and write one packed output each; and the fused system
+that runs every stage in one."""
 
 from nsdrake.control.systems.actuator_limits import ActuatorLimitsSystem
-from nsdrake.control.systems.criteria import (
-    JointLimitsCriterionSystem,
-    JointTorqueCriterionSystem,
-    ManipulabilityCriterionSystem,
-    ObstacleCriterionSystem,
-)
+from nsdrake.control.systems.criteria import CriteriaSystem
+from nsdrake.control.systems.fused import FusedController
 from nsdrake.control.systems.impedance_controller import ImpedanceController
 from nsdrake.control.systems.null_space_controller import NullSpaceController
 from nsdrake.control.systems.priority_selector import PrioritySelector
@@ -16,12 +13,10 @@ from nsdrake.control.systems.self_motion import SelfMotionSweep
 
 __all__ = [
     "ActuatorLimitsSystem",
+    "CriteriaSystem",
+    "FusedController",
     "ImpedanceController",
-    "JointLimitsCriterionSystem",
-    "JointTorqueCriterionSystem",
-    "ManipulabilityCriterionSystem",
     "NullSpaceController",
-    "ObstacleCriterionSystem",
     "PrioritySelector",
     "RobotTermsSystem",
     "SelfMotionSweep",

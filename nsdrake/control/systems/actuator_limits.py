@@ -1,11 +1,12 @@
-"""ActuatorLimitsSystem: torque and torque-rate limits with the primary task first."""
+"""ActuatorLimitsSystem: stage 6, torque and torque-rate limits with the primary task first."""
 
 from __future__ import annotations
 
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from nsdrake.control.actuator_limits import limited_torque
+from nsdrake.control.plan import ControllerPlan
+from nsdrake.control.stages import actuator_limits_stage
 
 
 class ActuatorLimitsSystem(LeafSystem):
@@ -30,41 +31,30 @@ class ActuatorLimitsSystem(LeafSystem):
     q̇_dⁿ), for the rate limit.
     """
 
-    def __init__(self, *, torque_limits: np.ndarray, rate_limits: np.ndarray, period: float):
+    def __init__(self, *, plan: ControllerPlan):
         super().__init__()
-        n = len(torque_limits)
-        self._n = n
-        self._tau_max = np.asarray(torque_limits, dtype=float)
-        self._rate_max = np.asarray(rate_limits, dtype=float)
-        self._period = period
+        n = plan.n
+        self._n, self._plan = n, plan
         self._task = self.DeclareVectorInputPort("task_torque", n)
         self._tau0 = self.DeclareVectorInputPort("null_space_torque", n)
         self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))  # [τ, 1 if it exists]
         deps = {self.input_port_ticket(p.get_index()) for p in (self._task, self._tau0)}
         deps.add(self.discrete_state_ticket(self._previous))
         self._limited = self.DeclareVectorOutputPort("limited", n + 2, self._calc, prerequisites_of_calc=deps)
-        if np.isfinite(self._rate_max).any():
-            self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._store)
+        if np.isfinite(plan.rate_limits).any():  # else nothing narrows the window
+            self.DeclarePeriodicUnrestrictedUpdateEvent(plan.config.period, 0.0, self._store)
 
     def output_parts(self) -> dict[str, int]:
         """The parts of the ``limited`` port and their sizes, in order."""
         return {"generalized_force": self._n, "saturation": 2}
 
     def _calc(self, context, output):
-        previous = context.get_discrete_state(self._previous).value()
-        n = self._n
-        output.SetFromVector(
-            limited_torque(
-                self._task.Eval(context),
-                self._tau0.Eval(context),
-                self._tau_max,
-                self._rate_max,
-                self._period,
-                previous[:n],
-                previous[n] != 0.0,
-            )
-        )
+        p = self._plan
+        actuator_limits_stage(
+            p.plan, p.dims, self._task.Eval(context), self._tau0.Eval(context),
+            context.get_discrete_state(self._previous).CopyToVector(), output.get_mutable_value(),
+        )  # fmt: skip
 
     def _store(self, context, state):
-        tau = self._limited.Eval(context)[: self._n]
-        state.get_mutable_discrete_state(self._previous).SetFromVector(np.append(tau, 1.0))
+        sample = state.get_mutable_discrete_state(self._previous).get_mutable_value()
+        sample[: self._n], sample[self._n] = self._limited.Eval(context)[: self._n], 1.0

@@ -1,4 +1,4 @@
-"""ImpedanceController: the primary task law of Eqs. 6–8."""
+"""ImpedanceController: stage 4, the primary task law of Eqs. 6–8."""
 
 from __future__ import annotations
 
@@ -6,17 +6,9 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from nsdrake.control.dynamics import RobotTerms
-from nsdrake.control.impedance import (
-    ImpedanceGains,
-    command_acceleration_from_error,
-    pose_error,
-    position_task_torque,
-    primary_torque,
-    task_wrench,
-    wrench_at_tool,
-)
-from nsdrake.control.orientation import quaternion_to_rotation
+from nsdrake.control.plan import ControllerPlan
+from nsdrake.control.stages import task_torque_stage
+from nsdrake.control.systems._values import TermsValue
 
 
 class ImpedanceController(LeafSystem):
@@ -43,86 +35,50 @@ class ImpedanceController(LeafSystem):
 
     x_d, xdot_d, xddot_d have one entry per translational task axis (m_t) [m, m/s,
     m/s²]; f_d is the desired normal force [N]; ``measured_wrench`` is the sensor's
-    [M_So; f] (6) [N m, N] about its origin So (``p_WSo``; None: about the tool
-    point), world; F is its force on the translational task rows and its moment at
-    the tool point on the rotational ones. A task with rotational axes
-    (``rot_rows``) also takes the desired tool orientation ``R_d`` as a quaternion
-    [w, x, y, z] (4), and ω_d, ω̇_d (3 each) [rad/s, rad/s²], world frame; their
-    rows ``rot_rows`` enter the law with the orientation error log(R_d R_WTᵀ)
-    (:mod:`nsdrake.control.orientation`). ``generalized_force`` (n) [N m] is in velocity order.
+    [M_So; f] (6) [N m, N] about its origin So (the plan's wrench point; none: about
+    the tool point), world; F is its force on the translational task rows and its
+    moment at the tool point on the rotational ones. A task with rotational axes also
+    takes the desired tool orientation ``R_d`` as a quaternion [w, x, y, z] (4), and
+    ω_d, ω̇_d (3 each) [rad/s, rad/s²], world frame; their task rows enter the law with
+    the orientation error log(R_d R_WTᵀ) (:mod:`nsdrake.control.orientation`).
+    ``generalized_force`` (n) [N m] is in velocity order.
     """
 
-    def __init__(
-        self,
-        *,
-        gains: ImpedanceGains,
-        task_rows: np.ndarray,
-        p_WSo: np.ndarray | None,
-        gravity_compensation: bool,
-        model_terms: RobotTerms,
-        rot_rows: np.ndarray = (),
-    ):
+    def __init__(self, *, plan: ControllerPlan):
         super().__init__()
-        n = model_terms.n
-        self._gains = gains
-        self._p_WSo = None if p_WSo is None else np.asarray(p_WSo, dtype=float)
-        self._rows = np.asarray(task_rows, dtype=int)
-        self._rot_rows = np.asarray(rot_rows, dtype=int)
-        self._gravity = gravity_compensation
-        m = len(self._rows)
-        self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
-        self._x_d = self.DeclareVectorInputPort("x_d", m)
-        self._xdot_d = self.DeclareVectorInputPort("xdot_d", m)
-        self._xddot_d = self.DeclareVectorInputPort("xddot_d", m)
+        self._plan = plan
+        m_t = plan.m_t
+        self._terms = self.DeclareAbstractInputPort(
+            "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
+        )
+        self._x_d = self.DeclareVectorInputPort("x_d", m_t)
+        self._xdot_d = self.DeclareVectorInputPort("xdot_d", m_t)
+        self._xddot_d = self.DeclareVectorInputPort("xddot_d", m_t)
         self._f_d = self.DeclareVectorInputPort("f_d", 1)
         self._wrench = self.DeclareVectorInputPort("measured_wrench", 6)
-        inputs = (self._terms, self._x_d, self._xdot_d, self._xddot_d, self._f_d, self._wrench)
-        if len(self._rot_rows):
-            self._R_d = self.DeclareVectorInputPort("R_d", 4)
-            self._omega_d = self.DeclareVectorInputPort("omega_d", 3)
-            self._omegadot_d = self.DeclareVectorInputPort("omegadot_d", 3)
-            inputs += (self._R_d, self._omega_d, self._omegadot_d)
+        inputs = [self._terms, self._x_d, self._xdot_d, self._xddot_d, self._f_d, self._wrench]
+        self._rotation = None
+        if plan.m_r:
+            self._rotation = [
+                self.DeclareVectorInputPort(name, size)
+                for name, size in (("R_d", 4), ("omega_d", 3), ("omegadot_d", 3))
+            ]
+            inputs += self._rotation
+        self._no_rotation = (np.zeros(4), np.zeros(3), np.zeros(3))
         self.DeclareVectorOutputPort(
             "generalized_force",
-            n,
+            plan.n,
             self._calc,
             prerequisites_of_calc={self.input_port_ticket(p.get_index()) for p in inputs},
         )
 
     def _calc(self, context, output):
-        terms = self._terms.Eval(context)
-        W = self._wrench.Eval(context)
-        W_T = W if self._p_WSo is None else wrench_at_tool(W, self._p_WSo, terms.p_WT)
-        if len(self._rot_rows):
-            output.SetFromVector(self._pose_torque(context, terms, W_T))
-            return
-        tau = position_task_torque(
-            terms,
-            self._x_d.Eval(context),
-            self._xdot_d.Eval(context),
-            self._xddot_d.Eval(context),
-            self._f_d.Eval(context)[0],
-            W_T,
-            self._rows,
-            self._gains,
-            self._gravity,
-        )
-        output.SetFromVector(tau)
-
-    def _pose_torque(self, context, terms, W_T):
-        rot = self._rot_rows
-        error = pose_error(
-            terms.x, self._x_d.Eval(context), terms.R_WT, quaternion_to_rotation(self._R_d.Eval(context)), rot
-        )
-        xdot_d = np.concatenate([self._xdot_d.Eval(context), self._omega_d.Eval(context)[rot]])
-        xddot_d = np.concatenate([self._xddot_d.Eval(context), self._omegadot_d.Eval(context)[rot]])
-        xddot_c = command_acceleration_from_error(
-            error,
-            terms.xdot,
-            xdot_d,
-            xddot_d,
-            task_wrench(W_T, self._rows, rot),
-            self._f_d.Eval(context)[0],
-            self._gains,
-        )
-        return primary_torque(terms, xddot_c, W_T, self._gravity)
+        p = self._plan
+        rotation = self._no_rotation
+        if self._rotation is not None:
+            rotation = [port.Eval(context) for port in self._rotation]
+        task_torque_stage(
+            self._terms.Eval(context).buffer, p.plan, p.index, p.dims, self._wrench.Eval(context),
+            self._x_d.Eval(context), self._xdot_d.Eval(context), self._xddot_d.Eval(context),
+            self._f_d.Eval(context)[0], *rotation, output.get_mutable_value(),
+        )  # fmt: skip

@@ -1,4 +1,4 @@
-"""NullSpaceController: the null-space velocity controller of Eq. 21."""
+"""NullSpaceController: stage 5, the null-space velocity controller of Eq. 21."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from nsdrake.control.dynamics import RobotTerms
-from nsdrake.control.null_space import null_space_torque
-from nsdrake.control.pseudo_inverse import GeneralizedInverse
+from nsdrake.control.plan import ControllerPlan
+from nsdrake.control.stages import null_space_stage
+from nsdrake.control.systems._values import TermsValue
 
 
 class NullSpaceController(LeafSystem):
@@ -34,34 +34,20 @@ class NullSpaceController(LeafSystem):
     once per tick (the controller splits it with a C++ ``Demultiplexer``).
     """
 
-    def __init__(
-        self,
-        *,
-        inverse: GeneralizedInverse,
-        K_n: float,
-        period: float,
-        task_velocity_compensation: bool,
-        coriolis_compensation: bool,
-        acceleration_feedforward: bool,
-        model_terms: RobotTerms,
-    ):
+    def __init__(self, *, plan: ControllerPlan):
         super().__init__()
-        n = model_terms.n
-        self._n = n
-        self._inverse = inverse
-        self._K_n = K_n
-        self._period = period
-        self._task_velocity_compensation = task_velocity_compensation
-        self._coriolis_compensation = coriolis_compensation
-        self._feedforward = acceleration_feedforward
-        self._terms = self.DeclareAbstractInputPort("robot_terms", AbstractValue.Make(model_terms))
+        n = plan.n
+        self._n, self._plan = n, plan
+        self._terms = self.DeclareAbstractInputPort(
+            "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
+        )
         self._qdot_ns_d = self.DeclareVectorInputPort("desired_null_space_velocity", n)
         # [previous q̇_dⁿ (n), 1 if that sample exists]
         self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))
         # An unrestricted update, so that it runs alongside the discrete plant's own
         # step (Drake advances a discrete MultibodyPlant in an unrestricted update,
         # before any discrete update) and stores the q̇_dⁿ the torque was computed from.
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._store)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(plan.config.period, 0.0, self._store)
         deps = {self.input_port_ticket(p.get_index()) for p in (self._terms, self._qdot_ns_d)}
         deps.add(self.discrete_state_ticket(self._previous))
         self.DeclareVectorOutputPort("null_space", 2 * n + 1, self._calc, prerequisites_of_calc=deps)
@@ -70,25 +56,13 @@ class NullSpaceController(LeafSystem):
         """The parts of the ``null_space`` port and their sizes, in order."""
         return {"generalized_force": self._n, "null_space_velocity_error": self._n, "lyapunov": 1}
 
-    def desired_acceleration(self, context) -> np.ndarray:
-        """q̈_dⁿ: (q̇_dⁿ(t) − q̇_dⁿ(t − T)) / T, or zero without a previous sample or feedforward."""
-        previous = context.get_discrete_state(self._previous).value()
-        if not self._feedforward or previous[self._n] == 0.0:
-            return np.zeros(self._n)
-        return (self._qdot_ns_d.Eval(context) - previous[: self._n]) / self._period
-
     def _calc(self, context, output):
-        result = null_space_torque(
-            self._terms.Eval(context),
-            self._inverse,
-            self._qdot_ns_d.Eval(context),
-            self.desired_acceleration(context),
-            self._K_n,
-            self._task_velocity_compensation,
-            self._coriolis_compensation,
-        )
-        output.SetFromVector(np.concatenate([result.tau0, result.e_n, [result.nu]]))
+        p = self._plan
+        null_space_stage(
+            self._terms.Eval(context).buffer, p.plan, p.dims, self._qdot_ns_d.Eval(context),
+            context.get_discrete_state(self._previous).CopyToVector(), output.get_mutable_value(),
+        )  # fmt: skip
 
     def _store(self, context, state):
-        sample = np.append(self._qdot_ns_d.Eval(context), 1.0)
-        state.get_mutable_discrete_state(self._previous).SetFromVector(sample)
+        sample = state.get_mutable_discrete_state(self._previous).get_mutable_value()
+        sample[: self._n], sample[self._n] = self._qdot_ns_d.Eval(context), 1.0

@@ -1,0 +1,511 @@
+"""The controller's tick: one ordered sequence of stages over preallocated arrays.
+
+This module is the one home of the stages and their order. Each stage is a compiled
+function that reads the flat arrays of :mod:`nsdrake.control.layout` (the plan's
+constants, the model terms, the criteria, the discrete state) and writes its output
+into an array it is given; the math inside each stage is the math of its own module,
+called, never restated:
+
+1. **model terms** (:func:`pinocchio_terms_stage`, or the Drake fallback then
+   :func:`complete_terms`): H, H⁻¹, C q̇, g, C, J, ∂J/∂q, J̇ q̇, ẋ, Λ and the generalised
+   inverse J^#, N (:mod:`dynamics`, :mod:`pseudo_inverse`), read in place from
+   Pinocchio's arrays, with the joint poses the obstacle criterion needs;
+2. **criteria** (:func:`criteria_stage`): [Φ; p; s; a] of the obstacle (Eq. 31, closed
+   forms over the link poses of stage 1), joint-torque (Eqs. 32–33), manipulability and
+   joint-limit criteria (:mod:`criteria`);
+3. **desired null-space velocity** (:func:`selection_stage`): Fig. 1's priority selector
+   on the stored switch state (:mod:`priority`), or the prescribed sweep (:mod:`self_motion`);
+4. **task torque** (:func:`task_torque_stage`): τ − τ₀ of Eqs. 6–8 (:mod:`impedance`);
+5. **null-space torque** (:func:`null_space_stage`): τ₀ of Eq. 21 (:mod:`null_space`), with
+   q̈_dⁿ the backward difference from the stored previous q̇_dⁿ;
+6. **actuator limits** (:func:`actuator_limits_stage`): τ = τ_task + s τ₀ within the
+   torque and rate windows (:mod:`actuator_limits`), from the stored previous τ.
+
+Stages 3–6 run in that order in :func:`tick_back`; 1–2 depend on the measured state
+alone and run in :func:`tick_front`.
+
+**The discrete state** is three arrays, never hidden in a stage: the selector's switch
+state [mode, mode blended from, switch time], the previous q̇_dⁿ [q̇_dⁿ (n); 1 if it
+exists] and the previous τ [τ (n); 1 if it exists]. (The reference's contact state is
+the reference's, outside the controller.)
+
+**Event semantics** (Drake's, which all three ways of running the stages reproduce).
+Drake advances a discrete MultibodyPlant in an *unrestricted* update, and at one instant
+every unrestricted update runs before every discrete update. So at t_k, with the state
+x_k the plant reached at t_k:
+
+- the output τ_k = tick(t_k, x_k) is computed once and drives the plant's step to x_{k+1};
+- the controller's own unrestricted update, from the same context, stores the q̇_dⁿ and
+  the τ just output (:func:`store_stage`), as the values used over the step;
+- then, *still at time t_k but from the post-step state x_{k+1}*, the selector's discrete
+  update selects a mode from the criteria at x_{k+1} and commits it with switch time t_k
+  (:func:`switch_update_stage`);
+- at t_{k+1}, the output again evaluates Fig. 1's tree on x_{k+1} from the committed
+  switch state (a tentative switch at t_{k+1}, not stored).
+
+A plain loop that receives x_{k+1} and calls the step once reproduces this exactly:
+:func:`step_back` first runs the pending discrete update with x_{k+1} at time t_k, then the
+output stages at t_{k+1}, then the stores. The criteria at x_{k+1} serve both, so they
+are computed once (in the Diagram, a cache entry that depends on the state alone).
+This holds as long as the state the step receives at t_{k+1} is the one Drake's discrete
+update at t_k sees: one plant step per control period and no sampled rung between the
+plant and the controller. (A plant stepping finer than the controller, the realism
+ladder's physics rung, has its discrete update see the state one *plant* step after t_k;
+the named systems and the fused system, which keep Drake's events, follow it exactly.)
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from nsdrake.control.actuator_limits import limited_torque
+from nsdrake.control.criteria.distance import segments_box, segments_sphere
+from nsdrake.control.criteria.joint_limits import joint_limits_criterion
+from nsdrake.control.criteria.joint_torque import joint_torque_criterion
+from nsdrake.control.criteria.manipulability import manipulability
+from nsdrake.control.dynamics import _cross, _jacobian_partials, derived_terms, task_inertia
+from nsdrake.control.impedance import _position_task_torque, pose_task_torque, wrench_at_tool
+from nsdrake.control.layout import (
+    index_views,
+    plan_views,
+    terms_views,
+    tick_views,
+)
+from nsdrake.control.model import symmetric_and_inverse
+from nsdrake.control.null_space import _null_space_law
+from nsdrake.control.orientation import quaternion_to_rotation
+from nsdrake.control.priority import (
+    INITIAL_SWITCH_STATE,
+    blend_weight_code,
+    select_mode_code,
+    selected_velocity,
+    switch_state_update,
+)
+from nsdrake.control.pseudo_inverse import inverse_at_state
+from nsdrake.control.self_motion import sweep_amplitude, sweep_velocity
+from nsdrake.control.smoothing import activation
+
+OBSTACLES_NONE, OBSTACLES_CLOSED_FORM, OBSTACLES_QUERIED = 0, 1, 2  # PlanView.obstacle_mode
+
+# Each stage has a compiled entry point over the flat arrays (for a caller outside the
+# compiled code: the named systems, the plan) and a body over their views (T: terms,
+# P: plan, ix: index, :mod:`nsdrake.control.layout`), which the composite ticks call so
+# that the views are made once per call.
+
+
+# ---------------------------------------------------------------- 1. model terms
+
+
+@njit(cache=True)
+def pinocchio_terms_stage(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms):
+    """Stage 1 from Pinocchio's arrays, read in place after ``computeAllTerms`` (M, nle, g,
+    the world joint Jacobians J_pin, the joint poses X_pin (nj, 3, 4)),
+    ``computeCoriolisMatrix`` (C, when the plan wants it) and ``updateFramePlacement``
+    (the tool's R_tool, p_tool), all in Pinocchio's joint order; q, v in the model's."""
+    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
+    _pinocchio_terms(T, P, ix, M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v)
+    _complete_terms(T, P, ix)
+
+
+@njit(cache=True)
+def tick_front(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms, criteria) -> bool:
+    """Stages 1 and 2 in one call (:func:`pinocchio_terms_stage`, :func:`criteria_stage`)."""
+    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
+    _pinocchio_terms(T, P, ix, M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v)
+    _complete_terms(T, P, ix)
+    return _criteria(T, P, ix, criteria)
+
+
+@njit(cache=True)
+def _pinocchio_terms(T, P, ix, M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v):
+    n, o = T.q.shape[0], ix.order
+    H, H_inv = symmetric_and_inverse(M)
+    T.q[:], T.v[:] = q, v
+    for i in range(n):
+        T.Cv[i], T.g[i] = nle[o[i]] - g[o[i]], g[o[i]]
+        for j in range(n):
+            T.H[i, j], T.H_inv[i, j] = H[o[i], o[j]], H_inv[o[i], o[j]]
+            if P.coriolis:
+                T.C[i, j] = C[o[i], o[j]]
+        T.J_joints[:, i] = J_pin[:, o[i]]
+    T.p_WT[:], T.R_WT[:] = p_tool, R_tool
+    T.X_joints[:] = X_pin
+    _tool_jacobian(T.J_joints, p_tool, ix.tool_support, T.J_spatial)
+
+
+@njit(cache=True)
+def _tool_jacobian(J_joints, p, support, out):
+    """[J_w; J_v] of the tool point p from the world joint Jacobians [v_O; ω] (velocity
+    of the point at the world origin): J_v = v_O − p × ω on the tool's supporting joints,
+    as Pinocchio's LOCAL_WORLD_ALIGNED frame Jacobian. (6, n), Drake's row order."""
+    out[:] = 0.0
+    for j in range(J_joints.shape[1]):
+        if support[j]:
+            w0, w1, w2 = J_joints[3, j], J_joints[4, j], J_joints[5, j]
+            c0, c1, c2 = _cross(p[0], p[1], p[2], w0, w1, w2)
+            out[0, j], out[1, j], out[2, j] = w0, w1, w2
+            out[3, j], out[4, j], out[5, j] = J_joints[0, j] - c0, J_joints[1, j] - c1, J_joints[2, j] - c2
+
+
+@njit(cache=True)
+def complete_terms(terms, plan, index, dims):
+    """Stage 1, the part common to both model libraries: from q, v, H, H⁻¹, J_spatial and
+    p_WT, the task rows J, ∂J/∂q, J̇, J̇ q̇, ẋ, H⁻¹ Jᵀ, Λ (capped, :func:`task_inertia`),
+    the generalised inverse J^#, N, A⁻¹ and x."""
+    _complete_terms(terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims))
+
+
+@njit(cache=True)
+def _complete_terms(T, P, ix):
+    for r in range(ix.spatial_rows.shape[0]):
+        T.J[r] = T.J_spatial[ix.spatial_rows[r]]
+    T.dJ_dq[:] = _jacobian_partials(T.J_spatial[:3], T.J_spatial[3:], ix.own, ix.other, ix.rows, ix.rot_rows)
+    Jdot, Jdot_v, xdot, H_inv_Jt = derived_terms(T.H_inv, T.J, T.dJ_dq, T.v)
+    T.Jdot[:], T.Jdot_v[:], T.xdot[:], T.H_inv_Jt[:] = Jdot, Jdot_v, xdot, H_inv_Jt
+    T.Lambda[:] = task_inertia(T.J @ T.H_inv_Jt, P.inertia_floor)
+    J_pinv, N, A_inv = inverse_at_state(P.inertia_weighted, P.damping, T.H_inv_Jt, T.Lambda, T.J)
+    T.J_pinv[:], T.N[:], T.A_inv[:] = J_pinv, N, A_inv
+    for r in range(ix.rows.shape[0]):
+        T.x[r] = T.p_WT[ix.rows[r]]
+
+
+# ---------------------------------------------------------------- 2. criteria
+
+
+@njit(cache=True)
+def pack_criterion(row, Phi, p, s, a):
+    """row = [Φ; p; s; a]: gradient, value, the quantity Fig. 1's tree compares, activation."""
+    n = Phi.shape[0]
+    row[:n] = Phi
+    row[n], row[n + 1], row[n + 2] = p, s, a
+
+
+@njit(cache=True)
+def criteria_stage(terms, plan, index, dims, out) -> bool:
+    """Stage 2: out (4, n + 3), one [Φ; p; s; a] row per criterion in Criterion's order
+    (obstacle, joint torque, manipulability, joint limits). Returns True when the obstacle
+    row needs Drake's queries (a link touches an obstacle, or a shape without closed form:
+    the caller computes that row, :meth:`nsdrake.control.plan.ControllerPlan.criteria`)."""
+    return _criteria(terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims), out)
+
+
+@njit(cache=True)
+def _criteria(T, P, ix, out) -> bool:
+    n = T.q.shape[0]
+    queried = P.obstacle_mode == OBSTACLES_QUERIED
+    pack_criterion(out[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
+    if P.obstacle_mode == OBSTACLES_CLOSED_FORM:
+        queried = _obstacle_row(T, P, ix, out[0])
+    p, Phi = joint_torque_criterion(T.J, T.dJ_dq, P.F_d)
+    pack_criterion(out[1], Phi, p, p, 1.0)
+    w, Phi = manipulability(T.J, T.dJ_dq)
+    pack_criterion(out[2], Phi, w, w, 1.0)
+    if P.has_limits:
+        p, Phi, margin = joint_limits_criterion(T.q, P.lower, P.upper, P.limits_influence)
+        pack_criterion(out[3], Phi, p, margin, activation(margin, P.limits_influence))
+    else:
+        pack_criterion(out[3], np.zeros(n), 0.0, np.inf, 0.0)
+    return queried
+
+
+@njit(cache=True)
+def link_segments(X_joints, links, link_joint):
+    """(A, B): each link capsule's axis segment, world (k, 3) each, from the pose of its
+    joint and the axis centre and direction in that joint's frame."""
+    k = links.shape[0]
+    A, B = np.empty((k, 3)), np.empty((k, 3))
+    for i in range(k):
+        X = X_joints[link_joint[i]]
+        for r in range(3):
+            centre = X[r, 0] * links[i, 0] + X[r, 1] * links[i, 1] + X[r, 2] * links[i, 2] + X[r, 3]
+            axis = X[r, 0] * links[i, 3] + X[r, 1] * links[i, 4] + X[r, 2] * links[i, 5]
+            A[i, r], B[i, r] = centre - links[i, 6] * axis, centre + links[i, 6] * axis
+    return A, B
+
+
+@njit(cache=True)
+def obstacle_rows(A, B, obstacles):
+    """(o, k, 7): rows [φ, ∇φ, S] of :mod:`nsdrake.control.criteria.distance` per obstacle."""
+    out = np.empty((obstacles.shape[0], A.shape[0], 7))
+    for j in range(obstacles.shape[0]):
+        ob = obstacles[j]
+        if ob[0] == 0.0:
+            out[j] = segments_box(A, B, ob[1:10].copy().reshape((3, 3)), ob[10:13].copy(), ob[13:16].copy())
+        else:
+            out[j] = segments_sphere(A, B, ob[10:13].copy(), ob[13])
+    return out
+
+
+@njit(cache=True)
+def point_gradient(normal, S, J_joints, support):
+    """∂d/∂q = n̂ᵀ J_S: the distance's gradient through the translational Jacobian of the
+    link point S (world), J_S = v_O + ω × S on the joints that move the link. (n,)."""
+    n = J_joints.shape[1]
+    out = np.zeros(n)
+    for j in range(n):
+        if support[j] != 0.0:
+            c0, c1, c2 = _cross(J_joints[3, j], J_joints[4, j], J_joints[5, j], S[0], S[1], S[2])
+            out[j] = (
+                normal[0] * (J_joints[0, j] + c0)
+                + normal[1] * (J_joints[1, j] + c1)
+                + normal[2] * (J_joints[2, j] + c2)
+            )
+    return out
+
+
+@njit(cache=True)
+def _obstacle_row(T, P, ix, out) -> bool:
+    """The obstacle criterion's [Φ; p; d_min; a] (Eq. 31, :mod:`nsdrake.control.criteria.obstacle`)
+    from the closed-form distances of every link–obstacle pair, link by link; True (and out
+    unchanged) if a pair touches (no unique normal: the caller asks Drake)."""
+    n, d_inf = T.q.shape[0], P.obstacle_influence
+    A, B = link_segments(T.X_joints, P.links, ix.link_joint)
+    rows = obstacle_rows(A, B, P.obstacles)
+    p, Phi, d_min = 0.0, np.zeros(n), np.inf
+    for i in range(rows.shape[1]):
+        for j in range(rows.shape[0]):
+            row = rows[j, i]
+            if math.isnan(row[0]):
+                return True
+            d = row[0] - P.links[i, 7]
+            d_min = min(d_min, d)
+            depth = d_inf - d
+            if depth > 0.0:
+                p -= depth**3 / 3.0
+                Phi += depth * depth * point_gradient(row[1:4], row[4:7], T.J_joints, P.link_support[i])
+    pack_criterion(out, Phi, p, d_min, activation(d_min, d_inf))
+    return False
+
+
+# ---------------------------------------------------------------- 3. desired null-space velocity
+
+
+@njit(cache=True)
+def _select(P, criteria, switch, t, out):
+    """out = the switch state after Fig. 1's tree on the criteria's switching quantities
+    (d_min, w, the joint-limit margin), selected at time t (unchanged when no criterion)."""
+    if not P.active:
+        out[:] = switch
+        return
+    s = criteria[:, criteria.shape[1] - 2]
+    switch_state_update(switch, t, select_mode_code(s[0], s[2], s[3], int(switch[0]), P.selector_limits), out)
+
+
+@njit(cache=True)
+def selection_stage(terms, plan, index, dims, criteria, switch, t, out):
+    """Stage 3, the selector: out = [q̇_dⁿ (n); mode; speed scale] from the criteria, the
+    tentative switch at time t on the stored ``switch`` state, the blend after a switch and
+    the joint-speed scaling (:func:`nsdrake.control.priority.selected_velocity`)."""
+    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
+    _selection(T, P, ix, criteria, switch, t, out)
+
+
+@njit(cache=True)
+def _selection(T, P, ix, criteria, switch, t, out):
+    n = T.q.shape[0]
+    state = np.empty(3)
+    _select(P, criteria, switch, t, state)
+    mode, previous = int(state[0]), int(state[1])
+    out[:n] = 0.0
+    out[n], out[n + 1] = state[0], 1.0
+    if not P.active or mode == 0:
+        return
+    if P.inertia_weighted:
+        W, W_inv = T.H, T.H_inv
+    else:
+        W = W_inv = np.eye(n)
+    activations = np.where(P.gains != 0.0, criteria[:, n + 2], 0.0)  # a level without gain: none
+    qdot, scale = selected_velocity(
+        T.N, W, W_inv, np.ascontiguousarray(criteria[:, :n]), P.gains, activations,
+        ix.orderings[mode, : ix.counts[mode]], ix.orderings[previous, : ix.counts[previous]],
+        blend_weight_code(state[2], t, P.blend_time), P.rotate, T.J_pinv @ T.xdot, P.command_limits,
+    )  # fmt: skip
+    out[:n], out[n + 1] = qdot, scale
+
+
+@njit(cache=True)
+def sweep_stage(terms, plan, dims, t, out):
+    """Stage 3 with ``source: sweep``: out = q̇_dⁿ = a(t) N d / ‖N d‖ (:mod:`nsdrake.control.self_motion`)."""
+    _sweep(terms_views(terms, dims), plan_views(plan, dims), t, out)
+
+
+@njit(cache=True)
+def _sweep(T, P, t, out):
+    w = P.sweep_wave
+    out[:] = sweep_velocity(T.N, P.direction, sweep_amplitude(t, w[0], w[1], w[2], w[3]))
+
+
+# ---------------------------------------------------------------- 4.–6. torques
+
+
+@njit(cache=True)
+def task_torque_stage(
+    terms, plan, index, dims, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out
+):
+    """Stage 4: out = τ − τ₀ (Eqs. 6–8) with the measured wrench moved to the tool point;
+    R_d (quaternion [w, x, y, z]), ω_d, ω̇_d enter only with rotational task axes."""
+    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
+    _task_torque(T, P, ix, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out)
+
+
+@njit(cache=True)
+def _task_torque(T, P, ix, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out):
+    W_T = wrench_at_tool(wrench, P.p_WSo, T.p_WT) if P.has_p_WSo else wrench
+    if ix.rot_rows.shape[0] == 0:
+        out[:] = _position_task_torque(
+            T.x, T.xdot, x_d, xdot_d, xddot_d, f_d, W_T, ix.rows, P.K_p, P.K_v, P.K_f, P.normal,
+            T.J, T.Lambda, T.Jdot_v, T.J_spatial, T.Cv, T.g, P.gravity,
+        )  # fmt: skip
+    else:
+        out[:] = pose_task_torque(
+            T.x, T.xdot, T.R_WT, x_d, xdot_d, xddot_d, f_d, quaternion_to_rotation(R_d), omega_d,
+            omegadot_d, W_T, ix.rows, ix.rot_rows, P.K_p, P.K_v, P.K_f, P.normal, T.J, T.Lambda,
+            T.Jdot_v, T.J_spatial, T.Cv, T.g, P.gravity,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def null_space_stage(terms, plan, dims, qdot_ns, previous, out):
+    """Stage 5: out = [τ₀ (n); eⁿ (n); ν] (Eqs. 21, 14, 23), q̈_dⁿ the backward difference of
+    q̇_dⁿ from ``previous`` = [q̇_dⁿ (n); 1 if stored] over one period (0 without it)."""
+    _null_space(terms_views(terms, dims), plan_views(plan, dims), qdot_ns, previous, out)
+
+
+@njit(cache=True)
+def _null_space(T, P, qdot_ns, previous, out):
+    n = T.q.shape[0]
+    qddot_ns = np.zeros(n)
+    if P.feedforward and previous[n] != 0.0:
+        qddot_ns = (qdot_ns - previous[:n]) / P.period
+    W_inv = T.H_inv if P.inertia_weighted else np.eye(n)
+    tau0, e_n, nu = _null_space_law(
+        T.H, T.H_inv, T.C, T.J, T.Jdot, T.v, T.xdot, T.Jdot_v, T.J_pinv, T.N, T.A_inv, W_inv,
+        qdot_ns, qddot_ns, P.K_n, P.task_velocity_compensation, P.coriolis_compensation,
+        P.inertia_weighted,
+    )  # fmt: skip
+    out[:n], out[n : 2 * n], out[2 * n] = tau0, e_n, nu
+
+
+@njit(cache=True)
+def actuator_limits_stage(plan, dims, tau_task, tau0, previous, out):
+    """Stage 6: out = [τ (n); s; clipped] within the torque window, narrowed by the rate
+    limit around ``previous`` = [τ (n); 1 if stored]."""
+    _actuator_limits(plan_views(plan, dims), tau_task, tau0, previous, out)
+
+
+@njit(cache=True)
+def _actuator_limits(P, tau_task, tau0, previous, out):
+    n = tau_task.shape[0]
+    out[:] = limited_torque(tau_task, tau0, P.tau_max, P.rate_max, P.period, previous[:n], previous[n] != 0.0)
+
+
+# ---------------------------------------------------------------- discrete updates
+
+
+def initial_state(n: int) -> np.ndarray:
+    """The discrete state before the first tick (:func:`state_parts`): the selector in mode 0
+    (the first selection blends in from rest), no previous q̇_dⁿ, no previous τ."""
+    return np.concatenate([INITIAL_SWITCH_STATE, np.zeros(2 * n + 2)])
+
+
+@njit(cache=True)
+def state_parts(state, n):
+    """(switch (3), previous q̇_dⁿ (n + 1), previous τ (n + 1)): the parts of the discrete
+    state [switch; previous q̇_dⁿ; previous τ] (2n + 5), as views."""
+    return state[:3], state[3 : n + 4], state[n + 4 : 2 * n + 5]
+
+
+@njit(cache=True)
+def store_stage(tick, dims, state):
+    """The unrestricted update at t_k: the q̇_dⁿ and the τ output at t_k, stored into the
+    discrete ``state`` as the values used over the step."""
+    out = tick_views(tick, dims)
+    _, previous_qdot, previous_tau = state_parts(state, out.qdot.shape[0])
+    _store(out, previous_qdot, previous_tau)
+
+
+@njit(cache=True)
+def _store(out, previous_qdot, previous_tau):
+    n = out.qdot.shape[0]
+    previous_qdot[:n], previous_qdot[n] = out.qdot, 1.0
+    previous_tau[:n], previous_tau[n] = out.limited[:n], 1.0
+
+
+@njit(cache=True)
+def switch_update_stage(plan, dims, criteria, state, t):
+    """The selector's discrete update at t_k: the switch state (``state[:3]``) committed, in
+    place, from the criteria at the post-step state, with switch time t_k."""
+    _commit_switch(plan_views(plan, dims), criteria, state[:3], t)
+
+
+@njit(cache=True)
+def _commit_switch(P, criteria, switch, t):
+    committed = np.empty(3)
+    _select(P, criteria, switch, t, committed)
+    switch[:] = committed
+
+
+# ---------------------------------------------------------------- the tick
+
+
+@njit(cache=True)
+def commands_views(commands, m_t, m_r):
+    """The inputs of stage 4 from one packed vector [wrench (6); x_d, ẋ_d, ẍ_d (m_t each);
+    f_d; with rotational axes R_d (4), ω_d (3), ω̇_d (3)]."""
+    c, o = commands, 7 + 3 * m_t
+    x_d, xdot_d, xddot_d = c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t]
+    if m_r == 0:
+        return c[:6], x_d, xdot_d, xddot_d, c[o - 1], np.zeros(4), np.zeros(3), np.zeros(3)
+    return c[:6], x_d, xdot_d, xddot_d, c[o - 1], c[o : o + 4], c[o + 4 : o + 7], c[o + 7 : o + 10]
+
+
+@njit(cache=True)
+def tick_back(terms, plan, index, dims, criteria, state, t, commands, tick):
+    """Stages 3–6 in their order, at time t, on the discrete ``state`` (:func:`state_parts`),
+    into ``tick`` (:func:`nsdrake.control.layout.tick_views`)."""
+    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
+    _tick_back(T, P, ix, criteria, state, t, commands, tick_views(tick, dims))
+
+
+@njit(cache=True)
+def _tick_back(T, P, ix, criteria, state, t, commands, out):
+    n = T.q.shape[0]
+    switch, previous_qdot, previous_tau = state_parts(state, n)
+    out.criteria[:] = criteria
+    out.x[:] = T.x
+    _selection(T, P, ix, criteria, switch, t, out.selection)
+    if P.sweep:
+        _sweep(T, P, t, out.qdot)
+    else:
+        out.qdot[:] = out.selection[:n]
+    wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d = commands_views(
+        commands, ix.rows.shape[0], ix.rot_rows.shape[0]
+    )
+    _task_torque(T, P, ix, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out.task)
+    _null_space(T, P, out.qdot, previous_qdot, out.null_space)
+    _actuator_limits(P, out.task, out.null_space[:n], previous_tau, out.limited)
+
+
+@njit(cache=True)
+def step_back(terms, plan, index, dims, criteria, state, t, pending, commands, tick):
+    """A plain loop's tick after stages 1–2 (module docstring): the pending discrete update
+    of the previous tick (at its time ``state[-1]``, from these criteria) when ``pending``,
+    stages 3–6 at time t, then the stores. ``state`` = [the discrete state (2n + 5,
+    :func:`state_parts`); the time of the previous tick]."""
+    T, P, ix, out = (
+        terms_views(terms, dims),
+        plan_views(plan, dims),
+        index_views(index, dims),
+        tick_views(tick, dims),
+    )
+    n = T.q.shape[0]
+    discrete = state[: 2 * n + 5]
+    switch, previous_qdot, previous_tau = state_parts(discrete, n)
+    if pending:
+        _commit_switch(P, criteria, switch, state[-1])
+    _tick_back(T, P, ix, criteria, discrete, t, commands, out)
+    _store(out, previous_qdot, previous_tau)
+    state[-1] = t

@@ -1,0 +1,158 @@
+"""ControllerStep: the whole controller as one plain call, for loops outside a Simulator.
+
+A real robot's loop (or an LCM driver) receives the measured state once per control
+period T and must answer with a torque::
+
+    step = ControllerStep(controller_model=model, normal=[0, 0, -1], config=config)
+    while running:
+        t, q, v, wrench = receive()
+        out = step.step(t, q, v, wrench, x_d, xdot_d, xddot_d, f_d)
+        send(out.tau)
+
+It runs the stages of :mod:`nsdrake.control.stages` on preallocated arrays, with the
+same model, task and :class:`ControllerConfig` as :class:`nsdrake.NullSpaceImpedanceController`,
+and gives the same τ, tick by tick, as that Diagram in a Simulator whose plant steps
+once per period (the stages module says why, and when that holds). The discrete
+state (the selector's switch state, the previous q̇_dⁿ, the previous τ) lives in
+:attr:`ControllerStep.state`; :meth:`ControllerStep.reset` starts over.
+
+In steady state a call allocates no Python object that outlives it (the result's
+arrays are views into one buffer, rewritten by the next call), so Python's garbage
+collector never has work to do on its account.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+
+from nsdrake.control.config import ControllerConfig
+from nsdrake.control.layout import tick_views
+from nsdrake.control.model import ControllerModel
+from nsdrake.control.plan import ControllerPlan
+from nsdrake.control.stages import initial_state, step_back
+
+
+class StepResult:
+    """One tick's outputs, as views into the step's buffers (valid until the next call).
+    The names and units are those of the controller's output ports:
+
+    - ``tau`` τ (n) [N m], ``saturation`` [s, clipped joints], ``null_space_torque`` τ₀ (n) [N m],
+      ``task_torque`` τ − τ₀ (n) [N m] (before the actuator limits);
+    - ``null_space_velocity_error`` eⁿ (n) [rad/s], ``lyapunov`` ν (1) [J],
+      ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], ``mode`` (1), ``speed_scale`` (1);
+    - ``criteria`` (4, n + 3): one [Φ; p; s; a] row per criterion (obstacle, joint torque,
+      manipulability, joint limits), so ``d_min`` = criteria[0, n + 1],
+      ``manipulability`` = criteria[2, n]; ``task_position`` x (m_t) [m].
+    """
+
+    def __init__(self, tick: np.ndarray, dims: np.ndarray):
+        views = tick_views(tick, dims)
+        n = int(dims[0])
+        self.tau, self.saturation = views.limited[:n], views.limited[n:]
+        self.null_space_torque = views.null_space[:n]
+        self.null_space_velocity_error = views.null_space[n : 2 * n]
+        self.lyapunov = views.null_space[2 * n :]
+        self.mode, self.speed_scale = views.selection[n : n + 1], views.selection[n + 1 :]
+        self.desired_null_space_velocity = views.qdot
+        self.task_torque = views.task
+        self.criteria = views.criteria
+        self.task_position = views.x
+
+
+class ControllerStep:
+    """The controller of :class:`nsdrake.NullSpaceImpedanceController` as one call per
+    tick (module docstring).
+
+    Args: as :class:`nsdrake.NullSpaceImpedanceController` (``controller_model``, ``normal``,
+    ``config``, ``tool_frame``, ``task_axes``, ``wrench_point``).
+
+    Call :meth:`step` once per control period ``config.period``, with the time and the
+    state of that tick.
+    """
+
+    def __init__(
+        self,
+        *,
+        controller_model: ControllerModel | MultibodyPlant | str | Path,
+        normal: Sequence[float],
+        config: ControllerConfig,
+        tool_frame: str = "tool",
+        task_axes: Sequence[str] = ("x", "y"),
+        wrench_point: Sequence[float] | None = None,
+    ):
+        from nsdrake.control.controller import as_controller_model, check_config, checked_normal
+
+        model = as_controller_model(controller_model, tool_frame, task_axes)
+        normal = checked_normal(normal, model)
+        check_config(config, model)
+        self.plan = plan = ControllerPlan(
+            model=model, config=config, normal=normal, wrench_point=wrench_point
+        )
+        self.model, self.config = model, config
+        n, m_t, m_r = plan.n, plan.m_t, plan.m_r
+        self._scratch = plan.create_scratch()
+        self._terms = plan.allocate_terms()
+        self._criteria = plan.allocate_criteria()
+        self._tick = plan.allocate_tick()
+        self._commands = np.zeros(7 + 3 * m_t + (10 if m_r else 0))
+        if m_r:
+            self._commands[7 + 3 * m_t] = 1.0  # R_d = I until given
+        self.state = np.empty(2 * n + 6)
+        self.result = StepResult(self._tick, plan.dims)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the discrete state: the next call is the first tick (no previous q̇_dⁿ or τ,
+        the selector in mode 0, blending in from rest)."""
+        self.state[:-1] = initial_state(self.plan.n)
+        self.state[-1] = 0.0
+        self._pending = False
+
+    def step(
+        self,
+        t: float,
+        q: np.ndarray,
+        v: np.ndarray,
+        wrench: np.ndarray,
+        x_d: np.ndarray,
+        xdot_d: np.ndarray,
+        xddot_d: np.ndarray,
+        f_d: float,
+        R_d: np.ndarray | None = None,
+        omega_d: np.ndarray | None = None,
+        omegadot_d: np.ndarray | None = None,
+    ) -> StepResult:
+        """τ and the diagnostics at time t [s] for the measured q [rad], q̇ [rad/s] (model's
+        velocity order), the measured wrench [M; f] (6) [N m, N] (as the ``measured_wrench``
+        port), the desired x_d, ẋ_d, ẍ_d (m_t each) [m, m/s, m/s²] and f_d [N]; with
+        rotational task axes the desired orientation R_d as a quaternion [w, x, y, z] and
+        ω_d, ω̇_d (3 each) [rad/s, rad/s²] (kept from the previous call when None).
+        Returns :attr:`result`, rewritten in place."""
+        c, m_t = self._commands, self.plan.m_t
+        c[:6], c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = (
+            wrench,
+            x_d,
+            xdot_d,
+            xddot_d,
+        )
+        c[6 + 3 * m_t] = f_d
+        if R_d is not None:
+            c[7 + 3 * m_t : 11 + 3 * m_t] = R_d
+        if omega_d is not None:
+            c[11 + 3 * m_t : 14 + 3 * m_t] = omega_d
+        if omegadot_d is not None:
+            c[14 + 3 * m_t : 17 + 3 * m_t] = omegadot_d
+        plan = self.plan
+        plan.front(
+            self._scratch, np.asarray(q, dtype=float), np.asarray(v, dtype=float), self._terms, self._criteria
+        )
+        step_back(
+            self._terms, plan.plan, plan.index, plan.dims, self._criteria, self.state, t, self._pending,
+            self._commands, self._tick,
+        )  # fmt: skip
+        self._pending = True
+        return self.result
