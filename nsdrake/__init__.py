@@ -10,6 +10,7 @@ from nsdrake.control import (
     ControllerConfig,
     ControllerConfigError,
     ControllerModel,
+    ControllerStep,
     NullSpaceImpedanceController,
     Obstacle,
 )
@@ -18,6 +19,7 @@ __all__ = [
     "ControllerConfig",
     "ControllerConfigError",
     "ControllerModel",
+    "ControllerStep",
     "NullSpaceImpedanceController",
     "Obstacle",
 ]

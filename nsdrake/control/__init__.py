@@ -7,23 +7,34 @@ scenarios or reports. It imports nothing else of nsdrake.
   more), ``priority`` (Fig. 1), ``actuator_limits``, ``orientation``, ``smoothing``;
 - ``config`` (ControllerConfig) and ``model`` (ControllerModel: the controller's own model
   of the arm and its obstacles);
-- ``systems/``, the LeafSystems over that math, and ``controller``
-  (NullSpaceImpedanceController), the Diagram that wires them.
+- ``stages`` (the controller's tick as one ordered sequence of compiled stages), ``layout``
+  and ``plan`` (its arrays and constants), ``kernels`` (the compiled code's cache);
+- ``systems/``, the LeafSystems over those stages, ``controller``
+  (NullSpaceImpedanceController), the Diagram that wires them (named systems or one fused
+  system), and ``step`` (ControllerStep, the same tick as one plain call).
 """
 
-from nsdrake.control.config import ControllerConfig
-from nsdrake.control.controller import (
+from nsdrake.control.kernels import announce_compiling, refresh_cache
+
+refresh_cache()  # before any kernel loads from numba's cache (nsdrake.control.kernels)
+announce_compiling()
+
+from nsdrake.control.config import ControllerConfig  # noqa: E402
+from nsdrake.control.controller import (  # noqa: E402
     ControllerConfigError,
     NullSpaceImpedanceController,
     without_null_space_task,
 )
-from nsdrake.control.model import ControllerModel, Obstacle
+from nsdrake.control.model import ControllerModel, Obstacle  # noqa: E402
+from nsdrake.control.step import ControllerStep, StepResult  # noqa: E402
 
 __all__ = [
     "ControllerConfig",
     "ControllerConfigError",
     "ControllerModel",
+    "ControllerStep",
     "NullSpaceImpedanceController",
     "Obstacle",
+    "StepResult",
     "without_null_space_task",
 ]

@@ -362,7 +362,7 @@ def _add_fused(builder, plan: ControllerPlan) -> tuple[dict, dict]:
     m_t = plan.m_t
     sizes = [6, m_t, m_t, m_t, 1] + ([4, 3, 3] if plan.m_r else [])
     commands = builder.AddNamedSystem("commands", Multiplexer(sizes))
-    fused = builder.AddNamedSystem("fused_controller", FusedController(plan=plan, commands_size=sum(sizes)))
+    fused = builder.AddNamedSystem("fused_controller", FusedController(plan=plan))
     builder.Connect(commands.get_output_port(), fused.GetInputPort("commands"))
     parts = _split(builder, "tick_parts", fused.GetOutputPort("tick"), tick_parts(plan.n, m_t))
     inputs = {"estimated_state": fused.GetInputPort("estimated_state")}

@@ -197,7 +197,7 @@ class JacobianPartials:
         return _jacobian_partials(J_w, J_v, self._own, self._other, self._rows, self._rot_rows)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cross(a0, a1, a2, b0, b1, b2):
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 

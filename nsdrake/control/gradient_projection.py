@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def projected_direction(N: np.ndarray, W_inv: np.ndarray, Phi: np.ndarray) -> np.ndarray:
     """N W⁻¹ Φ: Eq. 30's direction, the gradient rotated by the metric W⁻¹ of the
     generalised inverse behind N (H⁻¹ for J̄, I for J⁺) and projected into its null
@@ -30,7 +30,7 @@ def projected_direction(N: np.ndarray, W_inv: np.ndarray, Phi: np.ndarray) -> np
     return N @ (W_inv @ Phi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gradient_step(N: np.ndarray, W_inv: np.ndarray, Phi: np.ndarray, K: float, rotate: bool) -> np.ndarray:
     """q̇_dⁿ = K N W⁻¹ Φ (``rotate``, Eq. 30 for J̄; :func:`projected_direction`) or
     K N Φ (Eq. 28's form). (n,) [rad/s]."""

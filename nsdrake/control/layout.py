@@ -84,7 +84,7 @@ IndexView = namedtuple(
 TickView = namedtuple("TickView", ("limited", "null_space", "selection", "qdot", "task", "criteria", "x"))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _take(buf, o, k):
     return buf[o : o + k], o + k
 
@@ -99,7 +99,7 @@ def terms_size(dims) -> int:
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def terms_views(buf, dims) -> TermsView:
     """The model terms at one state (:class:`nsdrake.control.dynamics.RobotTerms` names them)."""
     if buf.shape[0] != terms_size(dims):
@@ -147,7 +147,7 @@ def plan_size(dims) -> int:
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def plan_views(buf, dims) -> PlanView:
     """The controller's constants (module docstring; :mod:`nsdrake.control.plan` fills them)."""
     if buf.shape[0] != plan_size(dims):
@@ -194,7 +194,7 @@ def index_size(dims) -> int:
     return m_t + m_r + m + n * n + n * n + n + n + MODES * CRITERIA + MODES + k
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def index_views(buf, dims) -> IndexView:
     """The plan's integer part: task rows, the joint-pair masks of ∂J/∂q, the joint order
     of the model library, the tool's supporting joints, Fig. 1's orderings, each link
@@ -225,7 +225,7 @@ def tick_size(dims) -> int:
     return (n + 2) + (2 * n + 1) + (n + 2) + n + n + CRITERIA * (n + CRITERION_WIDTH_EXTRA) + m_t
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def tick_views(buf, dims) -> TickView:
     """Every stage's output: ``limited`` [τ (n); s; clipped] (actuator limits), ``null_space``
     [τ₀ (n); eⁿ (n); ν] (Eq. 21), ``selection`` [the selector's q̇_dⁿ (n); mode; speed scale],
@@ -268,7 +268,7 @@ def field_slices(views, size: int, dims: np.ndarray) -> dict[str, tuple[int, tup
     """{field: (start, shape)} of the array fields of a views function over a float buffer
     of ``size``, read off the views of a buffer whose entries are their own indices: the
     Python side's cheap way to one field (:func:`field`), from the one layout."""
-    probe = views(np.arange(size, dtype=float), dims)
+    probe = views.py_func(np.arange(size, dtype=float), dims)  # in Python: nothing to compile
     out = {}
     for name, view in zip(probe._fields, probe, strict=True):
         if isinstance(view, np.ndarray):

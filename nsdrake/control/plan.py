@@ -36,14 +36,19 @@ from nsdrake.control.priority import Criterion, SelectorLimits, ordering_table
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 from nsdrake.control.smoothing import activation
 from nsdrake.control.stages import (
+    CRITERIA as CRITERIA_STAGE,
+)
+from nsdrake.control.stages import (
     OBSTACLES_CLOSED_FORM,
     OBSTACLES_NONE,
     OBSTACLES_QUERIED,
+    commands_size,
     complete_terms,
-    criteria_stage,
+    initial_state,
     pack_criterion,
-    pinocchio_terms_stage,
-    tick_front,
+    run_stages,
+    state_parts,
+    terms_stage,
 )
 
 
@@ -134,8 +139,20 @@ class ControllerPlan:
         )
         self.plan = self._plan_array(wrench_point, links, supports, obstacles)
         self.index = self._index_array(joints)
-        self._terms_fields = field_slices(terms_views, terms_size(self.dims), self.dims)
-        self._tick_fields = field_slices(tick_views, tick_size(self.dims), self.dims)
+        # None where the controller does not use a part of the stages' code (run_stages):
+        # rotational task axes, a prescribed sweep, joint limits, obstacles in closed form.
+        self.variant = tuple(
+            1 if used else None
+            for used in (
+                self.m_r > 0,
+                config.desired_null_space.source == "sweep",
+                bool(np.isfinite(model.plant.GetPositionLowerLimits()).any()
+                     or np.isfinite(model.plant.GetPositionUpperLimits()).any()),
+                self.obstacle_mode == OBSTACLES_CLOSED_FORM,
+            )
+        )  # fmt: skip
+        self._terms_fields = field_slices(terms_views, self.terms_length, self.dims)
+        self._tick_fields = field_slices(tick_views, self.tick_length, self.dims)
 
     def terms_field(self, terms: np.ndarray, name: str) -> np.ndarray:
         """A view of one field of a terms buffer (:class:`nsdrake.control.layout.TermsView`'s names)."""
@@ -187,7 +204,7 @@ class ControllerPlan:
             torque_limits(config, model), self.rate_limits,
         ]  # fmt: skip
         plan = np.concatenate([np.asarray(p, dtype=float).ravel() for p in parts])
-        assert plan.shape[0] == plan_size(self.dims)
+        assert plan.shape[0] == plan_size.py_func(self.dims)
         return plan
 
     def _index_array(self, joints) -> np.ndarray:
@@ -201,24 +218,32 @@ class ControllerPlan:
             orderings, counts, joints,
         ]  # fmt: skip
         index = np.concatenate([np.asarray(p, dtype=np.int64).ravel() for p in parts])
-        assert index.shape[0] == index_size(self.dims)
+        assert index.shape[0] == index_size.py_func(self.dims)
         return index
 
     # ------------------------------------------------ buffers
 
     def allocate_terms(self) -> np.ndarray:
-        return np.zeros(terms_size(self.dims))
+        return np.zeros(self.terms_length)
+
+    @property
+    def terms_length(self) -> int:
+        return int(terms_size.py_func(self.dims))
 
     def allocate_criteria(self) -> np.ndarray:
         return np.zeros((CRITERIA, self.n + 3))
 
     def allocate_tick(self) -> np.ndarray:
-        return np.zeros(tick_size(self.dims))
+        return np.zeros(self.tick_length)
+
+    @property
+    def tick_length(self) -> int:
+        return int(tick_size.py_func(self.dims))
 
     def create_scratch(self) -> ModelScratch:
         return self.model.create_scratch()
 
-    # ------------------------------------------------ stages 1 and 2
+    # ------------------------------------------------ the stages
 
     def terms(self, scratch: ModelScratch, q: np.ndarray, v: np.ndarray, terms: np.ndarray) -> None:
         """Stage 1 at (q, q̇) into ``terms``: Pinocchio's arrays read in place, or Drake's calls."""
@@ -228,48 +253,85 @@ class ControllerPlan:
             return
         s = scratch.pinocchio
         pin.update(s, q, v, self.coriolis)
-        pinocchio_terms_stage(
+        terms_stage(
             s.M, s.nle, s.g, s.C, s.J, pin.joint_poses(s), s.R_tool, s.p_tool, q, v,
             self.plan, self.index, self.dims, terms,
         )  # fmt: skip
 
     def _drake_terms(self, scratch: ModelScratch, q, v, terms) -> None:
         arm = self.model.arm
-        T = terms_views(terms, self.dims)
         H, H_inv, Cv, g, J_spatial, p_WT, R_WT, C = arm.plant_terms(
             self.model.plant_context(scratch), q, v, self.coriolis
         )
-        T.q[:], T.v[:], T.H[:], T.H_inv[:], T.Cv[:], T.g[:] = q, v, H, H_inv, Cv, g
-        T.J_spatial[:], T.p_WT[:] = J_spatial, p_WT
+        for name, value in (("q", q), ("v", v), ("H", H), ("H_inv", H_inv), ("Cv", Cv), ("g", g)):
+            self.terms_field(terms, name)[:] = value
+        self.terms_field(terms, "J_spatial")[:], self.terms_field(terms, "p_WT")[:] = J_spatial, p_WT
         if R_WT is not None:
-            T.R_WT[:] = R_WT
+            self.terms_field(terms, "R_WT")[:] = R_WT
         if C is not None:
-            T.C[:] = C
+            self.terms_field(terms, "C")[:] = C
         complete_terms(terms, self.plan, self.index, self.dims)
 
-    def front(self, scratch: ModelScratch, q: np.ndarray, v: np.ndarray, terms: np.ndarray, criteria) -> None:
-        """Stages 1 and 2 at (q, q̇): :meth:`terms` then :meth:`criteria`, in one compiled call
-        after Pinocchio's passes."""
-        pin = self.model.pinocchio
-        if pin is None:
-            self.terms(scratch, q, v, terms)
-            self.criteria(scratch, terms, criteria)
-            return
-        s = scratch.pinocchio
-        pin.update(s, q, v, self.coriolis)
-        if tick_front(
-            s.M, s.nle, s.g, s.C, s.J, pin.joint_poses(s), s.R_tool, s.p_tool, q, v,
-            self.plan, self.index, self.dims, terms, criteria,
+    def run(self, stages: int, t: float, t_previous: float, terms, buffers: StageBuffers) -> None:
+        """:func:`nsdrake.control.stages.run_stages` on ``buffers``' arrays; the obstacle row
+        from Drake's queries where the closed forms cannot answer (a link touching an
+        obstacle, other shapes, Drake terms)."""
+        b = buffers
+        self.run_arrays(
+            stages, t, t_previous, terms, b.criteria, b.switch, b.previous_qdot, b.previous_tau,
+            b.commands, b.tick, b.scratch,
+        )  # fmt: skip
+
+    def run_arrays(
+        self,
+        stages,
+        t,
+        t_previous,
+        terms,
+        criteria,
+        switch,
+        previous_qdot,
+        previous_tau,
+        commands,
+        tick,
+        scratch,
+    ) -> None:
+        """:meth:`run` with each array given (views of a system's ports and state)."""
+        if run_stages(
+            stages, t, t_previous, self.plan, self.index, self.dims, terms, criteria, switch, previous_qdot,
+            previous_tau, commands, tick, *self.variant,
         ):  # fmt: skip
-            self._queried_obstacle_row(scratch, q, criteria[0])
+            self._queried_obstacle_row(scratch, self.terms_field(terms, "q"), criteria[0])
+            rest = stages & ~CRITERIA_STAGE
+            if rest:
+                self.run_arrays(
+                    rest,
+                    t,
+                    t_previous,
+                    terms,
+                    criteria,
+                    switch,
+                    previous_qdot,
+                    previous_tau,
+                    commands,
+                    tick,
+                    scratch,
+                )
+
+    def front(
+        self, scratch: ModelScratch, q: np.ndarray, v: np.ndarray, terms, buffers: StageBuffers
+    ) -> None:
+        """Stages 1 and 2 at (q, q̇) into ``terms`` and ``buffers.criteria``."""
+        self.terms(scratch, q, v, terms)
+        self.run(CRITERIA_STAGE, 0.0, 0.0, terms, buffers)
 
     def criteria(self, scratch: ModelScratch, terms: np.ndarray, out: np.ndarray) -> None:
-        """Stage 2 into ``out`` (4, n + 3); the obstacle row from Drake's queries where the
-        closed forms cannot answer (a link touching an obstacle, other shapes, Drake terms)."""
-        if criteria_stage(terms, self.plan, self.index, self.dims, out):
-            self._queried_obstacle_row(scratch, terms_views(terms, self.dims).q, out[0])
+        """Stage 2 at the state of ``terms`` into ``out`` (4, n + 3)."""
+        self.run(CRITERIA_STAGE, 0.0, 0.0, terms, StageBuffers(self, criteria=out, scratch=scratch))
 
     def _queried_obstacle_row(self, scratch: ModelScratch, q: np.ndarray, row: np.ndarray) -> None:
+        if scratch is None:
+            raise ValueError("the obstacle criterion needs Drake's queries here: pass a model scratch")
         model, influence = self.model, self.config.desired_null_space.criteria.obstacle.influence_distance
         plant_context = model.plant_context(scratch)
         model.plant.SetPositions(plant_context, q)
@@ -333,3 +395,41 @@ def _obstacle_table(model, distances, mode) -> np.ndarray:
         else:
             rows.append([1.0, *R.ravel(), *p, shape.radius(), 0.0, 0.0])
     return np.array(rows)
+
+
+class StageBuffers:
+    """The arrays :meth:`ControllerPlan.run` passes to the stages: ``criteria`` (4, n + 3),
+    the discrete ``state`` [switch (3); previous q̇_dⁿ (n + 1); previous τ (n + 1)] with views
+    ``switch``, ``previous_qdot``, ``previous_tau``, the packed ``commands``, the ``tick``
+    and a model ``scratch`` (for the obstacle criterion's Drake queries). Each may be given
+    (a view of someone's memory, e.g. a system's output or discrete state); the rest are
+    allocated here. A copy (Drake copies a context's values) copies the numbers and makes a
+    fresh scratch."""
+
+    def __init__(self, plan: ControllerPlan, **given):
+        n = plan.n
+        self.plan = plan
+        self.criteria = given.get("criteria", plan.allocate_criteria())
+        state = initial_state(n)
+        self.switch, self.previous_qdot, self.previous_tau = state_parts(state, n)
+        for name in ("switch", "previous_qdot", "previous_tau", "commands", "tick", "scratch"):
+            if name in given:
+                setattr(self, name, given[name])
+        if "commands" not in given:
+            self.commands = np.zeros(commands_size(plan.m_t, plan.m_r))
+            if plan.m_r:
+                self.commands[7 + 3 * plan.m_t] = 1.0  # R_d = I until given
+        if "tick" not in given:
+            self.tick = plan.allocate_tick()
+        if "scratch" not in given:
+            self.scratch = plan.create_scratch() if plan.obstacle_mode != OBSTACLES_NONE else None
+
+    def part(self, name: str) -> np.ndarray:
+        """A view of one part of the tick (:class:`nsdrake.control.layout.TickView`'s names)."""
+        return self.plan.tick_field(self.tick, name)
+
+    def __deepcopy__(self, memo):
+        out = StageBuffers(self.plan)
+        for name in ("criteria", "switch", "previous_qdot", "previous_tau", "commands", "tick"):
+            getattr(out, name)[:] = getattr(self, name)
+        return out

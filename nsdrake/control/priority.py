@@ -124,7 +124,7 @@ def select_mode(
     return Mode(select_mode_code(d_min, w, margin, int(previous), limits.as_array()))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def select_mode_code(d_min: float, w: float, margin: float, previous: int, limits: np.ndarray) -> int:
     """:func:`select_mode` on plain numbers: modes as their ints, ``limits`` as
     :meth:`SelectorLimits.as_array`."""
@@ -198,7 +198,7 @@ def stacked_prioritized_velocity(N, W, W_inv, gradients, gains, activations, rot
     return qdot
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _ordering_velocity(N, W, W_inv, gradients, gains, activations, rows, rotate, rank_damping):
     """One ordering's q̇_dⁿ: the levels ``rows`` of the stacked criteria, in that order."""
     if rows.shape[0] == 0:
@@ -286,7 +286,7 @@ def update_switch_state(state: SwitchState, t: float, new_mode: Mode) -> SwitchS
     return SwitchState.from_array(out)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def switch_state_update(state: np.ndarray, t: float, new_mode: int, out: np.ndarray) -> None:
     """out = the switch state [mode, previous, switch time] after selecting ``new_mode`` at
     time t: unchanged if it is the current mode, else (new, current, t)."""
@@ -301,7 +301,7 @@ def blend_weight(state: SwitchState, t: float, blend_time: float) -> float:
     return blend_weight_code(state.switch_time, t, blend_time)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def blend_weight_code(switch_time: float, t: float, blend_time: float) -> float:
     """:func:`blend_weight` from the time of the last switch."""
     if blend_time <= 0.0 or not np.isfinite(switch_time):

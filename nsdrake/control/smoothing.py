@@ -16,10 +16,10 @@ def smoothstep(u: float) -> float:
 
 
 # The same function compiled, for the controller's kernels (numba calls only compiled code).
-compiled_smoothstep = njit(cache=True)(smoothstep)
+compiled_smoothstep = njit(cache=True, inline="always")(smoothstep)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def activation(distance: float, influence: float) -> float:
     """How much a criterion that switches on near a boundary counts in the projection of
     the levels below it (:mod:`nsdrake.control.priority`): 0 while the distance to the

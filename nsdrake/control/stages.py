@@ -1,28 +1,30 @@
 """The controller's tick: one ordered sequence of stages over preallocated arrays.
 
-This module is the one home of the stages and their order. Each stage is a compiled
-function that reads the flat arrays of :mod:`nsdrake.control.layout` (the plan's
-constants, the model terms, the criteria, the discrete state) and writes its output
-into an array it is given; the math inside each stage is the math of its own module,
-called, never restated:
+This module is the one home of the stages and their order. Each stage reads the flat
+arrays of :mod:`nsdrake.control.layout` (the plan's constants, the model terms, the
+criteria, the discrete state, the inputs) and writes its output into the tick buffer;
+the math inside each stage is the math of its own module, called, never restated:
 
-1. **model terms** (:func:`pinocchio_terms_stage`, or the Drake fallback then
-   :func:`complete_terms`): H, H⁻¹, C q̇, g, C, J, ∂J/∂q, J̇ q̇, ẋ, Λ and the generalised
-   inverse J^#, N (:mod:`dynamics`, :mod:`pseudo_inverse`), read in place from
+1. **model terms** (:func:`terms_stage` from Pinocchio's arrays, or the Drake fallback
+   then :func:`complete_terms`): H, H⁻¹, C q̇, g, C, J, ∂J/∂q, J̇ q̇, ẋ, Λ and the
+   generalised inverse J^#, N (:mod:`dynamics`, :mod:`pseudo_inverse`), read in place from
    Pinocchio's arrays, with the joint poses the obstacle criterion needs;
-2. **criteria** (:func:`criteria_stage`): [Φ; p; s; a] of the obstacle (Eq. 31, closed
-   forms over the link poses of stage 1), joint-torque (Eqs. 32–33), manipulability and
-   joint-limit criteria (:mod:`criteria`);
-3. **desired null-space velocity** (:func:`selection_stage`): Fig. 1's priority selector
-   on the stored switch state (:mod:`priority`), or the prescribed sweep (:mod:`self_motion`);
-4. **task torque** (:func:`task_torque_stage`): τ − τ₀ of Eqs. 6–8 (:mod:`impedance`);
-5. **null-space torque** (:func:`null_space_stage`): τ₀ of Eq. 21 (:mod:`null_space`), with
-   q̈_dⁿ the backward difference from the stored previous q̇_dⁿ;
-6. **actuator limits** (:func:`actuator_limits_stage`): τ = τ_task + s τ₀ within the
-   torque and rate windows (:mod:`actuator_limits`), from the stored previous τ.
+2. **criteria** (``CRITERIA``): [Φ; p; s; a] of the obstacle (Eq. 31, closed forms over the
+   link poses of stage 1), joint-torque (Eqs. 32–33), manipulability and joint-limit
+   criteria (:mod:`criteria`);
+3. **desired null-space velocity** (``SELECTION``, then ``DESIRED``): Fig. 1's priority
+   selector on the stored switch state (:mod:`priority`), then q̇_dⁿ, the selector's or the
+   prescribed sweep's (:mod:`self_motion`);
+4. **task torque** (``TASK``): τ − τ₀ of Eqs. 6–8 (:mod:`impedance`);
+5. **null-space torque** (``NULL_SPACE``): τ₀ of Eq. 21 (:mod:`null_space`), q̈_dⁿ the
+   backward difference from the stored previous q̇_dⁿ;
+6. **actuator limits** (``LIMITS``): τ = τ_task + s τ₀ within the torque and rate windows
+   (:mod:`actuator_limits`), from the stored previous τ.
 
-Stages 3–6 run in that order in :func:`tick_back`; 1–2 depend on the measured state
-alone and run in :func:`tick_front`.
+Stages 2–6 and the two discrete updates are one compiled function, :func:`run_stages`,
+which runs the stages it is asked for (a bit set) in this order; each named system asks
+for its own stage, the fused system and :class:`nsdrake.ControllerStep` for all of them.
+One function compiled once, for every way of running the controller.
 
 **The discrete state** is three arrays, never hidden in a stage: the selector's switch
 state [mode, mode blended from, switch time], the previous q̇_dⁿ [q̇_dⁿ (n); 1 if it
@@ -36,22 +38,23 @@ x_k the plant reached at t_k:
 
 - the output τ_k = tick(t_k, x_k) is computed once and drives the plant's step to x_{k+1};
 - the controller's own unrestricted update, from the same context, stores the q̇_dⁿ and
-  the τ just output (:func:`store_stage`), as the values used over the step;
+  the τ just output (``STORE``), as the values used over the step;
 - then, *still at time t_k but from the post-step state x_{k+1}*, the selector's discrete
   update selects a mode from the criteria at x_{k+1} and commits it with switch time t_k
-  (:func:`switch_update_stage`);
+  (``COMMIT``);
 - at t_{k+1}, the output again evaluates Fig. 1's tree on x_{k+1} from the committed
   switch state (a tentative switch at t_{k+1}, not stored).
 
-A plain loop that receives x_{k+1} and calls the step once reproduces this exactly:
-:func:`step_back` first runs the pending discrete update with x_{k+1} at time t_k, then the
-output stages at t_{k+1}, then the stores. The criteria at x_{k+1} serve both, so they
-are computed once (in the Diagram, a cache entry that depends on the state alone).
-This holds as long as the state the step receives at t_{k+1} is the one Drake's discrete
-update at t_k sees: one plant step per control period and no sampled rung between the
-plant and the controller. (A plant stepping finer than the controller, the realism
-ladder's physics rung, has its discrete update see the state one *plant* step after t_k;
-the named systems and the fused system, which keep Drake's events, follow it exactly.)
+A plain loop that receives x_{k+1} and calls the step once reproduces this exactly
+(``PLAIN_STEP``): the criteria at x_{k+1}, the pending discrete update with them at time
+t_k, the output stages at t_{k+1}, then the stores. The criteria at x_{k+1} serve both,
+so they are computed once (in the fused system, a cache entry that depends on the state
+alone). This holds as long as the state the step receives at t_{k+1} is the one Drake's
+discrete update at t_k sees: one plant step per control period and no sampled rung
+between the plant and the controller. (A plant stepping finer than the controller, the
+realism ladder's physics rung, has its discrete update see the state one *plant* step
+after t_k; the named systems and the fused system, which keep Drake's events, follow
+it exactly.)
 """
 
 from __future__ import annotations
@@ -68,12 +71,7 @@ from nsdrake.control.criteria.joint_torque import joint_torque_criterion
 from nsdrake.control.criteria.manipulability import manipulability
 from nsdrake.control.dynamics import _cross, _jacobian_partials, derived_terms, task_inertia
 from nsdrake.control.impedance import _position_task_torque, pose_task_torque, wrench_at_tool
-from nsdrake.control.layout import (
-    index_views,
-    plan_views,
-    terms_views,
-    tick_views,
-)
+from nsdrake.control.layout import index_views, plan_views, terms_views, tick_views
 from nsdrake.control.model import symmetric_and_inverse
 from nsdrake.control.null_space import _null_space_law
 from nsdrake.control.orientation import quaternion_to_rotation
@@ -90,37 +88,31 @@ from nsdrake.control.smoothing import activation
 
 OBSTACLES_NONE, OBSTACLES_CLOSED_FORM, OBSTACLES_QUERIED = 0, 1, 2  # PlanView.obstacle_mode
 
-# Each stage has a compiled entry point over the flat arrays (for a caller outside the
-# compiled code: the named systems, the plan) and a body over their views (T: terms,
-# P: plan, ix: index, :mod:`nsdrake.control.layout`), which the composite ticks call so
-# that the views are made once per call.
+# The stages run_stages can run, in the order it runs them (a bit set).
+CRITERIA = 1  # stage 2 into ``criteria``
+COMMIT = 2  # the selector's discrete update: the switch committed at t_previous
+SELECTION = 4  # stage 3, the selector, into tick.selection
+DESIRED = 8  # stage 3, q̇_dⁿ into tick.qdot: the sweep's (source: sweep) or the selector's
+SWEEP = 16  # the sweep alone into tick.qdot (the named self-motion system)
+TASK = 32  # stage 4 into tick.task
+NULL_SPACE = 64  # stage 5 (q̇_dⁿ from tick.qdot) into tick.null_space
+LIMITS = 128  # stage 6 (from tick.task and tick.null_space) into tick.limited
+COPY = 256  # the criteria and x into the tick (the fused system's packed output)
+STORE = 512  # the unrestricted update: tick.qdot and tick.limited's τ as the previous values
+TICK = SELECTION | DESIRED | TASK | NULL_SPACE | LIMITS | COPY  # the output, stages 3–6
+PLAIN_STEP = CRITERIA | COMMIT | TICK | STORE  # a plain loop's tick after stage 1
 
 
 # ---------------------------------------------------------------- 1. model terms
 
 
 @njit(cache=True)
-def pinocchio_terms_stage(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms):
+def terms_stage(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms):
     """Stage 1 from Pinocchio's arrays, read in place after ``computeAllTerms`` (M, nle, g,
     the world joint Jacobians J_pin, the joint poses X_pin (nj, 3, 4)),
     ``computeCoriolisMatrix`` (C, when the plan wants it) and ``updateFramePlacement``
     (the tool's R_tool, p_tool), all in Pinocchio's joint order; q, v in the model's."""
     T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
-    _pinocchio_terms(T, P, ix, M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v)
-    _complete_terms(T, P, ix)
-
-
-@njit(cache=True)
-def tick_front(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms, criteria) -> bool:
-    """Stages 1 and 2 in one call (:func:`pinocchio_terms_stage`, :func:`criteria_stage`)."""
-    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
-    _pinocchio_terms(T, P, ix, M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v)
-    _complete_terms(T, P, ix)
-    return _criteria(T, P, ix, criteria)
-
-
-@njit(cache=True)
-def _pinocchio_terms(T, P, ix, M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v):
     n, o = T.q.shape[0], ix.order
     H, H_inv = symmetric_and_inverse(M)
     T.q[:], T.v[:] = q, v
@@ -134,9 +126,10 @@ def _pinocchio_terms(T, P, ix, M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v)
     T.p_WT[:], T.R_WT[:] = p_tool, R_tool
     T.X_joints[:] = X_pin
     _tool_jacobian(T.J_joints, p_tool, ix.tool_support, T.J_spatial)
+    _complete_terms(T, P, ix)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _tool_jacobian(J_joints, p, support, out):
     """[J_w; J_v] of the tool point p from the world joint Jacobians [v_O; ω] (velocity
     of the point at the world origin): J_v = v_O − p × ω on the tool's supporting joints,
@@ -152,13 +145,13 @@ def _tool_jacobian(J_joints, p, support, out):
 
 @njit(cache=True)
 def complete_terms(terms, plan, index, dims):
-    """Stage 1, the part common to both model libraries: from q, v, H, H⁻¹, J_spatial and
-    p_WT, the task rows J, ∂J/∂q, J̇, J̇ q̇, ẋ, H⁻¹ Jᵀ, Λ (capped, :func:`task_inertia`),
-    the generalised inverse J^#, N, A⁻¹ and x."""
+    """Stage 1, the part common to both model libraries (the Drake fallback calls it after
+    writing q, v, H, H⁻¹, C q̇, g, C, J_spatial, p_WT, R_WT): the task rows J, ∂J/∂q, J̇, J̇ q̇,
+    ẋ, H⁻¹ Jᵀ, Λ (capped, :func:`task_inertia`), the generalised inverse J^#, N, A⁻¹ and x."""
     _complete_terms(terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _complete_terms(T, P, ix):
     for r in range(ix.spatial_rows.shape[0]):
         T.J[r] = T.J_spatial[ix.spatial_rows[r]]
@@ -172,10 +165,77 @@ def _complete_terms(T, P, ix):
         T.x[r] = T.p_WT[ix.rows[r]]
 
 
-# ---------------------------------------------------------------- 2. criteria
+# ---------------------------------------------------------------- stages 2–6 and the updates
 
 
 @njit(cache=True)
+def run_stages(
+    stages, t, t_previous, plan, index, dims, terms, criteria, switch, previous_qdot, previous_tau, commands, tick,
+    pose, sweep, limits, obstacles,
+) -> bool:  # fmt: skip
+    """The ``stages`` (a bit set of this module's constants) at time t, in their order:
+    CRITERIA, COMMIT (at ``t_previous``), SELECTION, DESIRED or SWEEP, TASK, NULL_SPACE,
+    LIMITS, COPY, STORE. ``criteria`` (4, n + 3), the discrete state ``switch`` (3),
+    ``previous_qdot`` and ``previous_tau`` (n + 1 each), the packed ``commands``
+    (:func:`commands_views`) and ``tick`` (:func:`nsdrake.control.layout.tick_views`) are
+    read and written in place. Returns True, having run nothing after CRITERIA, when its
+    obstacle row needs Drake's queries: the caller computes that row, then the remaining
+    stages (:meth:`nsdrake.control.plan.ControllerPlan.run`).
+
+    ``pose``, ``sweep``, ``limits``, ``obstacles`` are None where the controller has no
+    rotational task axes, no prescribed sweep, no joint limits, no obstacle in closed form
+    (:attr:`nsdrake.control.plan.ControllerPlan.variant`): compiled code for what a
+    controller does not use is left out (numba specialises on None)."""
+    T, P, ix, out = (
+        terms_views(terms, dims),
+        plan_views(plan, dims),
+        index_views(index, dims),
+        tick_views(tick, dims),
+    )
+    n = T.q.shape[0]
+    if stages & CRITERIA:
+        pack_criterion(criteria[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
+        if obstacles is None:
+            if P.obstacle_mode == OBSTACLES_QUERIED:
+                return True
+        elif _obstacle_row(T, P, ix, criteria[0]):
+            return True
+        _torque_and_manipulability_rows(T, P, criteria)
+        if limits is None:
+            pack_criterion(criteria[3], np.zeros(n), 0.0, np.inf, 0.0)
+        else:
+            _joint_limits_row(T, P, criteria[3])
+    if stages & COMMIT:
+        _commit_switch(P, criteria, switch, t_previous)
+    if stages & SELECTION:
+        _selection(T, P, ix, criteria, switch, t, out.selection)
+    if stages & (SWEEP | DESIRED):
+        if sweep is None:
+            out.qdot[:] = out.selection[:n]
+        else:
+            w = P.sweep_wave
+            out.qdot[:] = sweep_velocity(T.N, P.direction, sweep_amplitude(t, w[0], w[1], w[2], w[3]))
+    if stages & TASK:
+        if pose is None:
+            _position_task(T, P, ix, commands, out.task)
+        else:
+            _pose_task(T, P, ix, commands, out.task)
+    if stages & NULL_SPACE:
+        _null_space(T, P, out.qdot, previous_qdot, out.null_space)
+    if stages & LIMITS:
+        _actuator_limits(P, out.task, out.null_space[:n], previous_tau, out.limited)
+    if stages & COPY:
+        out.criteria[:], out.x[:] = criteria, T.x
+    if stages & STORE:
+        previous_qdot[:n], previous_qdot[n] = out.qdot, 1.0
+        previous_tau[:n], previous_tau[n] = out.limited[:n], 1.0
+    return False
+
+
+# ---------------------------------------------------------------- 2. criteria
+
+
+@njit(cache=True, inline="always")
 def pack_criterion(row, Phi, p, s, a):
     """row = [Φ; p; s; a]: gradient, value, the quantity Fig. 1's tree compares, activation."""
     n = Phi.shape[0]
@@ -183,35 +243,24 @@ def pack_criterion(row, Phi, p, s, a):
     row[n], row[n + 1], row[n + 2] = p, s, a
 
 
-@njit(cache=True)
-def criteria_stage(terms, plan, index, dims, out) -> bool:
-    """Stage 2: out (4, n + 3), one [Φ; p; s; a] row per criterion in Criterion's order
-    (obstacle, joint torque, manipulability, joint limits). Returns True when the obstacle
-    row needs Drake's queries (a link touches an obstacle, or a shape without closed form:
-    the caller computes that row, :meth:`nsdrake.control.plan.ControllerPlan.criteria`)."""
-    return _criteria(terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims), out)
-
-
-@njit(cache=True)
-def _criteria(T, P, ix, out) -> bool:
-    n = T.q.shape[0]
-    queried = P.obstacle_mode == OBSTACLES_QUERIED
-    pack_criterion(out[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
-    if P.obstacle_mode == OBSTACLES_CLOSED_FORM:
-        queried = _obstacle_row(T, P, ix, out[0])
+@njit(cache=True, inline="always")
+def _torque_and_manipulability_rows(T, P, out):
+    """Stage 2's joint-torque (Eqs. 32–33, F_d the nominal force along n) and manipulability
+    rows of ``out`` (4, n + 3), in Criterion's order."""
     p, Phi = joint_torque_criterion(T.J, T.dJ_dq, P.F_d)
     pack_criterion(out[1], Phi, p, p, 1.0)
     w, Phi = manipulability(T.J, T.dJ_dq)
     pack_criterion(out[2], Phi, w, w, 1.0)
-    if P.has_limits:
-        p, Phi, margin = joint_limits_criterion(T.q, P.lower, P.upper, P.limits_influence)
-        pack_criterion(out[3], Phi, p, margin, activation(margin, P.limits_influence))
-    else:
-        pack_criterion(out[3], np.zeros(n), 0.0, np.inf, 0.0)
-    return queried
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _joint_limits_row(T, P, out):
+    """Stage 2's joint-limit row [Φ; p; the smallest margin; its activation]."""
+    p, Phi, margin = joint_limits_criterion(T.q, P.lower, P.upper, P.limits_influence)
+    pack_criterion(out, Phi, p, margin, activation(margin, P.limits_influence))
+
+
+@njit(cache=True, inline="always")
 def link_segments(X_joints, links, link_joint):
     """(A, B): each link capsule's axis segment, world (k, 3) each, from the pose of its
     joint and the axis centre and direction in that joint's frame."""
@@ -226,7 +275,7 @@ def link_segments(X_joints, links, link_joint):
     return A, B
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def obstacle_rows(A, B, obstacles):
     """(o, k, 7): rows [φ, ∇φ, S] of :mod:`nsdrake.control.criteria.distance` per obstacle."""
     out = np.empty((obstacles.shape[0], A.shape[0], 7))
@@ -239,7 +288,7 @@ def obstacle_rows(A, B, obstacles):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_gradient(normal, S, J_joints, support):
     """∂d/∂q = n̂ᵀ J_S: the distance's gradient through the translational Jacobian of the
     link point S (world), J_S = v_O + ω × S on the joints that move the link. (n,)."""
@@ -256,7 +305,7 @@ def point_gradient(normal, S, J_joints, support):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _obstacle_row(T, P, ix, out) -> bool:
     """The obstacle criterion's [Φ; p; d_min; a] (Eq. 31, :mod:`nsdrake.control.criteria.obstacle`)
     from the closed-form distances of every link–obstacle pair, link by link; True (and out
@@ -283,7 +332,7 @@ def _obstacle_row(T, P, ix, out) -> bool:
 # ---------------------------------------------------------------- 3. desired null-space velocity
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _select(P, criteria, switch, t, out):
     """out = the switch state after Fig. 1's tree on the criteria's switching quantities
     (d_min, w, the joint-limit margin), selected at time t (unchanged when no criterion)."""
@@ -294,17 +343,20 @@ def _select(P, criteria, switch, t, out):
     switch_state_update(switch, t, select_mode_code(s[0], s[2], s[3], int(switch[0]), P.selector_limits), out)
 
 
-@njit(cache=True)
-def selection_stage(terms, plan, index, dims, criteria, switch, t, out):
+@njit(cache=True, inline="always")
+def _commit_switch(P, criteria, switch, t):
+    """The selector's discrete update at t_k: the switch state committed in place from the
+    criteria at the post-step state, with switch time t_k."""
+    committed = np.empty(3)
+    _select(P, criteria, switch, t, committed)
+    switch[:] = committed
+
+
+@njit(cache=True, inline="always")
+def _selection(T, P, ix, criteria, switch, t, out):
     """Stage 3, the selector: out = [q̇_dⁿ (n); mode; speed scale] from the criteria, the
     tentative switch at time t on the stored ``switch`` state, the blend after a switch and
     the joint-speed scaling (:func:`nsdrake.control.priority.selected_velocity`)."""
-    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
-    _selection(T, P, ix, criteria, switch, t, out)
-
-
-@njit(cache=True)
-def _selection(T, P, ix, criteria, switch, t, out):
     n = T.q.shape[0]
     state = np.empty(3)
     _select(P, criteria, switch, t, state)
@@ -326,56 +378,53 @@ def _selection(T, P, ix, criteria, switch, t, out):
     out[:n], out[n + 1] = qdot, scale
 
 
-@njit(cache=True)
-def sweep_stage(terms, plan, dims, t, out):
-    """Stage 3 with ``source: sweep``: out = q̇_dⁿ = a(t) N d / ‖N d‖ (:mod:`nsdrake.control.self_motion`)."""
-    _sweep(terms_views(terms, dims), plan_views(plan, dims), t, out)
-
-
-@njit(cache=True)
-def _sweep(T, P, t, out):
-    w = P.sweep_wave
-    out[:] = sweep_velocity(T.N, P.direction, sweep_amplitude(t, w[0], w[1], w[2], w[3]))
-
-
 # ---------------------------------------------------------------- 4.–6. torques
 
 
-@njit(cache=True)
-def task_torque_stage(
-    terms, plan, index, dims, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out
-):
-    """Stage 4: out = τ − τ₀ (Eqs. 6–8) with the measured wrench moved to the tool point;
-    R_d (quaternion [w, x, y, z]), ω_d, ω̇_d enter only with rotational task axes."""
-    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
-    _task_torque(T, P, ix, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out)
+@njit(cache=True, inline="always")
+def commands_views(commands, m_t):
+    """The position part of stage 4's packed inputs [wrench (6); x_d, ẋ_d, ẍ_d (m_t each);
+    f_d; with rotational axes R_d (4), ω_d (3), ω̇_d (3)]: (wrench, x_d, ẋ_d, ẍ_d, f_d)."""
+    c = commands
+    return c[:6], c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t], c[6 + 3 * m_t]
 
 
-@njit(cache=True)
-def _task_torque(T, P, ix, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out):
+def commands_size(m_t: int, m_r: int) -> int:
+    """Length of the packed commands of :func:`commands_views`."""
+    return 7 + 3 * m_t + (10 if m_r else 0)
+
+
+@njit(cache=True, inline="always")
+def _position_task(T, P, ix, commands, out):
+    """Stage 4 for a position task: out = τ − τ₀ (Eqs. 6–8) with the measured wrench moved to
+    the tool point."""
+    wrench, x_d, xdot_d, xddot_d, f_d = commands_views(commands, ix.rows.shape[0])
     W_T = wrench_at_tool(wrench, P.p_WSo, T.p_WT) if P.has_p_WSo else wrench
-    if ix.rot_rows.shape[0] == 0:
-        out[:] = _position_task_torque(
-            T.x, T.xdot, x_d, xdot_d, xddot_d, f_d, W_T, ix.rows, P.K_p, P.K_v, P.K_f, P.normal,
-            T.J, T.Lambda, T.Jdot_v, T.J_spatial, T.Cv, T.g, P.gravity,
-        )  # fmt: skip
-    else:
-        out[:] = pose_task_torque(
-            T.x, T.xdot, T.R_WT, x_d, xdot_d, xddot_d, f_d, quaternion_to_rotation(R_d), omega_d,
-            omegadot_d, W_T, ix.rows, ix.rot_rows, P.K_p, P.K_v, P.K_f, P.normal, T.J, T.Lambda,
-            T.Jdot_v, T.J_spatial, T.Cv, T.g, P.gravity,
-        )  # fmt: skip
+    out[:] = _position_task_torque(
+        T.x, T.xdot, x_d, xdot_d, xddot_d, f_d, W_T, ix.rows, P.K_p, P.K_v, P.K_f, P.normal,
+        T.J, T.Lambda, T.Jdot_v, T.J_spatial, T.Cv, T.g, P.gravity,
+    )  # fmt: skip
 
 
-@njit(cache=True)
-def null_space_stage(terms, plan, dims, qdot_ns, previous, out):
+@njit(cache=True, inline="always")
+def _pose_task(T, P, ix, commands, out):
+    """Stage 4 for a pose task, with R_d (quaternion [w, x, y, z]), ω_d, ω̇_d after the
+    position commands."""
+    wrench, x_d, xdot_d, xddot_d, f_d = commands_views(commands, ix.rows.shape[0])
+    o = 7 + 3 * ix.rows.shape[0]
+    R_d, omega_d, omegadot_d = commands[o : o + 4], commands[o + 4 : o + 7], commands[o + 7 : o + 10]
+    W_T = wrench_at_tool(wrench, P.p_WSo, T.p_WT) if P.has_p_WSo else wrench
+    out[:] = pose_task_torque(
+        T.x, T.xdot, T.R_WT, x_d, xdot_d, xddot_d, f_d, quaternion_to_rotation(R_d), omega_d,
+        omegadot_d, W_T, ix.rows, ix.rot_rows, P.K_p, P.K_v, P.K_f, P.normal, T.J, T.Lambda,
+        T.Jdot_v, T.J_spatial, T.Cv, T.g, P.gravity,
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _null_space(T, P, qdot_ns, previous, out):
     """Stage 5: out = [τ₀ (n); eⁿ (n); ν] (Eqs. 21, 14, 23), q̈_dⁿ the backward difference of
     q̇_dⁿ from ``previous`` = [q̇_dⁿ (n); 1 if stored] over one period (0 without it)."""
-    _null_space(terms_views(terms, dims), plan_views(plan, dims), qdot_ns, previous, out)
-
-
-@njit(cache=True)
-def _null_space(T, P, qdot_ns, previous, out):
     n = T.q.shape[0]
     qddot_ns = np.zeros(n)
     if P.feedforward and previous[n] != 0.0:
@@ -389,123 +438,24 @@ def _null_space(T, P, qdot_ns, previous, out):
     out[:n], out[n : 2 * n], out[2 * n] = tau0, e_n, nu
 
 
-@njit(cache=True)
-def actuator_limits_stage(plan, dims, tau_task, tau0, previous, out):
+@njit(cache=True, inline="always")
+def _actuator_limits(P, tau_task, tau0, previous, out):
     """Stage 6: out = [τ (n); s; clipped] within the torque window, narrowed by the rate
     limit around ``previous`` = [τ (n); 1 if stored]."""
-    _actuator_limits(plan_views(plan, dims), tau_task, tau0, previous, out)
-
-
-@njit(cache=True)
-def _actuator_limits(P, tau_task, tau0, previous, out):
     n = tau_task.shape[0]
     out[:] = limited_torque(tau_task, tau0, P.tau_max, P.rate_max, P.period, previous[:n], previous[n] != 0.0)
 
 
-# ---------------------------------------------------------------- discrete updates
+# ---------------------------------------------------------------- the discrete state
 
 
 def initial_state(n: int) -> np.ndarray:
-    """The discrete state before the first tick (:func:`state_parts`): the selector in mode 0
-    (the first selection blends in from rest), no previous q̇_dⁿ, no previous τ."""
+    """The discrete state before the first tick, [switch (3); previous q̇_dⁿ (n + 1);
+    previous τ (n + 1)]: the selector in mode 0 (the first selection blends in from rest),
+    no previous q̇_dⁿ, no previous τ."""
     return np.concatenate([INITIAL_SWITCH_STATE, np.zeros(2 * n + 2)])
 
 
-@njit(cache=True)
-def state_parts(state, n):
-    """(switch (3), previous q̇_dⁿ (n + 1), previous τ (n + 1)): the parts of the discrete
-    state [switch; previous q̇_dⁿ; previous τ] (2n + 5), as views."""
+def state_parts(state: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(switch (3), previous q̇_dⁿ (n + 1), previous τ (n + 1)): views of :func:`initial_state`'s parts."""
     return state[:3], state[3 : n + 4], state[n + 4 : 2 * n + 5]
-
-
-@njit(cache=True)
-def store_stage(tick, dims, state):
-    """The unrestricted update at t_k: the q̇_dⁿ and the τ output at t_k, stored into the
-    discrete ``state`` as the values used over the step."""
-    out = tick_views(tick, dims)
-    _, previous_qdot, previous_tau = state_parts(state, out.qdot.shape[0])
-    _store(out, previous_qdot, previous_tau)
-
-
-@njit(cache=True)
-def _store(out, previous_qdot, previous_tau):
-    n = out.qdot.shape[0]
-    previous_qdot[:n], previous_qdot[n] = out.qdot, 1.0
-    previous_tau[:n], previous_tau[n] = out.limited[:n], 1.0
-
-
-@njit(cache=True)
-def switch_update_stage(plan, dims, criteria, state, t):
-    """The selector's discrete update at t_k: the switch state (``state[:3]``) committed, in
-    place, from the criteria at the post-step state, with switch time t_k."""
-    _commit_switch(plan_views(plan, dims), criteria, state[:3], t)
-
-
-@njit(cache=True)
-def _commit_switch(P, criteria, switch, t):
-    committed = np.empty(3)
-    _select(P, criteria, switch, t, committed)
-    switch[:] = committed
-
-
-# ---------------------------------------------------------------- the tick
-
-
-@njit(cache=True)
-def commands_views(commands, m_t, m_r):
-    """The inputs of stage 4 from one packed vector [wrench (6); x_d, ẋ_d, ẍ_d (m_t each);
-    f_d; with rotational axes R_d (4), ω_d (3), ω̇_d (3)]."""
-    c, o = commands, 7 + 3 * m_t
-    x_d, xdot_d, xddot_d = c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t]
-    if m_r == 0:
-        return c[:6], x_d, xdot_d, xddot_d, c[o - 1], np.zeros(4), np.zeros(3), np.zeros(3)
-    return c[:6], x_d, xdot_d, xddot_d, c[o - 1], c[o : o + 4], c[o + 4 : o + 7], c[o + 7 : o + 10]
-
-
-@njit(cache=True)
-def tick_back(terms, plan, index, dims, criteria, state, t, commands, tick):
-    """Stages 3–6 in their order, at time t, on the discrete ``state`` (:func:`state_parts`),
-    into ``tick`` (:func:`nsdrake.control.layout.tick_views`)."""
-    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
-    _tick_back(T, P, ix, criteria, state, t, commands, tick_views(tick, dims))
-
-
-@njit(cache=True)
-def _tick_back(T, P, ix, criteria, state, t, commands, out):
-    n = T.q.shape[0]
-    switch, previous_qdot, previous_tau = state_parts(state, n)
-    out.criteria[:] = criteria
-    out.x[:] = T.x
-    _selection(T, P, ix, criteria, switch, t, out.selection)
-    if P.sweep:
-        _sweep(T, P, t, out.qdot)
-    else:
-        out.qdot[:] = out.selection[:n]
-    wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d = commands_views(
-        commands, ix.rows.shape[0], ix.rot_rows.shape[0]
-    )
-    _task_torque(T, P, ix, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d, out.task)
-    _null_space(T, P, out.qdot, previous_qdot, out.null_space)
-    _actuator_limits(P, out.task, out.null_space[:n], previous_tau, out.limited)
-
-
-@njit(cache=True)
-def step_back(terms, plan, index, dims, criteria, state, t, pending, commands, tick):
-    """A plain loop's tick after stages 1–2 (module docstring): the pending discrete update
-    of the previous tick (at its time ``state[-1]``, from these criteria) when ``pending``,
-    stages 3–6 at time t, then the stores. ``state`` = [the discrete state (2n + 5,
-    :func:`state_parts`); the time of the previous tick]."""
-    T, P, ix, out = (
-        terms_views(terms, dims),
-        plan_views(plan, dims),
-        index_views(index, dims),
-        tick_views(tick, dims),
-    )
-    n = T.q.shape[0]
-    discrete = state[: 2 * n + 5]
-    switch, previous_qdot, previous_tau = state_parts(discrete, n)
-    if pending:
-        _commit_switch(P, criteria, switch, state[-1])
-    _tick_back(T, P, ix, criteria, discrete, t, commands, out)
-    _store(out, previous_qdot, previous_tau)
-    state[-1] = t

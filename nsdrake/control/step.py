@@ -30,10 +30,9 @@ import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 
 from nsdrake.control.config import ControllerConfig
-from nsdrake.control.layout import tick_views
 from nsdrake.control.model import ControllerModel
-from nsdrake.control.plan import ControllerPlan
-from nsdrake.control.stages import initial_state, step_back
+from nsdrake.control.plan import ControllerPlan, StageBuffers
+from nsdrake.control.stages import COMMIT, PLAIN_STEP, initial_state, state_parts
 
 
 class StepResult:
@@ -49,18 +48,17 @@ class StepResult:
       ``manipulability`` = criteria[2, n]; ``task_position`` x (m_t) [m].
     """
 
-    def __init__(self, tick: np.ndarray, dims: np.ndarray):
-        views = tick_views(tick, dims)
-        n = int(dims[0])
-        self.tau, self.saturation = views.limited[:n], views.limited[n:]
-        self.null_space_torque = views.null_space[:n]
-        self.null_space_velocity_error = views.null_space[n : 2 * n]
-        self.lyapunov = views.null_space[2 * n :]
-        self.mode, self.speed_scale = views.selection[n : n + 1], views.selection[n + 1 :]
-        self.desired_null_space_velocity = views.qdot
-        self.task_torque = views.task
-        self.criteria = views.criteria
-        self.task_position = views.x
+    def __init__(self, buffers: StageBuffers, n: int):
+        part = buffers.part
+        self.tau, self.saturation = part("limited")[:n], part("limited")[n:]
+        self.null_space_torque = part("null_space")[:n]
+        self.null_space_velocity_error = part("null_space")[n : 2 * n]
+        self.lyapunov = part("null_space")[2 * n :]
+        self.mode, self.speed_scale = part("selection")[n : n + 1], part("selection")[n + 1 :]
+        self.desired_null_space_velocity = part("qdot")
+        self.task_torque = part("task")
+        self.criteria = part("criteria")
+        self.task_position = part("x")
 
 
 class ControllerStep:
@@ -93,24 +91,29 @@ class ControllerStep:
             model=model, config=config, normal=normal, wrench_point=wrench_point
         )
         self.model, self.config = model, config
-        n, m_t, m_r = plan.n, plan.m_t, plan.m_r
-        self._scratch = plan.create_scratch()
+        self._buffers = StageBuffers(plan, scratch=plan.create_scratch())
         self._terms = plan.allocate_terms()
-        self._criteria = plan.allocate_criteria()
-        self._tick = plan.allocate_tick()
-        self._commands = np.zeros(7 + 3 * m_t + (10 if m_r else 0))
-        if m_r:
-            self._commands[7 + 3 * m_t] = 1.0  # R_d = I until given
-        self.state = np.empty(2 * n + 6)
-        self.result = StepResult(self._tick, plan.dims)
+        self._m_t = plan.m_t
+        self.result = StepResult(self._buffers, plan.n)
         self.reset()
+
+    @property
+    def state(self) -> np.ndarray:
+        """The discrete state [switch (3); previous q̇_dⁿ (n + 1); previous τ (n + 1)], a view."""
+        b = self._buffers
+        return np.concatenate([b.switch, b.previous_qdot, b.previous_tau])
 
     def reset(self) -> None:
         """Forget the discrete state: the next call is the first tick (no previous q̇_dⁿ or τ,
         the selector in mode 0, blending in from rest)."""
-        self.state[:-1] = initial_state(self.plan.n)
-        self.state[-1] = 0.0
-        self._pending = False
+        b = self._buffers
+        for part, value in zip(
+            (b.switch, b.previous_qdot, b.previous_tau),
+            state_parts(initial_state(self.plan.n), self.plan.n),
+            strict=True,
+        ):
+            part[:] = value
+        self._t_previous = None
 
     def step(
         self,
@@ -132,7 +135,8 @@ class ControllerStep:
         rotational task axes the desired orientation R_d as a quaternion [w, x, y, z] and
         ω_d, ω̇_d (3 each) [rad/s, rad/s²] (kept from the previous call when None).
         Returns :attr:`result`, rewritten in place."""
-        c, m_t = self._commands, self.plan.m_t
+        b, m_t = self._buffers, self._m_t
+        c = b.commands
         c[:6], c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = (
             wrench,
             x_d,
@@ -147,12 +151,10 @@ class ControllerStep:
         if omegadot_d is not None:
             c[14 + 3 * m_t : 17 + 3 * m_t] = omegadot_d
         plan = self.plan
-        plan.front(
-            self._scratch, np.asarray(q, dtype=float), np.asarray(v, dtype=float), self._terms, self._criteria
-        )
-        step_back(
-            self._terms, plan.plan, plan.index, plan.dims, self._criteria, self.state, t, self._pending,
-            self._commands, self._tick,
-        )  # fmt: skip
-        self._pending = True
+        plan.terms(b.scratch, np.asarray(q, dtype=float), np.asarray(v, dtype=float), self._terms)
+        if self._t_previous is None:  # the first tick: no discrete update pending
+            plan.run(PLAIN_STEP & ~COMMIT, t, 0.0, self._terms, b)
+        else:
+            plan.run(PLAIN_STEP, t, self._t_previous, self._terms, b)
+        self._t_previous = t
         return self.result

@@ -122,17 +122,30 @@ def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
     )
 
 
+def controller_structure(scenario: Scenario, auto: str = "systems") -> str:
+    """ "systems" or "fused": the scenario's ``controller_structure``, with ``auto`` the
+    command's default (nsdrake run: the named systems; compare and sweep: fused)."""
+    return auto if scenario.controller_structure == "auto" else scenario.controller_structure
+
+
 def build_controller(
-    scenario: Scenario, station: Station, wrench_point, *, null_space_task: bool = True
+    scenario: Scenario,
+    station: Station,
+    wrench_point,
+    *,
+    null_space_task: bool = True,
+    structure: str = "systems",
 ) -> NullSpaceImpedanceController:
     """The scenario's controller, on its own model of the station's arm and obstacles;
-    ``wrench_point`` is the point the measured moment is about (the sensor origin)."""
+    ``wrench_point`` is the point the measured moment is about (the sensor origin);
+    ``structure`` "systems" or "fused" (:func:`controller_structure`)."""
     try:
         return NullSpaceImpedanceController(
             controller_model=controller_model(scenario, station),
             normal=station.normal,
             config=controller_config(scenario, null_space_task=null_space_task),
             wrench_point=wrench_point,
+            fused=structure == "fused",
         )
     except ControllerConfigError as e:
         raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
@@ -271,20 +284,29 @@ def connect_controller(builder, station: Station, controller, reference) -> None
 
 
 def build_diagram(
-    scenario: Scenario, *, null_space_task: bool = True, meshcat: Meshcat | None = None
+    scenario: Scenario,
+    *,
+    null_space_task: bool = True,
+    meshcat: Meshcat | None = None,
+    auto_structure: str = "systems",
 ) -> ControlledStation:
     """The Fig. 3 diagram for ``scenario``: station, reference, controller, loggers.
 
     ``null_space_task`` False sets every criterion gain and the sweep to zero
     (q̇_dⁿ = 0): the null-space controller then only damps self-motion. With a
-    ``meshcat``, the diagram also has the Meshcat visualizers.
+    ``meshcat``, the diagram also has the Meshcat visualizers. The controller's
+    structure is the scenario's ``controller_structure``, ``auto_structure`` ("systems"
+    or "fused") when that is auto.
     """
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario)
     if scenario.realism.any:
         plug_realism(builder, station, scenario.realism, scenario.control_period)
     reference = add_reference(builder, scenario, station)
-    controller = build_controller(scenario, station, station.sensor.p_WSo, null_space_task=null_space_task)
+    structure = controller_structure(scenario, auto_structure)
+    controller = build_controller(
+        scenario, station, station.sensor.p_WSo, null_space_task=null_space_task, structure=structure
+    )
     builder.AddSystem(controller)
     connect_controller(builder, station, controller, reference)
     R_d = None

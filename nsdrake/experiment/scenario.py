@@ -109,6 +109,7 @@ class ReferenceConfig:
 
 
 REPORT_CHECKS = ("fig3", "priority", "pose", "self_motion")
+CONTROLLER_STRUCTURES = ("auto", "systems", "fused")
 
 
 @dataclass
@@ -170,6 +171,11 @@ class Scenario:
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     # Effects of the real robot, each off by default (nsdrake/realism.py: the realism ladder).
     realism: RealismConfig = field(default_factory=RealismConfig)
+    # How the controller's stages run (NullSpaceImpedanceController's ``fused``): systems,
+    # the paper's named systems (diagram.svg shows them); fused, the same stages in one
+    # LeafSystem, the same traces for about a third of the controller's cost; auto, systems
+    # for nsdrake run and fused for nsdrake compare and sweep [-].
+    controller_structure: str = "auto"
     # Where the scenario was read from (set by the loader; not a YAML field).
     source: str = field(default="", metadata={"yaml": False})
     # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
@@ -479,6 +485,7 @@ def validate(s: Scenario) -> None:
     if s.control_period > s.duration:
         _fail(src, "control_period", f"{s.control_period} s is longer than the duration {s.duration} s")
     check_choice(src, "plane", s.plane, PLANES)
+    check_choice(src, "controller_structure", s.controller_structure, CONTROLLER_STRUCTURES)
     for name, value in s.arm.initial_positions.items():
         check_finite(src, f"arm.initial_positions.{_name(name)}", value)
     for name, value in s.arm.initial_velocities.items():

@@ -76,15 +76,21 @@ def run(
     progress: Callable[[float], None] | None = None,
     meshcat: Meshcat | None = None,
     live: bool = False,
+    auto_structure: str = "systems",
 ) -> tuple[Traces, ControlledStation]:
     """Simulates ``scenario`` for its duration; returns the traces and the diagram handles.
+
+    ``auto_structure``: the controller's structure ("systems" or "fused") when the
+    scenario's ``controller_structure`` is auto; both give the same traces.
 
     ``progress`` is called with the fraction done, about a hundred times per run.
     With a ``meshcat``, the run is recorded and the recording published to it
     (``visualization.write_replay`` saves it); ``live`` also sends every frame to
     the browsers watching and paces the run at real time. Neither changes the traces.
     """
-    built = build_diagram(scenario, null_space_task=null_space_task, meshcat=meshcat)
+    built = build_diagram(
+        scenario, null_space_task=null_space_task, meshcat=meshcat, auto_structure=auto_structure
+    )
     station = built.station
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()

@@ -44,12 +44,14 @@ def simulate_run(task: dict) -> dict:
         checks = own if set(own) - set(SWEEP_CHECKS) else list(SWEEP_CHECKS)
         measured = dataclasses.replace(scenario, report=dataclasses.replace(scenario.report, checks=checks))
         try:
-            traces, built = run(scenario)
+            traces, built = run(scenario, auto_structure="fused")  # the same traces, cheaper
         except DivergenceError as e:
             result.update(status="failed", reason=str(e), traces_csv=_csv_text(e.traces))
         else:
             result["traces_csv"] = _csv_text(traces)
-            baseline = run(scenario, null_space_task=False)[0] if task["baseline"] else None
+            baseline = (
+                run(scenario, null_space_task=False, auto_structure="fused")[0] if task["baseline"] else None
+            )
             metrics = compute_metrics(measured, built.station, traces, baseline)
             values = {m.name: _plain(m.value) for m in metrics}
             values["all_bounds_met"] = all(m.passed for m in metrics if m.passed is not None)

@@ -38,7 +38,7 @@ from numba import njit
 TOUCH = 1e-12  # [m] at or below this the segment counts as touching: no unique normal
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _dot(x, y):
     return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
 
@@ -51,7 +51,7 @@ def _rotate(R, x, transpose):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rotate_into(R, x, transpose, out):
     """out = R x, or Rᵀ x (3-vectors)."""
     for i in range(3):
@@ -112,7 +112,7 @@ def segments_box(A, B, R_WO, p_WO, h):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _box_minimiser(a, b, h, cuts):
     """The s ∈ [0, 1] minimising φ² along a + s b (box frame): φ² is one quadratic between
     the breakpoints where a coordinate crosses ±h_i, minimised exactly on each piece.

@@ -1,21 +1,23 @@
-"""Per-context memory of the controller's systems: the values their abstract ports and
-cache entries hold. Drake clones a context's values with ``copy.deepcopy``, so each
-class here says what a copy is (numbers copied, model scratch made anew, never shared)."""
+"""What the controller's systems share: per-context memory (the values of their abstract
+ports and cache entries) and the call of their stage.
+
+Drake copies a context's values with ``copy.deepcopy``, so each value here says what a
+copy is (numbers copied, model scratch made anew, never shared between contexts).
+"""
 
 from __future__ import annotations
 
-import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import ValueProducer
+from pydrake.systems.framework import LeafSystem, ValueProducer
 
-from nsdrake.control.plan import ControllerPlan
+from nsdrake.control.plan import ControllerPlan, StageBuffers
 
 
 class TermsValue:
     """The model terms at one state (:func:`nsdrake.control.layout.terms_views`): the value
     of the ``robot_terms`` port, one flat buffer rewritten in place at every state."""
 
-    def __init__(self, buffer: np.ndarray):
+    def __init__(self, buffer):
         self.buffer = buffer
 
 
@@ -31,27 +33,10 @@ class ScratchValue:
         return ScratchValue(self.plan)
 
 
-class FrontValue:
-    """Stages 1 and 2 at one state (the fused system's cache entry): the terms, the
-    criteria, and the scratch they were computed in."""
-
-    def __init__(self, plan: ControllerPlan):
-        self.plan = plan
-        self.scratch = plan.create_scratch()
-        self.terms = plan.allocate_terms()
-        self.criteria = plan.allocate_criteria()
-
-    def __deepcopy__(self, memo):
-        out = FrontValue(self.plan)
-        out.terms[:], out.criteria[:] = self.terms, self.criteria
-        return out
-
-
 def declare_value_cache(system, description: str, create, calc=None, prerequisites=None):
     """A cache entry holding ``create()``, allocated per context, that ``calc(context, value)``
     rewrites in place (``value`` the object itself) when one of ``prerequisites`` changed;
-    without ``calc`` it is scratch memory, never recomputed. Read it with
-    :func:`cached`."""
+    without ``calc`` it is scratch memory, never recomputed (read it with :func:`scratch`)."""
     if calc is None:
         producer = ValueProducer(allocate=lambda: AbstractValue.Make(create()), calc=lambda c, v: None)
         prerequisites = {system.nothing_ticket()}
@@ -65,12 +50,30 @@ def declare_value_cache(system, description: str, create, calc=None, prerequisit
     )
 
 
-def cached(entry, context):
-    """The object in a :func:`declare_value_cache` entry: evaluated (computed if out of
-    date), or for scratch memory, as it is."""
-    return entry.Eval(context)
-
-
 def scratch(entry, context):
     """The object in a scratch entry of :func:`declare_value_cache` (never computed)."""
     return entry.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
+
+
+class StageSystem(LeafSystem):
+    """A system that runs one stage of :mod:`nsdrake.control.stages`: it has the plan, a
+    ``robot_terms`` input (unless ``terms`` is False) and per-context :class:`StageBuffers`
+    for the stage's other arrays."""
+
+    def __init__(self, plan: ControllerPlan, *, terms: bool = True):
+        super().__init__()
+        self._plan = plan
+        self._n = plan.n
+        self._stage_buffers = declare_value_cache(self, "stage buffers", lambda: StageBuffers(plan))
+        if terms:
+            self._terms = self.DeclareAbstractInputPort(
+                "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
+            )
+        self._no_terms = plan.allocate_terms()
+
+    def buffers(self, context) -> StageBuffers:
+        return scratch(self._stage_buffers, context)
+
+    def run(self, context, stages: int, buffers: StageBuffers, t_previous: float = 0.0) -> None:
+        terms = self._terms.Eval(context).buffer if hasattr(self, "_terms") else self._no_terms
+        self._plan.run(stages, context.get_time(), t_previous, terms, buffers)

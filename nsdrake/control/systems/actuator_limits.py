@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from nsdrake.control.plan import ControllerPlan
-from nsdrake.control.stages import actuator_limits_stage
+from nsdrake.control.stages import LIMITS
+from nsdrake.control.systems._values import StageSystem
 
 
-class ActuatorLimitsSystem(LeafSystem):
+class ActuatorLimitsSystem(StageSystem):
     """τ = τ_task + s τ₀ within each joint's torque and torque-rate limits, τ₀ reduced
     first (:mod:`nsdrake.control.actuator_limits`).
 
@@ -32,9 +33,8 @@ class ActuatorLimitsSystem(LeafSystem):
     """
 
     def __init__(self, *, plan: ControllerPlan):
-        super().__init__()
+        super().__init__(plan, terms=False)
         n = plan.n
-        self._n, self._plan = n, plan
         self._task = self.DeclareVectorInputPort("task_torque", n)
         self._tau0 = self.DeclareVectorInputPort("null_space_torque", n)
         self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))  # [τ, 1 if it exists]
@@ -49,11 +49,12 @@ class ActuatorLimitsSystem(LeafSystem):
         return {"generalized_force": self._n, "saturation": 2}
 
     def _calc(self, context, output):
-        p = self._plan
-        actuator_limits_stage(
-            p.plan, p.dims, self._task.Eval(context), self._tau0.Eval(context),
-            context.get_discrete_state(self._previous).CopyToVector(), output.get_mutable_value(),
-        )  # fmt: skip
+        b, n = self.buffers(context), self._n
+        b.part("task")[:] = self._task.Eval(context)
+        b.part("null_space")[:n] = self._tau0.Eval(context)
+        b.previous_tau[:] = context.get_discrete_state(self._previous).get_value()
+        self.run(context, LIMITS, b)
+        output.SetFromVector(b.part("limited"))
 
     def _store(self, context, state):
         sample = state.get_mutable_discrete_state(self._previous).get_mutable_value()

@@ -12,13 +12,12 @@ splits it with Drake's (C++) ``Demultiplexer`` for its diagnostic ports (``d_min
 from __future__ import annotations
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
 from nsdrake.control.layout import CRITERIA
 from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.priority import Criterion
-from nsdrake.control.systems._values import ScratchValue, TermsValue, declare_value_cache, scratch
+from nsdrake.control.stages import CRITERIA as STAGE
+from nsdrake.control.systems._values import StageSystem
 
 CRITERION_LAYOUT = ("gradient", "value", "switching", "activation")  # [Φ (n); p; s; a]
 
@@ -38,7 +37,7 @@ def unpack_criterion(packed: np.ndarray) -> tuple[np.ndarray, float, float, floa
     return packed[:-3], float(packed[-3]), float(packed[-2]), float(packed[-1])
 
 
-class CriteriaSystem(LeafSystem):
+class CriteriaSystem(StageSystem):
     """The criteria of Section 3.5 and joint limits at the measured state (stage 2 of
     :mod:`nsdrake.control.stages`): obstacle avoidance (Eq. 31) from the controller model's
     own geometry (the arm's links and the obstacles it knows about), joint torque due to
@@ -65,13 +64,8 @@ class CriteriaSystem(LeafSystem):
     """
 
     def __init__(self, *, plan: ControllerPlan):
-        super().__init__()
-        self._plan = plan
+        super().__init__(plan)
         self._shape = (CRITERIA, plan.n + 3)
-        self._terms = self.DeclareAbstractInputPort(
-            "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
-        )
-        self._scratch = declare_value_cache(self, "model scratch", lambda: ScratchValue(plan))
         self.DeclareVectorOutputPort(
             "criteria",
             CRITERIA * (plan.n + 3),
@@ -83,6 +77,6 @@ class CriteriaSystem(LeafSystem):
         return criteria_parts(self._plan.n)
 
     def _calc(self, context, output):
-        terms = self._terms.Eval(context).buffer
-        out = output.get_mutable_value().reshape(self._shape)
-        self._plan.criteria(scratch(self._scratch, context).scratch, terms, out)
+        b = self.buffers(context)
+        self.run(context, STAGE, b)
+        output.SetFromVector(b.criteria.ravel())

@@ -4,16 +4,30 @@ from __future__ import annotations
 
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from nsdrake.control.layout import tick_size
-from nsdrake.control.plan import ControllerPlan
-from nsdrake.control.stages import initial_state, store_stage, switch_update_stage, tick_back
-from nsdrake.control.systems._values import FrontValue, declare_value_cache
+from nsdrake.control.plan import ControllerPlan, StageBuffers
+from nsdrake.control.stages import COMMIT, STORE, TICK, commands_size, initial_state
+from nsdrake.control.systems._values import declare_value_cache
+
+
+class FrontValue:
+    """Stages 1 and 2 at one state (the fused system's cache entry): the terms and the
+    buffers whose criteria they filled (with the model scratch they were computed in)."""
+
+    def __init__(self, plan: ControllerPlan):
+        self.plan = plan
+        self.terms = plan.allocate_terms()
+        self.buffers = StageBuffers(plan, scratch=plan.create_scratch())
+
+    def __deepcopy__(self, memo):
+        out = FrontValue(self.plan)
+        out.terms[:], out.buffers.criteria[:] = self.terms, self.buffers.criteria
+        return out
 
 
 class FusedController(LeafSystem):
     """The stages of :mod:`nsdrake.control.stages` in one system: stages 1–2 in a cache entry
-    that depends on the measured state alone, stages 3–6 in the output, and the three
-    pieces of discrete state with the named systems' events (the same τ, tick by tick).
+    that depends on the measured state alone, stages 3–6 in the output, and the discrete
+    state with the named systems' events (the same τ, tick by tick).
 
     .. pydrake_system::
 
@@ -35,50 +49,52 @@ class FusedController(LeafSystem):
     and τ of the output (the previous values of Eq. 21's q̈_dⁿ and of the rate limit),
     then a discrete update commits the selector's switch from the state the plant has
     just stepped to. The criteria at that state are kept for the next output (the cache
-    entry's state has not changed), so stages 1–2 run once per period.
+    entry's input has not changed), so stages 1–2 run once per period. The discrete
+    state is [switch (3); previous q̇_dⁿ (n + 1); previous τ (n + 1)].
     """
 
-    def __init__(self, *, plan: ControllerPlan, commands_size: int):
+    def __init__(self, *, plan: ControllerPlan):
         super().__init__()
         self._plan = plan
         n = plan.n
         self._n = n
         self._state = self.DeclareVectorInputPort("estimated_state", 2 * n)
-        self._commands = self.DeclareVectorInputPort("commands", commands_size)
+        self._commands = self.DeclareVectorInputPort("commands", commands_size(plan.m_t, plan.m_r))
         self._front = declare_value_cache(
             self, "stages 1-2", lambda: FrontValue(plan), self._calc_front,
             {self.input_port_ticket(self._state.get_index())},
         )  # fmt: skip
-        # [switch (3); previous q̇_dⁿ (n + 1); previous τ (n + 1)] (stages.state_parts)
         self._discrete = self.DeclareDiscreteState(BasicVector(initial_state(n)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(plan.config.period, 0.0, self._store)
-        self.DeclarePeriodicDiscreteUpdateEvent(plan.config.period, 0.0, self._update_switch)
+        self.DeclarePeriodicDiscreteUpdateEvent(plan.config.period, 0.0, self._commit)
         deps = {self.input_port_ticket(p.get_index()) for p in (self._state, self._commands)}
         deps |= {self.all_state_ticket(), self.time_ticket()}
         self._tick = self.DeclareVectorOutputPort(
-            "tick", tick_size(plan.dims), self._calc, prerequisites_of_calc=deps
+            "tick", plan.tick_length, self._calc, prerequisites_of_calc=deps
         )
+        self._scratch_tick = plan.allocate_tick()  # COMMIT reads and writes no tick
 
     def _calc_front(self, context, front: FrontValue):
         state = self._state.Eval(context)
         n = self._n
-        self._plan.front(front.scratch, state[:n], state[n:], front.terms, front.criteria)
+        self._plan.front(front.buffers.scratch, state[:n], state[n:], front.terms, front.buffers)
+
+    def _run(self, context, stages, t_previous, state, tick) -> None:
+        front, n = self._front.Eval(context), self._n
+        b = front.buffers
+        self._plan.run_arrays(
+            stages, context.get_time(), t_previous, front.terms, b.criteria, state[:3], state[3 : n + 4],
+            state[n + 4 :], self._commands.Eval(context), tick, b.scratch,
+        )  # fmt: skip
 
     def _calc(self, context, output):
-        p, front = self._plan, self._front.Eval(context)
-        tick_back(
-            front.terms, p.plan, p.index, p.dims, front.criteria,
-            context.get_discrete_state(self._discrete).CopyToVector(), context.get_time(),
-            self._commands.Eval(context), output.get_mutable_value(),
-        )  # fmt: skip
+        state = context.get_discrete_state(self._discrete).CopyToVector()
+        self._run(context, TICK, 0.0, state, output.get_mutable_value())
 
     def _store(self, context, state):
         discrete = state.get_mutable_discrete_state(self._discrete).get_mutable_value()
-        store_stage(self._tick.Eval(context), self._plan.dims, discrete)
+        self._run(context, STORE, 0.0, discrete, self._tick.Eval(context))
 
-    def _update_switch(self, context, discrete_state):
-        p = self._plan
-        switch_update_stage(
-            p.plan, p.dims, self._front.Eval(context).criteria,
-            discrete_state.get_mutable_vector(self._discrete).get_mutable_value(), context.get_time(),
-        )  # fmt: skip
+    def _commit(self, context, discrete_state):
+        discrete = discrete_state.get_mutable_vector(self._discrete).get_mutable_value()
+        self._run(context, COMMIT, context.get_time(), discrete, self._scratch_tick)

@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
-
 from nsdrake.control.plan import ControllerPlan
-from nsdrake.control.stages import task_torque_stage
-from nsdrake.control.systems._values import TermsValue
+from nsdrake.control.stages import TASK
+from nsdrake.control.systems._values import StageSystem
 
 
-class ImpedanceController(LeafSystem):
+class ImpedanceController(StageSystem):
     """τ − τ₀ = Jᵀ Λ (ẍ_c − J̇ q̇) + J_Tᵀ W_T + C q̇ + g, with
     ẍ_c = ẍ_d + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − nᵀF)
     (:mod:`nsdrake.control.impedance` gives the law, why the measured wrench W_T
@@ -45,40 +41,27 @@ class ImpedanceController(LeafSystem):
     """
 
     def __init__(self, *, plan: ControllerPlan):
-        super().__init__()
-        self._plan = plan
+        super().__init__(plan)
         m_t = plan.m_t
-        self._terms = self.DeclareAbstractInputPort(
-            "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
-        )
-        self._x_d = self.DeclareVectorInputPort("x_d", m_t)
-        self._xdot_d = self.DeclareVectorInputPort("xdot_d", m_t)
-        self._xddot_d = self.DeclareVectorInputPort("xddot_d", m_t)
-        self._f_d = self.DeclareVectorInputPort("f_d", 1)
-        self._wrench = self.DeclareVectorInputPort("measured_wrench", 6)
-        inputs = [self._terms, self._x_d, self._xdot_d, self._xddot_d, self._f_d, self._wrench]
-        self._rotation = None
+        # In the order of the packed commands (nsdrake.control.stages.commands_views).
+        sizes = {"measured_wrench": 6, "x_d": m_t, "xdot_d": m_t, "xddot_d": m_t, "f_d": 1}
         if plan.m_r:
-            self._rotation = [
-                self.DeclareVectorInputPort(name, size)
-                for name, size in (("R_d", 4), ("omega_d", 3), ("omegadot_d", 3))
-            ]
-            inputs += self._rotation
-        self._no_rotation = (np.zeros(4), np.zeros(3), np.zeros(3))
+            sizes |= {"R_d": 4, "omega_d": 3, "omegadot_d": 3}
+        self._inputs, start = [], 0
+        for name, size in sizes.items():
+            self._inputs.append((self.DeclareVectorInputPort(name, size), slice(start, start + size)))
+            start += size
+        ports = [self._terms] + [port for port, _ in self._inputs]
         self.DeclareVectorOutputPort(
             "generalized_force",
             plan.n,
             self._calc,
-            prerequisites_of_calc={self.input_port_ticket(p.get_index()) for p in inputs},
+            prerequisites_of_calc={self.input_port_ticket(p.get_index()) for p in ports},
         )
 
     def _calc(self, context, output):
-        p = self._plan
-        rotation = self._no_rotation
-        if self._rotation is not None:
-            rotation = [port.Eval(context) for port in self._rotation]
-        task_torque_stage(
-            self._terms.Eval(context).buffer, p.plan, p.index, p.dims, self._wrench.Eval(context),
-            self._x_d.Eval(context), self._xdot_d.Eval(context), self._xddot_d.Eval(context),
-            self._f_d.Eval(context)[0], *rotation, output.get_mutable_value(),
-        )  # fmt: skip
+        b = self.buffers(context)
+        for port, where in self._inputs:
+            b.commands[where] = port.Eval(context)
+        self.run(context, TASK, b)
+        output.SetFromVector(b.part("task"))

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from nsdrake.control.plan import ControllerPlan
-from nsdrake.control.stages import null_space_stage
-from nsdrake.control.systems._values import TermsValue
+from nsdrake.control.stages import NULL_SPACE
+from nsdrake.control.systems._values import StageSystem
 
 
-class NullSpaceController(LeafSystem):
+class NullSpaceController(StageSystem):
     """τ₀ = H N (q̈_dⁿ + (J̇^# J + J^# J̇) q̇ + K_n eⁿ + H⁻¹ C eⁿ), eⁿ = q̇_dⁿ − N q̇,
     ν = ½ eⁿᵀ H eⁿ (Eqs. 14, 21, 23; :mod:`nsdrake.control.null_space`).
 
@@ -35,12 +34,8 @@ class NullSpaceController(LeafSystem):
     """
 
     def __init__(self, *, plan: ControllerPlan):
-        super().__init__()
+        super().__init__(plan)
         n = plan.n
-        self._n, self._plan = n, plan
-        self._terms = self.DeclareAbstractInputPort(
-            "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
-        )
         self._qdot_ns_d = self.DeclareVectorInputPort("desired_null_space_velocity", n)
         # [previous q̇_dⁿ (n), 1 if that sample exists]
         self._previous = self.DeclareDiscreteState(BasicVector(np.zeros(n + 1)))
@@ -57,11 +52,11 @@ class NullSpaceController(LeafSystem):
         return {"generalized_force": self._n, "null_space_velocity_error": self._n, "lyapunov": 1}
 
     def _calc(self, context, output):
-        p = self._plan
-        null_space_stage(
-            self._terms.Eval(context).buffer, p.plan, p.dims, self._qdot_ns_d.Eval(context),
-            context.get_discrete_state(self._previous).CopyToVector(), output.get_mutable_value(),
-        )  # fmt: skip
+        b = self.buffers(context)
+        b.part("qdot")[:] = self._qdot_ns_d.Eval(context)
+        b.previous_qdot[:] = context.get_discrete_state(self._previous).get_value()
+        self.run(context, NULL_SPACE, b)
+        output.SetFromVector(b.part("null_space"))
 
     def _store(self, context, state):
         sample = state.get_mutable_discrete_state(self._previous).get_mutable_value()

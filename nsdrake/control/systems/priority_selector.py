@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from nsdrake.control.layout import CRITERIA
 from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.priority import INITIAL_SWITCH_STATE
-from nsdrake.control.stages import selection_stage, switch_update_stage
-from nsdrake.control.systems._values import TermsValue
+from nsdrake.control.stages import COMMIT, SELECTION
+from nsdrake.control.systems._values import StageSystem
 
 
-class PrioritySelector(LeafSystem):
+class PrioritySelector(StageSystem):
     """The desired null-space velocity q̇_dⁿ from the criteria, ordered by Fig. 1's
     decision tree and resolved level by level (:mod:`nsdrake.control.priority`): hysteresis
     on the limits, a smoothstep blend of q̇_dⁿ over ``blend_time`` after each switch,
@@ -46,14 +45,9 @@ class PrioritySelector(LeafSystem):
     """
 
     def __init__(self, *, plan: ControllerPlan):
-        super().__init__()
-        self._plan = plan
+        super().__init__(plan)
         n = plan.n
-        self._n = n
         self._shape = (CRITERIA, n + 3)
-        self._terms = self.DeclareAbstractInputPort(
-            "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
-        )
         self._criteria = self.DeclareVectorInputPort("criteria", CRITERIA * (n + 3))
         self._state = self.DeclareDiscreteState(BasicVector(list(INITIAL_SWITCH_STATE)))
         self.DeclarePeriodicDiscreteUpdateEvent(plan.config.period, 0.0, self._update)
@@ -66,17 +60,15 @@ class PrioritySelector(LeafSystem):
         return {"desired_null_space_velocity": self._n, "mode": 1, "speed_scale": 1}
 
     def _calc(self, context, output):
-        p = self._plan
-        selection_stage(
-            self._terms.Eval(context).buffer, p.plan, p.index, p.dims,
-            self._criteria.Eval(context).reshape(self._shape),
-            context.get_discrete_state(self._state).CopyToVector(), context.get_time(),
-            output.get_mutable_value(),
-        )  # fmt: skip
+        b = self.buffers(context)
+        b.criteria[:] = self._criteria.Eval(context).reshape(self._shape)
+        b.switch[:] = context.get_discrete_state(self._state).get_value()
+        self.run(context, SELECTION, b)
+        output.SetFromVector(b.part("selection"))
 
     def _update(self, context, discrete_state):
-        p = self._plan
-        switch_update_stage(
-            p.plan, p.dims, self._criteria.Eval(context).reshape(self._shape),
-            discrete_state.get_mutable_vector(self._state).get_mutable_value(), context.get_time(),
-        )  # fmt: skip
+        b = self.buffers(context)
+        b.criteria[:] = self._criteria.Eval(context).reshape(self._shape)
+        b.switch[:] = context.get_discrete_state(self._state).get_value()
+        self.run(context, COMMIT, b, t_previous=context.get_time())
+        discrete_state.get_mutable_vector(self._state).SetFromVector(b.switch)

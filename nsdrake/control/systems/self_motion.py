@@ -2,15 +2,12 @@
 
 from __future__ import annotations
 
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
-
 from nsdrake.control.plan import ControllerPlan
-from nsdrake.control.stages import sweep_stage
-from nsdrake.control.systems._values import TermsValue
+from nsdrake.control.stages import SWEEP
+from nsdrake.control.systems._values import StageSystem
 
 
-class SelfMotionSweep(LeafSystem):
+class SelfMotionSweep(StageSystem):
     """q̇_dⁿ = a(t) N d / ‖N d‖: the arm swept through its self-motion along the
     projection of a fixed joint-space direction d, at the commanded speed a(t)
     (:mod:`nsdrake.control.self_motion`). N is the projector of the same generalised
@@ -28,11 +25,7 @@ class SelfMotionSweep(LeafSystem):
     """
 
     def __init__(self, *, plan: ControllerPlan):
-        super().__init__()
-        self._plan = plan
-        self._terms = self.DeclareAbstractInputPort(
-            "robot_terms", AbstractValue.Make(TermsValue(plan.allocate_terms()))
-        )
+        super().__init__(plan)
         self.DeclareVectorOutputPort(
             "desired_null_space_velocity",
             plan.n,
@@ -41,7 +34,6 @@ class SelfMotionSweep(LeafSystem):
         )
 
     def _calc(self, context, output):
-        p = self._plan
-        sweep_stage(
-            self._terms.Eval(context).buffer, p.plan, p.dims, context.get_time(), output.get_mutable_value()
-        )
+        b = self.buffers(context)
+        self.run(context, SWEEP, b)
+        output.SetFromVector(b.part("qdot"))

@@ -1,0 +1,95 @@
+"""nsdrake's compiled kernels: compiled once per install, announced while it happens, never stale.
+
+The controller's arithmetic runs in numba kernels (``@njit(cache=True)``). numba compiles
+a kernel on its first call and keeps the machine code in ``__pycache__`` beside the
+source, so the first run after an install compiles and later runs load.
+
+Two things numba leaves to its user:
+
+- **A notice.** Compiling takes tens of seconds, during which a run prints nothing.
+  :func:`announce_compiling` listens to numba's compile events and prints one line, once
+  per process, when the first of nsdrake's kernels starts compiling (not when they load
+  from the cache).
+- **Stale machine code.** numba invalidates a cached kernel when *its own* source file
+  changes, not when a kernel it calls, defined in another file, does: after an edit or a
+  partial update the cache would keep running the old callee. :func:`refresh_cache`
+  fingerprints every nsdrake source file that defines kernels and, when the fingerprint
+  changes, deletes nsdrake's cached kernels (only those, only in the package's own
+  ``__pycache__`` folders), so that they compile anew once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+from pathlib import Path
+
+from numba.core import event
+
+PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
+STAMP = "nsdrake-kernels.stamp"
+NOTICE = "nsdrake: compiling nsdrake's kernels (once per install)…"
+
+
+def kernel_sources(package: Path = PACKAGE) -> list[Path]:
+    """The package's source files that define numba kernels, sorted."""
+    return sorted(p for p in package.rglob("*.py") if "@njit" in p.read_text(encoding="utf-8"))
+
+
+def fingerprint(sources: list[Path], package: Path = PACKAGE) -> str:
+    digest = hashlib.sha256()
+    for path in sources:
+        digest.update(str(path.relative_to(package)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def refresh_cache(package: Path = PACKAGE) -> bool:
+    """Deletes nsdrake's cached kernels if any kernel source changed since they were
+    compiled (module docstring); True if it did. A read-only install keeps its cache (it
+    cannot have been edited in place)."""
+    sources = kernel_sources(package)
+    stamp = package / "__pycache__" / STAMP
+    now = fingerprint(sources, package)
+    try:
+        if stamp.read_text() == now:
+            return False
+    except OSError:
+        pass
+    try:
+        for path in sources:
+            for cached in (path.parent / "__pycache__").glob(f"{path.stem}.*.nb[ic]"):
+                cached.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(now)
+    except OSError:
+        return False
+    return True
+
+
+class _CompileNotice(event.Listener):
+    """Prints :data:`NOTICE` on stderr when the first nsdrake kernel starts compiling."""
+
+    def __init__(self):
+        self.printed = False
+
+    def on_start(self, ev):
+        if self.printed:
+            return
+        module = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "") or ""
+        if module.startswith("nsdrake."):
+            self.printed = True
+            print(NOTICE, file=sys.stderr, flush=True)
+
+    def on_end(self, ev):
+        pass
+
+
+_notice = _CompileNotice()
+
+
+def announce_compiling() -> None:
+    """Registers the compile notice (once per process)."""
+    if not getattr(announce_compiling, "done", False):
+        event.register("numba:compile", _notice)
+        announce_compiling.done = True
