@@ -170,8 +170,8 @@ def _complete_terms(T, P, ix):
 
 @njit(cache=True)
 def run_stages(
-    stages, t, t_previous, plan, index, dims, terms, criteria, switch, previous_qdot, previous_tau, commands, tick,
-    pose, sweep, limits, obstacles,
+    stages, t, t_previous, plan, index, dims, terms, criteria, switch, previous_qdot, previous_tau,
+    commands, tick, pose, sweep, limits, obstacles,
 ) -> bool:  # fmt: skip
     """The ``stages`` (a bit set of this module's constants) at time t, in their order:
     CRITERIA, COMMIT (at ``t_previous``), SELECTION, DESIRED or SWEEP, TASK, NULL_SPACE,
