@@ -1,0 +1,184 @@
+"""The controller's tick run three ways gives one τ (issue 20, item 2).
+
+The named systems (``NullSpaceImpedanceController``), the fused system
+(``NullSpaceImpedanceController(fused=True)``) and the plain ``ControllerStep`` run the
+same stages (nsdrake.control.stages). Each closed-loop run here simulates the scenario with
+the named systems and with the fused system, logging the controller's inputs and τ at every
+control tick; the plain step is then called once per logged tick with the logged inputs, as
+a robot's loop would. All three must agree at every tick to 1e-12 relative (they run the
+same compiled code on the same numbers, so they agree to the last bit).
+
+What the comparison catches: a stage dropped or run out of order in the fused system or in
+the plain step (the selector's commit after the selection, the stores before the limits,
+the pending discrete update skipped, …) changes τ from the first tick or the first mode
+switch on; so does a discrete update at the wrong instant (Drake's event order: the
+stores in the unrestricted update with the plant's step, the selector's commit in the
+discrete update that follows, at the same time but from the post-step state).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import fig3_with
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput
+
+from nsdrake import ControllerModel, ControllerStep, NullSpaceImpedanceController
+from nsdrake.control.orientation import rotation_to_quaternion
+from nsdrake.experiment import diagram as assembly
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.scenario_station import add_scenario_station
+from nsdrake.station.models import models_dir
+from nsdrake.station.plant import desired_tool_orientation
+
+EXACT = 1e-12  # relative, per tick
+LOGGED = ("generalized_force", "desired_null_space_velocity", "mode", "saturation", "d_min", "lyapunov")
+
+
+def scenario_controller(scenario):
+    def make(station, structure):
+        return assembly.build_controller(scenario, station, station.sensor.p_WSo, structure=structure)
+
+    return make
+
+
+def closed_loop(scenario, structure: str, make_controller=None) -> dict:
+    """The scenario's diagram (as nsdrake.experiment.diagram builds it, without the realism
+    rungs) with the controller in ``structure`` ("systems" or "fused"), simulated; returns
+    the logged controller inputs and outputs, one column per control tick."""
+    builder = DiagramBuilder()
+    station = add_scenario_station(builder, scenario)
+    reference = assembly.add_reference(builder, scenario, station)
+    controller = (make_controller or scenario_controller(scenario))(station, structure)
+    builder.AddSystem(controller)
+    assembly.connect_controller(builder, station, controller, reference)
+    R_d = None
+    if station.arm_model.m_r:
+        R_d = desired_tool_orientation(station, scenario.reference.orientation)
+        assembly.add_orientation_reference(builder, controller, R_d)
+    ports = {"state": station.ports.state, "wrench": station.ports.wrench}
+    ports |= {name: reference.GetOutputPort(name) for name in ("x_d", "xdot_d", "xddot_d", "f_d")}
+    ports |= {name: controller.GetOutputPort(name) for name in LOGGED}
+    loggers = {
+        name: LogVectorOutput(port, builder, publish_period=scenario.control_period)
+        for name, port in ports.items()
+    }
+    simulator = Simulator(builder.Build())
+    context = simulator.get_mutable_context()
+    plant_context = station.plant.GetMyMutableContextFromRoot(context)
+    station.plant.SetPositions(plant_context, station.q0)
+    station.plant.SetVelocities(plant_context, station.v0)
+    simulator.Initialize()
+    simulator.AdvanceTo(scenario.duration)
+    logs = {name: logger.FindLog(context).data() for name, logger in loggers.items()}
+    logs["t"] = loggers["state"].FindLog(context).sample_times()
+    logs["controller"], logs["R_d"] = controller, R_d
+    return logs
+
+
+def plain_steps(logs: dict) -> np.ndarray:
+    """τ of a ControllerStep built from the same model, task and config, called once per
+    logged tick with the logged state, wrench and reference. (n, ticks)."""
+    controller = logs["controller"]
+    step = ControllerStep(
+        controller_model=controller.model,
+        normal=controller.normal,
+        config=controller.config,
+        wrench_point=controller.wrench_point,
+    )
+    n = controller.model.n
+    rotation = () if logs["R_d"] is None else (rotation_to_quaternion(logs["R_d"]), np.zeros(3), np.zeros(3))
+    out = np.empty((n, len(logs["t"])))
+    for k, t in enumerate(logs["t"]):
+        x = logs["state"][:, k]
+        desired = (logs[name][:, k] for name in ("x_d", "xdot_d", "xddot_d"))
+        result = step.step(t, x[:n], x[n:], logs["wrench"][:, k], *desired, logs["f_d"][0, k], *rotation)
+        out[:, k] = result.tau
+    return out
+
+
+def worst_relative(a: np.ndarray, b: np.ndarray) -> float:
+    """max over ticks of max|a_k − b_k| / max|b_k| (columns are ticks); equal entries, ∞ (no
+    obstacle: d_min) included, differ by 0."""
+    difference = np.where(a == b, 0.0, np.abs(a - b))
+    scale = np.maximum(np.max(np.abs(np.where(np.isfinite(b), b, 0.0)), axis=0), 1e-300)
+    return float(np.max(np.max(difference, axis=0) / scale))
+
+
+def assert_three_ways_agree(scenario, make_controller=None) -> dict:
+    named = closed_loop(scenario, "systems", make_controller)
+    fused = closed_loop(scenario, "fused", make_controller)
+    for name in LOGGED:
+        assert worst_relative(fused[name], named[name]) <= EXACT, name
+    assert worst_relative(plain_steps(named), named["generalized_force"]) <= EXACT
+    return named
+
+
+def test_fig3_approach_three_ways():
+    """fig3's first 0.4 s: the approach, mode 0 → 2 at the first tick, obstacle and
+    criteria gradients active, the q̈_dⁿ feed-forward from the second tick on."""
+    named = assert_three_ways_agree(load_scenario("fig3", duration=0.4))
+    assert set(np.unique(named["mode"])) == {2.0}
+    assert np.max(np.abs(named["desired_null_space_velocity"])) > 0.1  # the null space is commanded
+
+
+def test_panda_pose_task_with_obstacles_three_ways():
+    """panda_wipe's first 0.3 s: the full pose task, the obstacle criterion inside its
+    influence distance (the table), the joint-limit criterion, gravity."""
+    named = assert_three_ways_agree(load_scenario("panda_wipe", duration=0.3))
+    assert np.max(named["d_min"]) < 0.1  # the obstacle level acts
+
+
+def test_actuator_limits_three_ways(tmp_path):
+    """fig3 with torque and torque-rate limits that bind from the start: τ₀ scaled and the
+    task torque clipped, the rate window around the stored previous τ."""
+    limits = "actuator_limits: {torque: {joint1: 6.0, joint2: 4.0, joint3: 3.0, joint4: 1.5}, torque_rate: {joint1: 200.0, joint2: 200.0, joint3: 100.0, joint4: 50.0}}\n"  # noqa: E501
+    named = assert_three_ways_agree(fig3_with(tmp_path, limits, duration=0.3))
+    s, clipped = named["saturation"]
+    assert np.min(s) < 0.5 and np.max(clipped) >= 1  # both limits bind
+
+
+@pytest.mark.slow
+def test_fig3_whole_run_three_ways():
+    """fig3 through contact, pressing and sliding (5 s)."""
+    assert_three_ways_agree(load_scenario("fig3"))
+
+
+@pytest.mark.slow
+def test_priority_demo_every_branch_three_ways():
+    """priority_demo: manipulability (mode 3), joint torque (mode 2), obstacle avoidance
+    (mode 1), each switch blended, hysteresis on both limits."""
+    named = assert_three_ways_agree(load_scenario("priority_demo"))
+    assert {1.0, 2.0, 3.0} <= set(np.unique(named["mode"]))
+
+
+@pytest.mark.slow
+def test_panda_wipe_through_contact_three_ways():
+    """panda_wipe to 1.5 s: contact at ≈ 1.27 s, where the torque-rate limit binds."""
+    named = assert_three_ways_agree(load_scenario("panda_wipe", duration=1.5))
+    assert np.min(named["saturation"][0]) < 1.0
+
+
+def test_drake_terms_three_ways():
+    """A controller whose model terms come from Drake's plant calls (ControllerModel.from_plant,
+    no Pinocchio, no obstacles) runs the same stages: fig3's first 0.3 s three ways."""
+    scenario = load_scenario("fig3", duration=0.3)
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModels(str(models_dir() / "arm4.urdf"))
+    plant.Finalize()
+    model = ControllerModel.from_plant(plant, tool_frame="tool", task_axes=("x", "y"))
+    config = assembly.controller_config(scenario)
+    config.desired_null_space.criteria.obstacle.gain = 0.0  # a plant alone knows no obstacles
+
+    def controller(station, structure):
+        return NullSpaceImpedanceController(
+            controller_model=model, normal=station.normal, config=config,
+            wrench_point=station.sensor.p_WSo, fused=structure == "fused",
+        )  # fmt: skip
+
+    named = assert_three_ways_agree(scenario, controller)
+    assert named["controller"].model.dynamics == "drake"
