@@ -51,7 +51,9 @@ from nsdrake.reporting.metrics import SETTLE_TIME, first_contact_index, torque_s
 from nsdrake.studies.measures import (
     MODE_CRITERION,
     MODE_NAME,
+    OSCILLATION_FLOOR_SHARE,
     commanded_step_rates,
+    drift_rate,
     force_oscillation,
     wrong_way_share,
 )
@@ -279,29 +281,29 @@ def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
 def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
     """The realism ladder (nsdrake/realism.py), in the fig3 window (from 0.5 s after first
     contact to the end): the measured normal force's error (what the controller and the
-    paper's Fig. 3 see) and the true contact force's, how the force oscillates around
-    f_d (:func:`nsdrake.studies.measures.force_oscillation`), the tangential position
-    error, ‖eⁿ‖ and ν."""
+    paper's Fig. 3 see), its drift (least-squares slope) and the share of it that the
+    impedance law's normal spring adds, K_p,n nᵀ(x_d − x) / K_f (mean; the normal
+    reference is frozen where contact was detected, so a tool that lagged its approach
+    reference is pressed harder for the rest of the run), the true contact force's
+    error, how the force oscillates around f_d (:func:`nsdrake.studies.measures.force_oscillation`;
+    no frequency below the noise floor, :data:`~nsdrake.studies.measures.OSCILLATION_FLOOR_SHARE`
+    of f_d), the tangential position error, ‖eⁿ‖ and ν."""
     s = ctx.scenario
     t = traces["t"]
-    row: dict = {}
     k0 = first_contact_index(traces, s.reference.contact_threshold)
     if k0 is None:
-        return {**row, "first_contact_time": math.inf}
+        return {"first_contact_time": math.inf}
     window = t >= t[k0] + SETTLE_TIME
-    row["first_contact_time"] = float(t[k0])
+    row: dict = {"first_contact_time": float(t[k0])}
     if window.sum() < 8:
         return row
-    error = (traces["f_n"] - traces["f_d"])[window]
-    row["force_error_rms"] = _rms(error)
-    row["force_error_peak"] = float(np.abs(error).max())
-    row["force_error_mean"] = float(error.mean())
-    true = traces["f_n_true"] if "f_n_true" in traces else traces["f_n"]
-    true_error = (true - traces["f_d"])[window]
-    row["true_force_error_rms"] = _rms(true_error)
-    row["true_force_error_mean"] = float(true_error.mean())
-    frequency, rms, p2p = force_oscillation(t[window], error)
-    row["force_oscillation_frequency"] = frequency
+    row |= _force_error_figures(traces, ctx, window)
+    frequency, rms, p2p = force_oscillation(
+        t[window],
+        (traces["f_n"] - traces["f_d"])[window],
+        floor=OSCILLATION_FLOOR_SHARE * float(traces["f_d"][window].max()),
+    )
+    row["force_oscillation_frequency"] = frequency if math.isfinite(frequency) else ""  # "": none
     row["force_oscillation_rms"] = rms
     row["force_oscillation_p2p"] = p2p
     pos_err = np.column_stack([traces[a] - traces[f"{a}_d"] for a in ctx.arm.task_axes])[window]
@@ -311,15 +313,62 @@ def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
     return row
 
 
+def _force_error_figures(traces: Traces, ctx: RunFacts, window: np.ndarray) -> dict:
+    """The measured and the true force's error in ``window``, the error's drift, and the
+    normal spring's share of it (:func:`measure_realism`)."""
+    imp = ctx.scenario.impedance
+    t = traces["t"][window]
+    error = (traces["f_n"] - traces["f_d"])[window]
+    true = traces["f_n_true"] if "f_n_true" in traces else traces["f_n"]
+    true_error = (true - traces["f_d"])[window]
+    axes = ctx.arm.task_axes[: len(ctx.normal)]
+    offset = np.column_stack([traces[f"{a}_d"] - traces[a] for a in axes])[window] @ ctx.normal
+    return {
+        "force_error_rms": _rms(error),
+        "force_error_peak": float(np.abs(error).max()),
+        "force_error_mean": float(error.mean()),
+        "force_error_drift": drift_rate(t, error),
+        "reference_offset_force": float(imp.K_p_normal * offset.mean() / imp.K_f),
+        "true_force_error_rms": _rms(true_error),
+        "true_force_error_mean": float(true_error.mean()),
+    }
+
+
 def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
     """Section 3.4 in closed loop. For each criterion while it is the active level-2
     criterion (Fig. 1's mode) and q̇_dⁿ ≠ 0: the share of control periods in which its
     logged value moved against the sign of its gain (task motion included), the share
     in which the commanded step alone, Φᵀ q̇_dⁿ, points the wrong way (the paper's
     claim; joint torque and manipulability, Φ recomputed from q), and its value at
-    the start and the end of the run; and the smallest link–obstacle distance and the
-    most contacts of links with obstacles (a criterion can improve by driving a link
-    into the plate when nothing guards it)."""
+    the start and the end; and, over the whole run, the smallest link–obstacle distance
+    and the most contacts of links with obstacles.
+
+    A run in which a link touches the plate or an obstacle has failed: nothing guards
+    the links in this family, so a criterion can improve by driving a link into the
+    plate, and from then on the arm is jammed against it and the task is lost. Its row
+    says when and how hard (``failed_at``), and its criterion figures cover only the
+    control periods before that moment (the end is the last one), so that they describe
+    the gradient step and not the jammed arm."""
+    forbidden = np.flatnonzero(traces["forbidden_contacts"] > 0)
+    clean = int(forbidden[0]) if forbidden.size else len(traces)
+    row: dict = _gradient_step_figures(_first_rows(traces, clean), ctx)
+    row["d_min_min"] = float(traces["d_min"].min())
+    row["forbidden_contacts_max"] = int(traces["forbidden_contacts"].max())
+    if forbidden.size:
+        k = int(forbidden[0])
+        row["failed_at"] = (
+            f"{traces['t'][k]:.4g} s: a link touched the plate or an obstacle "
+            f"(normal force up to {traces['f_n'][k:].max():.3g} N after)"
+        )
+    return row
+
+
+def _first_rows(traces: Traces, rows: int) -> Traces:
+    return Traces({name: traces[name][:rows] for name in traces.names})
+
+
+def _gradient_step_figures(traces: Traces, ctx: RunFacts) -> dict:
+    """:func:`measure_gradient_projection`'s criterion figures, over ``traces``."""
     s = ctx.scenario
     d = s.desired_null_space
     gains = {1: d.criteria.obstacle.gain, 2: d.criteria.joint_torque.gain, 3: d.criteria.manipulability.gain}
@@ -341,9 +390,6 @@ def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
             row[f"{name}_commanded_step_wrong_share"] = float(wrong[:-1].sum()) / periods
         row[f"{name}_start"] = float(values[0])
         row[f"{name}_end"] = float(values[-1])
-    # Whether the criterion's optimum was reached by pushing a link into an obstacle.
-    row["d_min_min"] = float(traces["d_min"].min())
-    row["forbidden_contacts_max"] = int(traces["forbidden_contacts"].max())
     return row
 
 
