@@ -157,6 +157,24 @@ class NullSpaceImpedanceController(Diagram):
 
     Preconditions: the controller model's joints are revolute or prismatic, one
     actuator each; J has full row rank m along the way (redundancy n > m).
+
+    Timing and feedthrough: a sampled-data law of period T = ``config.period``. Its
+    state (the previous q̇_dⁿ of q̈_dⁿ's backward difference, the selector's mode and
+    switch time, the previous torque of the rate limit) is updated by periodic events at
+    t_k = k T, but its outputs are computed from its inputs whenever something evaluates
+    them, and every input feeds ``generalized_force`` directly. Connect it straight to a
+    discrete plant that steps at T; behind a plant that steps at T/2^k, put
+    ``nsdrake.ControlHold(size=n, period=T)`` between ``generalized_force`` and the
+    actuation; behind a continuous plant, ``ControlHold(size=n, period=T,
+    direct_feedthrough=False)``, which also breaks the algebraic loop that a force
+    sensor on the plant's reaction forces closes (Drake's ``ZeroOrderHold`` samples
+    after the controller's own updates and so drops the q̈_dⁿ feed-forward). From a
+    fresh context q̇_dⁿ blends in from zero over ``selector.blend_time``, and the first
+    period has no q̈_dⁿ feed-forward and no torque-rate limit. The constructor raises
+    ControllerConfigError (a ValueError) for a configuration the model cannot do, and
+    ValueError, FileNotFoundError or Drake's RuntimeError for a model it cannot read; it
+    does not judge the gains' stability. README, "Use the controller in your own
+    diagram": the measurements, and the wiring for a plant with more joints than the arm.
     """
 
     def __init__(
