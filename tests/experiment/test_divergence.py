@@ -13,10 +13,14 @@ from nsdrake.reporting.run_folder import run_to_folder
 
 
 def unstable_fig3():
-    """fig3 with K_n T = 3, beyond the null-space loop's discrete stability bound (2):
-    the scenario checks would refuse it, so it is built past them, as a bug might."""
+    """fig3 whose controller believes the arm 11 times heavier than it is (the realism
+    ladder's model error at +1000%): every model-based gain acts 11 times stronger, so the
+    normal velocity loop has T K_v = 0.002 × 200 × 11 = 4.4, beyond the sampled loop's
+    bound of 2. No check can refuse it (the checks see the controller's own model); the
+    run diverges within a few periods."""
     s = load_scenario("fig3", duration=1.0)
-    return dataclasses.replace(s, null_space=dataclasses.replace(s.null_space, K_n=1500.0))
+    error = dataclasses.replace(s.realism.model_error, enabled=True, mass_error=10.0)
+    return dataclasses.replace(s, realism=dataclasses.replace(s.realism, model_error=error))
 
 
 def test_a_diverging_run_keeps_its_traces_and_is_marked_failed(tmp_path):
