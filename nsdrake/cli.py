@@ -5,6 +5,7 @@
     nsdrake compare FAMILY [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--jobs N] [--overwrite]
                            [--variant-timeout SECONDS]
     nsdrake sweep SPEC [--out DIR] [--jobs N] [--engine process|dask] [--scheduler ADDRESS] [--overwrite]
+                       [--max-runs N]
     nsdrake list
 
 Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
@@ -40,7 +41,7 @@ from nsdrake.studies.compare import (
 )
 from nsdrake.studies.sweep import sweep_command
 from nsdrake.studies.sweep_engines import ENGINES
-from nsdrake.studies.sweep_spec import shipped_sweeps
+from nsdrake.studies.sweep_spec import MAX_RUNS, shipped_sweeps
 
 
 class _Parser(argparse.ArgumentParser):
@@ -107,6 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--engine", choices=ENGINES, default="process", help="local processes, or Dask")
     sweep.add_argument("--scheduler", help="address of a Dask scheduler (default: a local cluster)")
     sweep.add_argument("--overwrite", action="store_true", help="replace the runs of another sweep in --out")
+    sweep.add_argument(
+        "--max-runs",
+        type=_jobs_like("--max-runs"),
+        default=MAX_RUNS,
+        help=f"refuse a sweep of more runs than this (default {MAX_RUNS})",
+    )
     sub.add_parser("list", help="list the shipped scenarios, families and sweeps")
     return parser
 
