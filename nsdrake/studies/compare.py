@@ -419,7 +419,10 @@ def _run_variant(task: _Task) -> tuple[str, object]:
     traces.write_csv(task.folder / "traces.csv")
     traces = Traces.read_csv(task.folder / "traces.csv")
     row = MEASURES[task.family.measure](traces, RunFacts(scenario=scenario, station=built.station))
-    return "ok", ({"diverged_at": diverged, **row} if diverged else row)
+    if diverged:  # diverged_at says why its figures are blank
+        row.pop("note", None)
+        return "ok", {"diverged_at": diverged, **row}
+    return "ok", row
 
 
 def _failure(e: BaseException) -> str:
