@@ -151,7 +151,7 @@ class NullSpaceImpedanceController(Diagram):
         task_axes: world axes of x, e.g. ("x", "y"), ("x", "y", "z") or the full pose
             ("x", "y", "z", "rx", "ry", "rz") (URDF/plant input only).
         normal: (m_t,) direction on the translational task axes in which the tool
-            pushes (normalised here).
+            pushes: any finite non-zero vector, normalised here.
         config: gains, inverse, switches, criteria, selector and speed limits.
         wrench_point: p_WSo (3,), the point the measured moment is about [m];
             None: the tool point itself.
