@@ -438,9 +438,12 @@ def _interrupt_once(signum, frame) -> None:
 
 def _variant_process(task: _Task, conn) -> None:
     """Worker process: one variant; sends ("ok", row), ("interrupted", t) or ("failed",
-    reason), then exits."""
+    reason), then exits. It starts with SIGINT blocked (:func:`start_quietly`), so that a
+    Ctrl-C during its start-up waits for the handler instead of a traceback."""
     signal.signal(signal.SIGINT, _interrupt_once)
     try:
+        if hasattr(signal, "pthread_sigmask"):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         message = _run_variant(task)
     except BaseException as e:  # every failure, an interruption outside the run included, is the row's
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -469,6 +472,20 @@ def _timed_out_row(timeout: float, t: float | None) -> dict:
     return {"error": f"failed: timed out after {timeout:g} s (--variant-timeout){kept}"}
 
 
+def start_quietly(process) -> None:
+    """Starts ``process`` with SIGINT blocked (its mask is inherited): a Ctrl-C that lands
+    while it starts up is held until it has installed its handler, and this process gets
+    it as soon as the start returns."""
+    if not hasattr(signal, "pthread_sigmask"):
+        process.start()
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        process.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 @dataclass
 class _Worker:
     index: int
@@ -492,7 +509,7 @@ class _Pool:
     def start(self, task: _Task) -> None:
         receive, send = self.ctx.Pipe(duplex=False)
         process = self.ctx.Process(target=_variant_process, args=(task, send), daemon=True)
-        process.start()
+        start_quietly(process)
         send.close()  # the worker holds the only writing end: its death means EOF here
         self.running[receive] = _Worker(task.index, process, time.monotonic() + self.timeout)
 
@@ -528,6 +545,8 @@ class _Pool:
         w.process.join()
         if w.stopped == "timeout" and status != "ok":
             row = _timed_out_row(self.timeout, value if status == "interrupted" else None)
+        elif w.stopped == "interrupt" and status != "ok":
+            row = _interrupted_row(value if status == "interrupted" else None)
         elif status == "ok":
             row = value
         elif status == "interrupted":

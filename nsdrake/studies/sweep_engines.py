@@ -17,6 +17,7 @@ import signal
 from collections.abc import Iterator
 from multiprocessing.connection import wait
 
+from nsdrake.studies.compare import start_quietly
 from nsdrake.studies.sweep_spec import SweepError
 from nsdrake.studies.sweep_worker import crash_if_asked, simulate_run
 
@@ -124,7 +125,7 @@ class _Slot:
     def __init__(self, ctx):
         self.conn, child = ctx.Pipe()
         self.process = ctx.Process(target=_worker, args=(child,), daemon=True, name="nsdrake-sweep-worker")
-        self.process.start()
+        start_quietly(self.process)  # Ctrl-C while it starts: no traceback from it
         child.close()
         self.task: dict | None = None
 
