@@ -50,7 +50,7 @@ from nsdrake.control.model import ControllerModel
 from nsdrake.control.orientation import rotation_to_quaternion
 from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
 from nsdrake.experiment.reference_system import SurfaceReference
-from nsdrake.experiment.scenario import Scenario, ScenarioError
+from nsdrake.experiment.scenario import Scenario, ScenarioError, controller_fields
 from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.realism.model_error import scale_urdf_masses
 from nsdrake.realism.wiring import add_realism_loggers, plug_realism
@@ -96,14 +96,7 @@ def speed_limit_vector(scenario: Scenario, arm: ArmModel) -> np.ndarray:
 
 def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> ControllerConfig:
     """The controller's part of the scenario."""
-    config = ControllerConfig(
-        period=scenario.control_period,
-        impedance=scenario.impedance,
-        null_space=scenario.null_space,
-        desired_null_space=scenario.desired_null_space,
-        actuator_limits=scenario.actuator_limits,
-        nominal_force=scenario.reference.force,
-    )
+    config = ControllerConfig(**controller_fields(scenario))
     return config if null_space_task else without_null_space_task(config)
 
 

@@ -71,6 +71,37 @@ def first_contact_index(traces: Traces, threshold: float) -> int | None:
     return int(hits[0]) if hits.size else None
 
 
+def measuring_window_gap(traces: Traces, contact_threshold: float, min_rows: int = 1) -> str | None:
+    """Why a run has no force figures, in words a user can act on, or None when it has:
+    the tool never reached the plate, or the window (from SETTLE_TIME after first contact
+    to the end) starts after the run ends or holds fewer than ``min_rows`` periods. The figures of
+    :func:`fig3_metrics`, the pose checks, ``nsdrake sweep`` and ``nsdrake compare``'s
+    force measures all start there."""
+    t = traces["t"]
+    if not len(t):
+        return "the run holds no control period: nothing to measure"
+    k0 = first_contact_index(traces, contact_threshold)
+    if k0 is None:
+        return (
+            f"no contact: the tool never pressed {contact_threshold:g} N on the plate in the "
+            f"{t[-1]:.3g} s run, so the force figures are empty"
+        )
+    start = float(t[k0]) + SETTLE_TIME
+    rows = int(np.sum(t >= start))
+    if start > t[-1]:
+        return (
+            f"the measuring window starts {SETTLE_TIME:g} s after first contact ({t[k0]:.3g} s), at "
+            f"{start:.3g} s, after the run ends at {t[-1]:.3g} s: its force figures are empty; run longer "
+            "(--duration)"
+        )
+    if rows < min_rows:
+        return (
+            f"the measuring window (from {start:.3g} s, {SETTLE_TIME:g} s after first contact) holds {rows} "
+            "control periods, too few to measure: its force figures are empty; run longer (--duration)"
+        )
+    return None
+
+
 def fig3_metrics(
     traces: Traces,
     *,

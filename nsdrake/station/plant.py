@@ -42,6 +42,7 @@ from pydrake.systems.primitives import MatrixGain
 from nsdrake.control.criteria.obstacle import proximity_geometries
 from nsdrake.control.dynamics import ArmModel
 from nsdrake.control.model import Obstacle
+from nsdrake.control.validation import arm_problem
 from nsdrake.station.config import ArmConfig, ContactConfig, ObstacleConfig, PlateConfig, StationError
 from nsdrake.station.contact_monitor import ContactMonitor
 from nsdrake.station.elastic import ElasticMap, add_elastic_arm, rigid_arm_plant
@@ -212,7 +213,7 @@ def _add_world(
     obstacle_bodies = _add_obstacles(plant, scene_graph, obstacles, plate_body)
     gravity = np.asarray(gravity, dtype=float)
     plant.mutable_gravity_field().set_gravity_vector(gravity)
-    plant.Finalize()
+    _finalize(plant, source)
     return _World(
         plant,
         scene_graph,
@@ -292,12 +293,26 @@ def _arm_model(plant, arm_instance, arm: ArmConfig, arm_file, task_axes, belt, g
         arm_model = ArmModel(tool.GetParentPlant(), tool, tuple(task_axes))
     except ValueError as e:
         raise StationError(f"{src}: arm.urdf: {e}") from None
+    problem = arm_problem(arm_model.n, arm_model.m, task_axes)  # before any terms are computed
+    if problem:
+        where = "task.axes" if problem[0] == "task_axes" else f"arm.urdf: {arm_file.name}"
+        raise StationError(f"{src}: {where}: {problem[1]}")
     if plant.num_actuators() != arm_model.n:
         raise StationError(
             f"{src}: arm.urdf: the arm needs one actuator per joint ({arm_model.n}), "
             f"it has {plant.num_actuators()}"
         )
     return arm_model
+
+
+def _finalize(plant: MultibodyPlant, source: str) -> None:
+    """Finalizes the plant; what the model checks did not foresee is one line."""
+    try:
+        plant.Finalize()
+    except RuntimeError as e:
+        text = " ".join(str(e).split())
+        text = text if len(text) <= 240 else text[:239] + "…"
+        raise StationError(f"{source}: arm.urdf: Drake cannot build the plant: {text}") from None
 
 
 def _short(name) -> str:
