@@ -82,8 +82,6 @@ def test_the_layer_check_notices_an_upward_import(tmp_path):
 
 
 MAX_FUNCTION_LINES = 60  # from `def` to the function's last line, docstring included
-# Functions the issue-15 work splits (input validation); remove each entry when it lands.
-LONG_FUNCTIONS_PENDING = {"nsdrake.experiment.scenario.validate", "nsdrake.studies.sweep_spec.load_sweep"}
 
 
 def long_functions(path: Path, module: str, limit: int = MAX_FUNCTION_LINES) -> dict[str, int]:
@@ -109,8 +107,7 @@ def test_no_function_is_longer_than_60_lines():
     long = {}
     for p in sorted(PACKAGE.rglob("*.py")):
         long |= long_functions(p, module_name(p))
-    over = {name: n for name, n in long.items() if name not in LONG_FUNCTIONS_PENDING}
-    assert not over, "; ".join(f"{name}: {n} lines" for name, n in sorted(over.items()))
+    assert not long, "; ".join(f"{name}: {n} lines" for name, n in sorted(long.items()))
 
 
 def test_the_length_check_counts_a_long_function(tmp_path):
