@@ -14,8 +14,10 @@ from nsdrake.control import (
     NullSpaceImpedanceController,
     Obstacle,
 )
+from nsdrake.station.control_hold import ControlHold
 
 __all__ = [
+    "ControlHold",
     "ControllerConfig",
     "ControllerConfigError",
     "ControllerModel",

@@ -3,30 +3,45 @@
     nsdrake run SCENARIO [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--overwrite]
                           [--meshcat] [--no-replay]
     nsdrake compare FAMILY [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--jobs N] [--overwrite]
+                           [--variant-timeout SECONDS]
     nsdrake sweep SPEC [--out DIR] [--jobs N] [--engine process|dask] [--scheduler ADDRESS] [--overwrite]
+                       [--max-runs N]
     nsdrake list
 
 Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
-status 2, before any simulation starts.
+status 2, before any simulation starts; a failed run exits 1, Ctrl-C 130 (keeping
+what was computed, marked interrupted).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
 import time
 from pathlib import Path
 
-from nsdrake.experiment.output import OutputFolderError, default_output_folder, prepare_output_folder
+from nsdrake.experiment.output import (
+    OutputFolderError,
+    default_output_folder,
+    prepare_output_folder,
+    release_unused,
+)
 from nsdrake.experiment.scenario import ScenarioError, load_scenario, shipped_scenarios
 from nsdrake.reporting.run_folder import check_scenario, run_to_folder
 from nsdrake.station.visualization import start_meshcat
-from nsdrake.studies.compare import load_family, run_family, shipped_families, variant_scenario
+from nsdrake.studies.compare import (
+    VARIANT_TIMEOUT,
+    load_family,
+    run_family,
+    shipped_families,
+    variant_scenario,
+)
 from nsdrake.studies.sweep import sweep_command
 from nsdrake.studies.sweep_engines import ENGINES
-from nsdrake.studies.sweep_spec import shipped_sweeps
+from nsdrake.studies.sweep_spec import MAX_RUNS, shipped_sweeps
 
 
 class _Parser(argparse.ArgumentParser):
@@ -78,6 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="replace the files an earlier nsdrake run wrote in --out (never others)",
     )
+    compare.add_argument(
+        "--variant-timeout",
+        type=_seconds,
+        default=VARIANT_TIMEOUT,
+        help=f"stop a variant still running after this many seconds (default {VARIANT_TIMEOUT:g})",
+    )
     sweep = sub.add_parser("sweep", help="run a scenario over a grid or random samples of its fields")
     sweep.add_argument("spec", help=f"a shipped sweep ({', '.join(shipped_sweeps())}) or a spec file")
     sweep.add_argument(
@@ -87,17 +108,43 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--engine", choices=ENGINES, default="process", help="local processes, or Dask")
     sweep.add_argument("--scheduler", help="address of a Dask scheduler (default: a local cluster)")
     sweep.add_argument("--overwrite", action="store_true", help="replace the runs of another sweep in --out")
+    sweep.add_argument(
+        "--max-runs",
+        type=_jobs_like("--max-runs"),
+        default=MAX_RUNS,
+        help=f"refuse a sweep of more runs than this (default {MAX_RUNS})",
+    )
     sub.add_parser("list", help="list the shipped scenarios, families and sweeps")
     return parser
 
 
-def _jobs(text: str) -> int:
+def _jobs_like(option: str):
+    """A parser of whole numbers >= 1 for ``option``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} must be a whole number, got '{text}'") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{option} must be >= 1, got '{text}'")
+        return value
+
+    return parse
+
+
+_jobs = _jobs_like("--jobs")
+
+
+def _seconds(text: str) -> float:
     try:
-        value = int(text)
+        value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--jobs must be a whole number, got '{text}'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"--jobs must be >= 1, got '{text}'")
+        raise argparse.ArgumentTypeError(
+            f"--variant-timeout must be a number of seconds, got '{text}'"
+        ) from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"--variant-timeout must be > 0 seconds, got '{text}'")
     return value
 
 
@@ -108,6 +155,13 @@ class _Progress:
         self.enabled = sys.stderr.isatty()
         self.label = label
         self.start = time.perf_counter()
+        self.partial = False  # a bar is drawn and its line not ended
+
+    def end_line(self) -> None:
+        """Ends a bar left half-drawn (the run stopped), so that a message starts a line."""
+        if self.partial:
+            sys.stderr.write("\n")
+            self.partial = False
 
     def __call__(self, fraction: float):
         if not self.enabled:
@@ -118,6 +172,7 @@ class _Progress:
         sys.stderr.write(
             f"\r{self.label} [{'#' * done}{'.' * (width - done)}] {fraction:4.0%} {elapsed:5.1f} s"
         )
+        self.partial = fraction < 1.0
         if fraction >= 1.0:
             sys.stderr.write("\n")
         sys.stderr.flush()
@@ -126,16 +181,23 @@ class _Progress:
 def _run(args) -> int:
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     check_scenario(scenario)  # model files, joint names: fail before anything is written
-    out = claim_output_folder(args.out, args.scenario, overwrite=args.overwrite)
-    try:
-        meshcat = _live_meshcat() if args.meshcat else None
-    except RuntimeError as e:  # e.g. no free port in Meshcat's range
-        print(f"nsdrake: error: cannot start Meshcat: {' '.join(str(e).split())}", file=sys.stderr)
-        return 2
-    print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
-    result = run_to_folder(
-        scenario, out, progress=_Progress(args.scenario), replay=not args.no_replay, meshcat=meshcat
-    )
+    with _claimed(args.out, args.scenario, args.overwrite) as out:
+        try:
+            meshcat = _live_meshcat() if args.meshcat else None
+        except RuntimeError as e:  # e.g. no free port in Meshcat's range
+            print(f"nsdrake: error: cannot start Meshcat: {' '.join(str(e).split())}", file=sys.stderr)
+            return 2
+        print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
+        progress = _Progress(args.scenario)
+        try:
+            result = run_to_folder(
+                scenario, out, progress=progress, replay=not args.no_replay, meshcat=meshcat
+            )
+        finally:
+            progress.end_line()
+    if result.interrupted:
+        print(f"nsdrake: {result.failure}; the run so far is in {out}/, marked interrupted", file=sys.stderr)
+        return INTERRUPTED
     for m in result.metrics:
         mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
         bound = f"  (bound: {m.bound})" if m.bound else ""
@@ -156,21 +218,33 @@ def _compare(args) -> int:
     family = load_family(args.family)
     for i in range(len(family.variants)):  # every input error before any folder or simulation
         variant_scenario(family, i, args.config, args.duration)
-    out = claim_output_folder(args.out, f"compare-{args.family}", overwrite=args.overwrite)
-    print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
-    result = run_family(
-        family,
-        out,
-        config=args.config,
-        duration=args.duration,
-        jobs=args.jobs,
-        isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
-        progress=_Progress(args.family),
-    )
+    with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
+        print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
+        progress = _Progress(args.family)
+        result = run_family(
+            family,
+            out,
+            config=args.config,
+            duration=args.duration,
+            jobs=args.jobs,
+            isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
+            progress=progress,
+            variant_timeout=args.variant_timeout,
+        )
+        progress.end_line()
+    if result.interrupted:
+        print(
+            f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "
+            "(unfinished rows marked interrupted)",
+            file=sys.stderr,
+        )
+        return INTERRUPTED
     print((out / "table.md").read_text())
     listed = [name for name in ("table.md", "table.csv") if (out / name).exists()]
     files = ", ".join(listed + [p.name for p in sorted(out.glob("*.png"))])
     print(f"nsdrake: wrote {out}/: {files}, variants/*/traces.csv")
+    for name, note in result.notes.items():
+        print(f"nsdrake: variant '{name}': {note}")
     for name, reason in result.failures.items():
         print(f"nsdrake: variant '{name}' {reason}", file=sys.stderr)
     if result.failures:
@@ -179,11 +253,29 @@ def _compare(args) -> int:
     return 0
 
 
-def claim_output_folder(out: Path | None, default_name: str, *, overwrite: bool) -> Path:
-    """``--out``, claimed (see nsdrake/output.py), or without it the first free runs/NAME[-k]."""
+INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT), as a shell reports it
+
+
+def claim_output_folder(
+    out: Path | None, default_name: str, *, overwrite: bool, created: list[Path] | None = None
+) -> Path:
+    """``--out``, claimed (see nsdrake/experiment/output.py), or without it the first free
+    runs/NAME[-k]; the folders made for it are appended to ``created``."""
     if out is None:
-        return default_output_folder(default_name)
-    return prepare_output_folder(out, overwrite=overwrite)
+        return default_output_folder(default_name, created=created)
+    return prepare_output_folder(out, overwrite=overwrite, created=created)
+
+
+@contextlib.contextmanager
+def _claimed(out: Path | None, default_name: str, overwrite: bool):
+    """The claimed output folder; if the command ends (fails, is stopped) before writing
+    anything there, the claim is undone and the folders made for it removed."""
+    created: list[Path] = []
+    folder = claim_output_folder(out, default_name, overwrite=overwrite, created=created)
+    try:
+        yield folder
+    finally:
+        release_unused(folder, created)
 
 
 BROWSER_WAIT = 60.0  # [s] how long --meshcat waits for a browser on a terminal
@@ -204,6 +296,7 @@ def _live_meshcat():
 
 
 def main(argv: list[str] | None = None) -> int:
+    _never_fail_to_print()
     args = build_parser().parse_args(argv)
     try:
         if args.command == "list":
@@ -211,6 +304,7 @@ def main(argv: list[str] | None = None) -> int:
             print("families (nsdrake compare): " + ", ".join(shipped_families()))
             print("sweeps (nsdrake sweep):    " + ", ".join(shipped_sweeps()))
             return 0
+        _check_working_directory()
         if args.command == "compare":
             return _compare(args)
         if args.command == "sweep":
@@ -222,6 +316,29 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:  # e.g. the disk filled up while writing: one line, not a traceback
         print(f"nsdrake: error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C outside a simulation (which keeps its traces itself)
+        print("nsdrake: interrupted", file=sys.stderr)
+        return INTERRUPTED
+
+
+def _never_fail_to_print() -> None:
+    """A terminal or pipe that cannot show a character (an ASCII-only locale, a path of
+    undecodable bytes) gets an escape (\\u03a9) instead of ending the command."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(errors="backslashreplace")
+        except (AttributeError, ValueError):  # not a text stream of io's (a test's capture)
+            pass
+
+
+def _check_working_directory() -> None:
+    """Relative paths (runs/, --out, --config) need a working directory that exists."""
+    try:
+        os.getcwd()
+    except FileNotFoundError:
+        raise OutputFolderError(
+            "the working directory no longer exists (it was deleted or moved); cd into a folder that exists"
+        ) from None
 
 
 if __name__ == "__main__":

@@ -73,6 +73,11 @@ def task_velocity_compensation(
     return J_pinv_dot @ (J @ v) + J_pinv @ (Jdot @ v)
 
 
+def task_space_inertia(J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
+    """Λ = (J H⁻¹ Jᵀ)⁻¹ (Eq. 13), the task-space inertia, without any cap. (m, m)."""
+    return np.linalg.inv(J @ H_inv @ J.T)
+
+
 def dynamically_consistent_inverse(J: np.ndarray, H_inv: np.ndarray) -> np.ndarray:
     """J̄ = H⁻¹ Jᵀ Λ (Eq. 13), the inertia-weighted pseudo-inverse. (n, m)."""
     return weighted_inverse(J, H_inv)

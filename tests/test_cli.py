@@ -298,3 +298,55 @@ def exit_code(args) -> int:
         return main(args)
     except SystemExit as e:
         return e.code
+
+
+def test_a_deleted_working_directory_is_one_line(tmp_path, monkeypatch, capsys):
+    """Issue 15, item 5: from a working directory that was deleted, relative paths (runs/,
+    the model files) failed with a misleading line or a traceback."""
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    monkeypatch.chdir(gone)
+    gone.rmdir()
+    for args in (["run", "fig3", "--duration", "0.1"], ["compare", "lyapunov"], ["sweep", "robustness"]):
+        assert exit_code(args) == 2
+        assert capsys.readouterr().err == (
+            "nsdrake: error: the working directory no longer exists (it was deleted or moved); "
+            "cd into a folder that exists\n"
+        )
+
+
+def test_a_unicode_out_under_an_ascii_terminal_runs_and_prints_an_escape(tmp_path, monkeypatch):
+    """Issue 15, item 5: printing "running fig3 … into Ωrun/" raised UnicodeEncodeError
+    under an ASCII-only terminal (PYTHONIOENCODING=ascii, a C locale without UTF-8), after
+    the folder was claimed (an empty claimed folder was left). The run completes and
+    prints the name escaped."""
+    import io
+
+    terminal = io.BytesIO()
+    monkeypatch.setattr(sys, "stdout", io.TextIOWrapper(terminal, encoding="ascii", write_through=True))
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "fig3", "--duration", "0.05", "--no-replay", "--out", "Ωrun"]) == 1  # no contact yet
+    assert "into \\u03a9run/" in terminal.getvalue().decode("ascii")
+    assert len(Traces.read_csv(tmp_path / "Ωrun" / "traces.csv")) == 26
+
+
+@pytest.mark.parametrize("out", [None, "new/deeper/out"])
+def test_a_command_that_fails_before_writing_leaves_no_claimed_folder(tmp_path, monkeypatch, capsys, out):
+    """Catches a claim left behind by a command that stopped between claiming its folder
+    and writing its first file (an empty folder with a .nsdrake-run that a later run must
+    --overwrite): the claim is undone and the folders made for it removed; a folder that
+    was there before stays."""
+    import nsdrake.cli as cli
+
+    def broken(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(cli, "run_to_folder", broken)
+    args = ["run", "fig3", "--duration", "0.1"] + (["--out", out] if out else [])
+    assert main(args) == 2
+    assert capsys.readouterr().err == "nsdrake: error: [Errno 28] No space left on device\n"
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "mine").mkdir()
+    assert main(["run", "fig3", "--duration", "0.1", "--out", "mine"]) == 2
+    assert (tmp_path / "mine").is_dir() and list((tmp_path / "mine").iterdir()) == []

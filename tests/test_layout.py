@@ -79,3 +79,44 @@ def test_the_layer_check_notices_an_upward_import(tmp_path):
     bad = tmp_path / "bad.py"
     bad.write_text("from nsdrake.experiment.scenario import Scenario\n")
     assert layer("nsdrake.control.bad") < max(layer(d) for d in imports(bad))
+
+
+MAX_FUNCTION_LINES = 60  # from `def` to the function's last line, docstring included
+
+
+def long_functions(path: Path, module: str, limit: int = MAX_FUNCTION_LINES) -> dict[str, int]:
+    """{module.qualified_name: lines} of the functions and methods in ``path`` longer than ``limit``."""
+    found = {}
+
+    def visit(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                name = f"{prefix}.{child.name}"
+                lines = child.end_lineno - child.lineno + 1
+                if not isinstance(child, ast.ClassDef) and lines > limit:
+                    found[name] = lines
+                visit(child, name)
+
+    visit(ast.parse(path.read_text()), module)
+    return found
+
+
+def test_no_function_is_longer_than_60_lines():
+    """STYLE: a function says one thing. Catches a function grown past 60 lines (nested
+    functions and methods counted on their own)."""
+    long = {}
+    for p in sorted(PACKAGE.rglob("*.py")):
+        long |= long_functions(p, module_name(p))
+    assert not long, "; ".join(f"{name}: {n} lines" for name, n in sorted(long.items()))
+
+
+def test_the_length_check_counts_a_long_function(tmp_path):
+    """The check itself: 61 lines from `def` to the end are caught, 60 are not, methods too."""
+
+    def function(name, lines, indent=""):
+        body = "".join(f"{indent}    x{i} = {i}\n" for i in range(lines - 2))
+        return f"{indent}def {name}():\n{body}{indent}    return 0\n"
+
+    source = function("f", 61) + function("g", 60) + "class C:\n" + function("h", 61, indent="    ")
+    (tmp_path / "m.py").write_text(source)
+    assert long_functions(tmp_path / "m.py", "m") == {"m.f": 61, "m.C.h": 61}

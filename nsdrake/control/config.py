@@ -1,11 +1,14 @@
 """The controller's configuration: one typed dataclass tree, read from YAML by
 the scenario loader and passed to :class:`nsdrake.NullSpaceImpedanceController`.
+What each field must be is checked by :mod:`nsdrake.control.validation`.
 
 (No ``from __future__ import annotations`` here: Drake's ``yaml_load_typed``
 reads the dataclass field types at run time.) Every field names its unit.
 """
 
 from dataclasses import dataclass, field
+
+from nsdrake.control.validation import NULL_SPACE_SOURCES, validate_config  # noqa: F401 (re-exported)
 
 
 @dataclass
@@ -139,9 +142,6 @@ class SweepConfig:
     ramp_time: float = 0.2
 
 
-NULL_SPACE_SOURCES = ("criteria", "sweep")
-
-
 @dataclass
 class DesiredNullSpaceConfig:
     """The desired null-space velocity q̇_dⁿ by gradient projection (Eqs. 28–30), prioritised."""
@@ -189,3 +189,10 @@ class ControllerConfig:
     # Magnitude of the desired contact force F_d = f n that the joint-torque criterion
     # (Eq. 32) optimises for, before contact too [N].
     nominal_force: float = 10.0
+
+    def __post_init__(self):
+        """Every field is checked as it is made (nsdrake.control.validation: the rules
+        the scenario reader applies too); ControllerConfigError names the first that is
+        wrong. The controller checks again when it is built, so a field changed after
+        this (``config.impedance.K_f = …``) is checked too."""
+        validate_config(self, "ControllerConfig")

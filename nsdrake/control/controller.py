@@ -25,6 +25,11 @@ from nsdrake.control.systems import (
     RobotTermsSystem,
     SelfMotionSweep,
 )
+from nsdrake.control.validation import (  # noqa: F401 (ControllerConfigError, check_task_span: re-exported)
+    ControllerConfigError,
+    check_task_span,
+    validate_controller,
+)
 
 __all__ = [
     "ControllerConfigError",
@@ -34,10 +39,6 @@ __all__ = [
     "torque_limits",
     "without_null_space_task",
 ]
-
-
-class ControllerConfigError(ValueError):
-    """A configuration that does not fit the controller model; the message is one line."""
 
 
 def without_null_space_task(config: ControllerConfig) -> ControllerConfig:
@@ -150,7 +151,7 @@ class NullSpaceImpedanceController(Diagram):
         task_axes: world axes of x, e.g. ("x", "y"), ("x", "y", "z") or the full pose
             ("x", "y", "z", "rx", "ry", "rz") (URDF/plant input only).
         normal: (m_t,) direction on the translational task axes in which the tool
-            pushes (normalised here).
+            pushes: any finite non-zero vector, normalised here.
         config: gains, inverse, switches, criteria, selector and speed limits.
         wrench_point: p_WSo (3,), the point the measured moment is about [m];
             None: the tool point itself.
@@ -168,6 +169,24 @@ class NullSpaceImpedanceController(Diagram):
 
     Preconditions: the controller model's joints are revolute or prismatic, one
     actuator each; J has full row rank m along the way (redundancy n > m).
+
+    Timing and feedthrough: a sampled-data law of period T = ``config.period``. Its
+    state (the previous q̇_dⁿ of q̈_dⁿ's backward difference, the selector's mode and
+    switch time, the previous torque of the rate limit) is updated by periodic events at
+    t_k = k T, but its outputs are computed from its inputs whenever something evaluates
+    them, and every input feeds ``generalized_force`` directly. Connect it straight to a
+    discrete plant that steps at T; behind a plant that steps at T/2^k, put
+    ``nsdrake.ControlHold(size=n, period=T)`` between ``generalized_force`` and the
+    actuation; behind a continuous plant, ``ControlHold(size=n, period=T,
+    direct_feedthrough=False)``, which also breaks the algebraic loop that a force
+    sensor on the plant's reaction forces closes (Drake's ``ZeroOrderHold`` samples
+    after the controller's own updates and so drops the q̈_dⁿ feed-forward). From a
+    fresh context q̇_dⁿ blends in from zero over ``selector.blend_time``, and the first
+    period has no q̈_dⁿ feed-forward and no torque-rate limit. The constructor raises
+    ControllerConfigError (a ValueError) for a configuration the model cannot do, and
+    ValueError, FileNotFoundError or Drake's RuntimeError for a model it cannot read; it
+    does not judge the gains' stability. README, "Use the controller in your own
+    diagram": the measurements, and the wiring for a plant with more joints than the arm.
     """
 
     def __init__(
@@ -183,10 +202,12 @@ class NullSpaceImpedanceController(Diagram):
     ):
         super().__init__()
         model = as_controller_model(controller_model, tool_frame, task_axes)
+        # Every argument, before any system is built (nsdrake.control.validation).
+        self.normal = validate_controller(
+            config=config, model=model, normal=normal, wrench_point=wrench_point
+        )
         self.model, self.config, self.fused = model, config, fused
-        self.normal = checked_normal(normal, model)
         self.wrench_point = None if wrench_point is None else np.asarray(wrench_point, dtype=float)
-        check_config(config, model)  # every refusal, in one line, before anything is built
         self.plan = ControllerPlan(
             model=model, config=config, normal=self.normal, wrench_point=self.wrench_point
         )
@@ -226,79 +247,12 @@ def as_controller_model(source, tool_frame: str, task_axes: Sequence[str]) -> Co
         return source
     if isinstance(source, MultibodyPlant):
         return ControllerModel.from_plant(source, tool_frame=tool_frame, task_axes=task_axes)
-    return ControllerModel.from_urdf(source, tool_frame=tool_frame, task_axes=task_axes)
-
-
-def checked_normal(normal: Sequence[float], model: ControllerModel) -> np.ndarray:
-    """The unit task direction n (m_t,); ControllerConfigError unless a non-zero vector on
-    the translational task axes."""
-    normal = np.asarray(normal, dtype=float)
-    m_t = model.arm.m_t
-    if normal.shape != (m_t,) or not np.linalg.norm(normal) > 0:
-        raise ControllerConfigError(
-            f"normal must be a non-zero vector on the {m_t} translational task axes, got {normal.tolist()}"
-        )
-    return normal / np.linalg.norm(normal)
-
-
-def check_config(config: ControllerConfig, model: ControllerModel) -> None:
-    """Refuses, in one line, what the model cannot do: joint names it does not have,
-    obstacle avoidance without link and obstacle geometry, a sweep without direction."""
-    d = config.desired_null_space
-    for where, table in (
-        ("desired_null_space.joint_speed_limits", d.joint_speed_limits),
-        ("desired_null_space.sweep.direction", d.sweep.direction),
-        ("actuator_limits.torque", config.actuator_limits.torque),
-        ("actuator_limits.torque_rate", config.actuator_limits.torque_rate),
-    ):
-        for name in table:
-            if name not in model.joint_names:
-                raise ControllerConfigError(
-                    f"{where}.{name}: unknown joint; the arm's joints are {', '.join(model.joint_names)}"
-                )
-    if d.criteria.obstacle.gain > 0 and not model.has_geometry:
-        raise ControllerConfigError(
-            "desired_null_space.criteria.obstacle.gain: the controller model has no link collision geometry "
-            "or no obstacles to keep away from (set the gain to 0, or build the model with obstacles)"
-        )
-    if model.m >= model.n:
-        raise ControllerConfigError(
-            f"task axes {list(model.arm.task_axes)}: the arm has {model.n} joints, "
-            "no redundancy for a null space"
-        )
-    check_task_span(model)
-
-
-SPAN_SAMPLES = 8  # random poses at which the task Jacobian's rank is checked
-SPAN_TOLERANCE = 1e-8  # σ_min / σ_max of J below this counts as rank-deficient
-
-
-def check_task_span(model: ControllerModel, seed: int = 0) -> None:
-    """Refuses, in one line, task axes the arm cannot span: J (m × n) rank-deficient at
-    every one of SPAN_SAMPLES seeded random poses within the joint limits (e.g. a
-    vertical axis, or a rotation out of the plane, for a planar arm). The message names
-    the task axes that the missing direction involves."""
-    plant = model.plant
-    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
-    lower = np.where(np.isfinite(lower), lower, -np.pi)
-    upper = np.where(np.isfinite(upper), upper, np.pi)
-    rng = np.random.default_rng(seed)
-    context = plant.CreateDefaultContext()
-    zero = np.zeros(model.n)
-    best, direction = 0.0, None
-    for _ in range(SPAN_SAMPLES):
-        J = model.arm.terms(context, rng.uniform(lower, upper), zero, False).J
-        U, sigma, _ = np.linalg.svd(J)
-        ratio = sigma[-1] / sigma[0] if sigma[0] > 0 else 0.0
-        if ratio > SPAN_TOLERANCE:
-            return
-        if direction is None or ratio >= best:
-            best, direction = ratio, U[:, -1]
-    axes = model.arm.task_axes
-    involved = [a for a, u in zip(axes, direction, strict=True) if abs(u) > 0.1]
+    if isinstance(source, (str, Path)):
+        return ControllerModel.from_urdf(source, tool_frame=tool_frame, task_axes=task_axes)
     raise ControllerConfigError(
-        f"task axes {list(axes)}: the arm cannot span them (J has rank < {model.m} at every sampled pose; "
-        f"no joint moves the tool along {' + '.join(involved)})"
+        "controller_model",
+        "must be a ControllerModel, a URDF path or text, or a finalized MultibodyPlant, "
+        f"got {type(source).__name__}",
     )
 
 

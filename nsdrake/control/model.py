@@ -37,11 +37,21 @@ from pydrake.systems.framework import DiagramBuilder
 
 from nsdrake.control.criteria.obstacle import proximity_geometries
 from nsdrake.control.dynamics import ArmModel, RobotTerms
+from nsdrake.control.urdf_checks import parse_urdf, urdf_problems
+from nsdrake.control.validation import (
+    ControllerConfigError,
+    arm_problem,
+    gravity_problem,
+    length_problem,
+    one_line,
+    show,
+    task_axes_problem,
+)
 
 DYNAMICS = ("auto", "drake", "pinocchio")
 
 
-class ModelMismatchError(ValueError):
+class ModelMismatchError(ControllerConfigError):
     """Two model libraries disagree about the same arm."""
 
 
@@ -79,17 +89,18 @@ class ControllerModel:
         urdf_text: str | None = None,
         dynamics: str = "auto",
     ):
-        if dynamics not in DYNAMICS:
-            raise ValueError(f"dynamics must be one of {', '.join(DYNAMICS)}, got {dynamics!r}")
-        if not plant.is_finalized():
-            raise ValueError("the controller model's plant must be finalized")
-        if not plant.HasFrameNamed(tool_frame):
-            raise ValueError(f"the controller model has no frame named '{tool_frame}'")
+        _check_arguments(plant, tool_frame, task_axes, dynamics)
         self.plant = plant
         self.scene_graph = scene_graph
         self.diagram = diagram
         self.tool_frame_name = tool_frame
-        self.arm = ArmModel(plant, plant.GetFrameByName(tool_frame), task_axes)
+        try:
+            self.arm = ArmModel(plant, plant.GetFrameByName(tool_frame), task_axes)
+        except ValueError as e:  # joints nsdrake cannot model (floating, ball, …)
+            raise ControllerConfigError("controller_model", one_line(e)) from None
+        problem = arm_problem(self.arm.n, self.arm.m, task_axes)
+        if problem:  # before any model term is computed (Pinocchio and numba need joints)
+            raise ControllerConfigError(*problem)
         self.n, self.m = self.arm.n, self.arm.m
         self.joint_names = self.arm.joint_names
         self.link_geometries: list = []
@@ -101,14 +112,7 @@ class ControllerModel:
             arm_bodies = [plant.get_body(b).index() for b in _moving_bodies(plant) if b != tool]
             self.link_geometries = proximity_geometries(inspector, plant, arm_bodies)
             self.obstacle_geometries = proximity_geometries(inspector, plant, [world])
-        self._pinocchio = None
-        if dynamics == "pinocchio" and urdf_text is None:
-            raise ValueError(
-                "Pinocchio dynamics need the model's URDF: build it with ControllerModel.from_urdf"
-            )
-        if dynamics == "pinocchio" or (dynamics == "auto" and urdf_text is not None and _has_pinocchio()):
-            self._pinocchio = PinocchioDynamics(urdf_text, self.arm, plant.gravity_field().gravity_vector())
-            check_agreement(self._pinocchio, self.arm)
+        self._pinocchio = _pinocchio_dynamics(urdf_text, self.arm, dynamics)
         self.dynamics = "pinocchio" if self._pinocchio else "drake"
 
     @classmethod
@@ -122,19 +126,32 @@ class ControllerModel:
         obstacles: Sequence[Obstacle] = (),
         dynamics: str = "auto",
     ) -> ControllerModel:
-        """The arm of a URDF (a path, or the URDF's text), welded to the world by the
-        file itself, with ``obstacles`` fixed in the world and ``gravity`` [m/s²]."""
-        text = str(urdf) if str(urdf).lstrip().startswith("<") else Path(urdf).read_text()
+        """The arm of a URDF, welded to the world by the file itself, with ``obstacles``
+        fixed in the world and ``gravity`` [m/s²]. ``urdf``: a ``Path``, or a ``str`` that
+        is the URDF's text (it holds a "<" or a line break) or else a path. The URDF is
+        checked before Drake or Pinocchio reads it (:mod:`nsdrake.control.urdf_checks`);
+        every problem is a one-line :class:`ControllerConfigError` naming the argument."""
+        text, where = _urdf_text(urdf)
+        problem = gravity_problem(gravity)
+        if problem:
+            raise ControllerConfigError("gravity", problem)
+        check_obstacles(obstacles)
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
         plant.set_name("controller_model")
-        Parser(plant).AddModelsFromString(text, "urdf")
+        try:
+            Parser(plant).AddModelsFromString(text, "urdf")
+        except RuntimeError as e:
+            raise ControllerConfigError(where, f"Drake cannot parse it: {_cut(e)}") from None
         for ob in obstacles:
             plant.RegisterCollisionGeometry(
                 plant.world_body(), ob.X_WO, ob.shape, ob.name, ProximityProperties()
             )
         plant.mutable_gravity_field().set_gravity_vector(np.asarray(gravity, dtype=float))
-        plant.Finalize()
+        try:
+            plant.Finalize()
+        except RuntimeError as e:
+            raise ControllerConfigError(where, f"Drake cannot build the plant: {_cut(e)}") from None
         diagram = builder.Build()
         return cls(
             plant=plant,
@@ -199,6 +216,107 @@ def _moving_bodies(plant: MultibodyPlant) -> list:
     """Bodies that some joint moves (the arm's links and tool)."""
     joints = [plant.get_joint(j) for j in plant.GetJointIndices() if plant.get_joint(j).num_velocities()]
     return list(plant.GetBodiesKinematicallyAffectedBy([j.index() for j in joints])) if joints else []
+
+
+def _cut(e, length: int = 240) -> str:
+    text = one_line(e)
+    return text if len(text) <= length else text[: length - 1] + "…"
+
+
+def _check_arguments(plant, tool_frame, task_axes, dynamics: str) -> None:
+    if dynamics not in DYNAMICS:
+        raise ControllerConfigError("dynamics", f"must be one of {', '.join(DYNAMICS)}, got {show(dynamics)}")
+    if not isinstance(plant, MultibodyPlant) or not plant.is_finalized():
+        raise ControllerConfigError(
+            "controller_model", "the controller model's plant must be a finalized MultibodyPlant"
+        )
+    if not isinstance(tool_frame, str) or not plant.HasFrameNamed(tool_frame):
+        raise ControllerConfigError(
+            "tool_frame", f"the controller model has no frame named {show(tool_frame)}"
+        )
+    problem = task_axes_problem(task_axes)
+    if problem:
+        raise ControllerConfigError(f"task_axes{problem[0]}", problem[1])
+
+
+def _urdf_text(urdf) -> tuple[str, str]:
+    """(the URDF's text, the name its errors go by), the text checked by the URDF rules."""
+    where = "controller_model"
+    if isinstance(urdf, str) and ("<" in urdf or "\n" in urdf):
+        text = urdf
+    else:
+        path = Path(urdf)
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError, ValueError) as e:
+            why = getattr(e, "strerror", None) or one_line(e)
+            raise ControllerConfigError(
+                where, f"{show(str(urdf))} is neither a readable URDF file ({why}) nor URDF text (no '<')"
+            ) from None
+        where = f"controller_model: {path.name}"
+    try:
+        root = parse_urdf(text)
+    except ValueError as e:
+        raise ControllerConfigError(
+            where, f"the URDF is {e}" if str(e).startswith("not XML") else str(e)
+        ) from None
+    for link, problem in urdf_problems(root):
+        raise ControllerConfigError(f"{where}: {link}", problem)
+    return text, where
+
+
+def check_obstacles(obstacles: Sequence[Obstacle]) -> None:
+    """Each obstacle: a named Drake shape at a finite pose, its size and distance within
+    LARGEST_LENGTH (farther or larger is no robot cell, and overflows the criterion)."""
+    names = set()
+    for i, ob in enumerate(obstacles):
+        where = f"obstacles[{i}]"
+        if not isinstance(ob, Obstacle) or not isinstance(ob.shape, Shape):
+            raise ControllerConfigError(where, f"must be an Obstacle(name, shape, X_WO), got {show(ob)}")
+        if not isinstance(ob.name, str) or not ob.name or ob.name in names:
+            raise ControllerConfigError(
+                f"{where}.name", f"must be a distinct non-empty name, got {show(ob.name)}"
+            )
+        names.add(ob.name)
+        if not isinstance(ob.X_WO, RigidTransform):
+            raise ControllerConfigError(f"{where}.X_WO", f"must be a RigidTransform, got {show(ob.X_WO)}")
+        problem = length_problem(ob.X_WO.translation(), "its position")
+        sizes = [getattr(ob.shape, f)() for f in _SHAPE_SIZES.get(type(ob.shape).__name__, ())]
+        problem = problem or length_problem(np.asarray(sizes), "its size")
+        if problem:
+            raise ControllerConfigError(where, problem)
+
+
+_SHAPE_SIZES = {
+    "Box": ("width", "depth", "height"),
+    "Sphere": ("radius",),
+    "Cylinder": ("radius", "length"),
+    "Capsule": ("radius", "length"),
+    "Ellipsoid": ("a", "b", "c"),
+}
+
+
+def _pinocchio_dynamics(urdf_text: str | None, arm: ArmModel, dynamics: str):
+    """Pinocchio's terms, checked against Drake's, when asked for (or, for "auto", when the
+    URDF is at hand and Pinocchio installed and able to read it); else None (Drake's)."""
+    if dynamics == "pinocchio" and urdf_text is None:
+        raise ControllerConfigError(
+            "dynamics", "Pinocchio dynamics need the model's URDF: build it with ControllerModel.from_urdf"
+        )
+    if dynamics == "drake" or urdf_text is None or (dynamics == "auto" and not _has_pinocchio()):
+        return None
+    try:
+        pinocchio = PinocchioDynamics(urdf_text, arm, arm.plant.gravity_field().gravity_vector())
+    except ControllerConfigError:
+        raise
+    except ValueError as e:  # Pinocchio's URDF reader is stricter than Drake's (e.g. <limit>)
+        if dynamics == "auto":
+            return None  # the same terms from Drake
+        raise ControllerConfigError(
+            "controller_model", f"Pinocchio cannot read the URDF: {_cut(e)}"
+        ) from None
+    check_agreement(pinocchio, arm)
+    return pinocchio
 
 
 def _has_pinocchio() -> bool:
@@ -284,11 +402,14 @@ class PinocchioDynamics:
         self._data = self._model.createData()
         name = arm.tool_frame.name()
         if not self._model.existFrame(name):
-            raise ModelMismatchError(f"Pinocchio's model of the URDF has no frame '{name}'")
+            raise ModelMismatchError(
+                "controller_model", f"Pinocchio's model of the URDF has no frame '{name}'"
+            )
         self._tool = self._model.getFrameId(name)
         if self._model.nq != arm.n or self._model.nv != arm.n:
             raise ModelMismatchError(
-                f"Pinocchio's model has nq={self._model.nq}, nv={self._model.nv}; Drake's has {arm.n} joints"
+                "controller_model",
+                f"Pinocchio's model has nq={self._model.nq}, nv={self._model.nv}; Drake's has {arm.n} joints",
             )
         # Drake's velocity order → Pinocchio's.
         order = [self._model.joints[self._model.getJointId(j)].idx_v for j in arm.joint_names]
@@ -403,18 +524,21 @@ AGREEMENT_TOLERANCE = 1e-9  # relative, per term
 
 def check_agreement(pinocchio: PinocchioDynamics, arm: ArmModel, states: int = 3, seed: int = 0) -> None:
     """Raises ModelMismatchError unless Pinocchio's and Drake's H, g, C q̇, C and J agree
-    at ``states`` seeded random states, to AGREEMENT_TOLERANCE relative to the term's size."""
+    at ``states`` seeded random states, to AGREEMENT_TOLERANCE relative to the term's size.
+    (C q̇ is the difference of two terms that hold g, so its rounding grows with |g| too.)"""
     rng = np.random.default_rng(seed)
     context = arm.plant.CreateDefaultContext()
     for _ in range(states):
         q, v = rng.uniform(-np.pi, np.pi, arm.n), rng.uniform(-1.0, 1.0, arm.n)
         a, b = pinocchio.terms(q, v, True), arm.terms(context, q, v, True)
+        gravity = float(np.max(np.abs(b.g)))
         for name in ("H", "g", "Cv", "C", "J_spatial"):
             x, y = getattr(a, name), getattr(b, name)
-            scale = max(float(np.max(np.abs(y))), 1e-12)
+            scale = max(float(np.max(np.abs(y))), gravity if name == "Cv" else 0.0, 1.0)
             error = float(np.max(np.abs(x - y)))
-            if error > AGREEMENT_TOLERANCE * max(scale, 1.0):
+            if not error <= AGREEMENT_TOLERANCE * scale:
                 raise ModelMismatchError(
+                    "controller_model",
                     f"the controller model's {name} from Pinocchio differs from Drake's by {error:.3g} "
-                    f"at q = {np.round(q, 3).tolist()}: the two libraries read the URDF differently"
+                    f"at q = {np.round(q, 3).tolist()}: the two libraries read the URDF differently",
                 )

@@ -193,18 +193,8 @@ def run_stages(
         tick_views(tick, dims),
     )
     n = T.q.shape[0]
-    if stages & CRITERIA:
-        pack_criterion(criteria[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
-        if obstacles is None:
-            if P.obstacle_mode == OBSTACLES_QUERIED:
-                return True
-        elif _obstacle_row(T, P, ix, criteria[0]):
-            return True
-        _torque_and_manipulability_rows(T, P, criteria)
-        if limits is None:
-            pack_criterion(criteria[3], np.zeros(n), 0.0, np.inf, 0.0)
-        else:
-            _joint_limits_row(T, P, criteria[3])
+    if stages & CRITERIA and _criteria_rows(T, P, ix, criteria, limits, obstacles):
+        return True
     if stages & COMMIT:
         _commit_switch(P, criteria, switch, t_previous)
     if stages & SELECTION:
@@ -233,6 +223,25 @@ def run_stages(
 
 
 # ---------------------------------------------------------------- 2. criteria
+
+
+@njit(cache=True, inline="always")
+def _criteria_rows(T, P, ix, criteria, limits, obstacles) -> bool:
+    """Stage 2: the four rows of ``criteria`` in Criterion's order. Returns True, having
+    packed only the empty obstacle row, when that row needs Drake's queries."""
+    n = T.q.shape[0]
+    pack_criterion(criteria[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
+    if obstacles is None:
+        if P.obstacle_mode == OBSTACLES_QUERIED:
+            return True
+    elif _obstacle_row(T, P, ix, criteria[0]):
+        return True
+    _torque_and_manipulability_rows(T, P, criteria)
+    if limits is None:
+        pack_criterion(criteria[3], np.zeros(n), 0.0, np.inf, 0.0)
+    else:
+        _joint_limits_row(T, P, criteria[3])
+    return False
 
 
 @njit(cache=True, inline="always")

@@ -33,6 +33,7 @@ from nsdrake.control.config import ControllerConfig
 from nsdrake.control.model import ControllerModel
 from nsdrake.control.plan import ControllerPlan, StageBuffers
 from nsdrake.control.stages import COMMIT, PLAIN_STEP, initial_state, state_parts
+from nsdrake.control.validation import validate_controller
 
 
 class StepResult:
@@ -82,11 +83,10 @@ class ControllerStep:
         task_axes: Sequence[str] = ("x", "y"),
         wrench_point: Sequence[float] | None = None,
     ):
-        from nsdrake.control.controller import as_controller_model, check_config, checked_normal
+        from nsdrake.control.controller import as_controller_model
 
         model = as_controller_model(controller_model, tool_frame, task_axes)
-        normal = checked_normal(normal, model)
-        check_config(config, model)
+        normal = validate_controller(config=config, model=model, normal=normal, wrench_point=wrench_point)
         self.plan = plan = ControllerPlan(
             model=model, config=config, normal=normal, wrench_point=wrench_point
         )

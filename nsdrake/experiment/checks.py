@@ -12,7 +12,8 @@ held over the step, so along one direction with stiffness K and damping D
 
     v' = v + T (−D v − K x),   x' = x + T v'
 
-whose matrix must have spectral radius < 1 (:func:`sampled_loop_radius`). This is
+whose matrix must have spectral radius < 1
+(:func:`nsdrake.control.validation.sampled_loop_radius`, the controller's own rule). This is
 checked along the plate (K_p,t, K_v,t), normal to it in free motion (K_p,n,
 K_v,n) and, for a pose task, on the rotational rows (K_p,r, K_v,r: ω̇ = ω̇_c there
 too). The null-space loop ėⁿ = −K_n eⁿ sampled at T needs K_n T < 2.
@@ -27,26 +28,20 @@ loop is well behaved up to ω T = 2.2 (T = 10 ms) and breaks by ω T = 2.7 (12 m
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
-from nsdrake.experiment.scenario import Scenario, ScenarioError
+from nsdrake.control.validation import stability_problems
+from nsdrake.experiment.scenario import Scenario, ScenarioError, controller_fields
 from nsdrake.station.friction import explicit_friction_margin, friction_slope, largest_inverse_inertia
 
 CONTACT_OMEGA_T = 2.5  # [-] largest ω T of the force loop in contact (module docstring)
-SHORTEST_PERIOD = 1e-5  # [s] below this a run takes more than 100,000 plant steps per simulated second
 LARGEST_TRACES = 4 * 2**30  # [bytes] traces kept in memory and written as CSV
 
 
 def _fail(where: str, problem: str):
     raise ScenarioError(f"{where}: {problem}")
-
-
-def sampled_loop_radius(K: float, D: float, T: float) -> float:
-    """Spectral radius of one task direction's loop with stiffness K [1/s²] and
-    damping D [1/s] sampled at T [s] (module docstring)."""
-    M = np.array([[1.0 - T * T * K, T * (1.0 - T * D)], [-T * K, 1.0 - T * D]])
-    return float(np.max(np.abs(np.linalg.eigvals(M))))
 
 
 def check_storage(scenario: Scenario, columns: int) -> None:
@@ -65,34 +60,15 @@ def check_with_model(scenario: Scenario, station) -> None:
     """Rank, stability and contact-period checks that need the station (module docstring)."""
     src = scenario.source or "scenario"
     T = scenario.control_period
-    if T < SHORTEST_PERIOD:
-        _fail(f"{src}: control_period", f"{T:g} s is shorter than {SHORTEST_PERIOD:g} s")
     # joint columns, task columns, scalars, and an arm with limits' margins and distances
     check_storage(scenario, columns=11 * station.arm_model.n + 4 * station.arm_model.m + 24)
     _check_rank(scenario, station, src)
-    imp = scenario.impedance
-    loops = [
-        ("K_p_tangent, K_v_tangent", imp.K_p_tangent, imp.K_v_tangent),
-        ("K_p_normal, K_v_normal", imp.K_p_normal, imp.K_v_normal),
-    ]
-    if station.arm_model.m_r:  # a pose task's rotational rows: ω̇ = ω̇_c, the same sampled loop
-        loops.append(("K_p_rotation, K_v_rotation", imp.K_p_rotation, imp.K_v_rotation))
-    for where, K, D in loops:
-        radius = sampled_loop_radius(K, D, T)
-        if radius >= 1.0:
-            _fail(
-                f"{src}: impedance.{where}",
-                f"({K:g}, {D:g}) sampled every {T:g} s is unstable (spectral radius {radius:.3g} ≥ 1); "
-                "lower the gains or the period",
-            )
+    # The sampled loops: the controller's own rule (its Python API refuses the same gains).
+    config = SimpleNamespace(**controller_fields(scenario))
+    for where, problem in stability_problems(config, rotational=station.arm_model.m_r > 0):
+        _fail(f"{src}: {where}", problem)
     _check_friction_step(scenario, station, src)
-    K_n = scenario.null_space.K_n
-    if K_n * T >= 2.0:
-        _fail(
-            f"{src}: null_space.K_n",
-            f"K_n T = {K_n * T:.3g} ≥ 2: beyond the discrete stability bound of ėⁿ = −K_n eⁿ sampled every "
-            f"{T:g} s (K_n < {2.0 / T:g})",
-        )
+    imp = scenario.impedance
     omega = math.sqrt(imp.K_p_normal + imp.K_f * contact_stiffness(station))
     if omega * T > CONTACT_OMEGA_T:
         _fail(

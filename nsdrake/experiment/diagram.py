@@ -25,6 +25,7 @@ control period by a ``VectorLogSink``.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,7 +50,7 @@ from nsdrake.control.model import ControllerModel
 from nsdrake.control.orientation import rotation_to_quaternion
 from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
 from nsdrake.experiment.reference_system import SurfaceReference
-from nsdrake.experiment.scenario import Scenario, ScenarioError
+from nsdrake.experiment.scenario import Scenario, ScenarioError, controller_fields
 from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.realism.model_error import scale_urdf_masses
 from nsdrake.realism.wiring import add_realism_loggers, plug_realism
@@ -95,14 +96,7 @@ def speed_limit_vector(scenario: Scenario, arm: ArmModel) -> np.ndarray:
 
 def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> ControllerConfig:
     """The controller's part of the scenario."""
-    config = ControllerConfig(
-        period=scenario.control_period,
-        impedance=scenario.impedance,
-        null_space=scenario.null_space,
-        desired_null_space=scenario.desired_null_space,
-        actuator_limits=scenario.actuator_limits,
-        nominal_force=scenario.reference.force,
-    )
+    config = ControllerConfig(**controller_fields(scenario))
     return config if null_space_task else without_null_space_task(config)
 
 
@@ -151,11 +145,36 @@ def build_controller(
         raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
 
 
+# arm_reach's discs by what determines them: (URDF content hash, tool frame, task axes, samples).
+_REACH: dict[tuple[str, str, tuple[str, ...], int], tuple[np.ndarray, float]] = {}
+
+
 def arm_reach(station: Station, samples: int = 2000) -> tuple[np.ndarray, float]:
     """(centre, radius) on the task axes of the disc the tool point can reach: centred on
     the first joint, radius the farthest tool distance over seeded random poses within
-    the joint limits (and the zero pose). [m]."""
+    the joint limits (and the zero pose). [m].
+
+    Computed once per arm model in a process (every run, compare variant and sweep run
+    builds its diagrams in a process that may have built the same arm before): the disc
+    depends only on the arm's kinematics and limits (the URDF's content), the tool frame
+    and the task axes, which key the cache, and the sampling is seeded, so a cached disc
+    is the one a new computation would give."""
     arm = station.arm_model
+    key = (
+        hashlib.sha256(Path(station.arm_file).read_bytes()).hexdigest(),
+        arm.tool_frame.name(),
+        arm.task_axes,
+        samples,
+    )
+    if key not in _REACH:
+        _REACH[key] = sampled_reach(arm, samples)
+    centre, radius = _REACH[key]
+    return centre.copy(), radius
+
+
+def sampled_reach(arm: ArmModel, samples: int) -> tuple[np.ndarray, float]:
+    """:func:`arm_reach`'s disc, computed: the zero pose and ``samples`` poses drawn with
+    seed 0, uniform within the joint limits (±π where a joint has none)."""
     plant = arm.plant
     context = plant.CreateDefaultContext()
     lower = np.maximum(plant.GetPositionLowerLimits(), -np.pi)

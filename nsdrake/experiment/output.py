@@ -134,16 +134,20 @@ def _file_in_the_way(path: Path) -> Path | None:
     return None
 
 
-def _make_folders(path: Path) -> None:
-    """``mkdir -p path``, with every failure as one line."""
+def _make_folders(path: Path, created: list[Path] | None = None) -> None:
+    """``mkdir -p path``, with every failure as one line; appends to ``created`` the folders
+    it made, outermost first."""
     blocker = _file_in_the_way(path)
     if blocker is not None:
         where = "exists and is not a folder" if blocker == path else f"{blocker} is a file, not a folder"
         raise OutputFolderError(f"{path}: {where}")
+    missing = [p for p in [*reversed(path.parents), path] if not p.exists()]
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise OutputFolderError(f"{path}: cannot create the folder: {_why(e)}") from None
+    if created is not None:
+        created += missing
 
 
 def _claim(folder: Path) -> bool:
@@ -251,14 +255,15 @@ def _remove_previous_run(folder: Path) -> None:
         raise OutputFolderError(f"{folder}: --overwrite: cannot remove {MANIFEST}: {_why(e)}") from None
 
 
-def prepare_output_folder(out: Path, *, overwrite: bool) -> Path:
-    """Claims the folder ``out`` (making it and its parents if needed).
+def prepare_output_folder(out: Path, *, overwrite: bool, created: list[Path] | None = None) -> Path:
+    """Claims the folder ``out`` (making it and its parents if needed; those it made are
+    appended to ``created``, for :func:`release_unused`).
 
     A non-empty folder is refused unless ``overwrite``; with it, what an earlier nsdrake
     command wrote there is removed first, and a folder holding anything else is refused.
     """
     out = Path(out)
-    _make_folders(out)
+    _make_folders(out, created)
     if any(out.iterdir()):
         if not overwrite:
             raise OutputFolderError(f"{out}: folder is not empty; choose another --out or pass --overwrite")
@@ -270,24 +275,45 @@ def prepare_output_folder(out: Path, *, overwrite: bool) -> Path:
     return out
 
 
-def default_output_folder(name: str, root: Path = Path("runs")) -> Path:
+def default_output_folder(name: str, root: Path = Path("runs"), created: list[Path] | None = None) -> Path:
     """Claims runs/NAME, or runs/NAME-2, -3, …: the first that is new or empty and that no
-    other run claims first."""
+    other run claims first (the folders it made are appended to ``created``)."""
     root = Path(root)
-    _make_folders(root)
+    _make_folders(root, created)
     k = 1
     while True:
         candidate = root / (name if k == 1 else f"{name}-{k}")
         k += 1
+        made = False
         try:
             os.mkdir(candidate)
+            made = True
         except FileExistsError:
             if not candidate.is_dir() or any(candidate.iterdir()):
                 continue
         except OSError as e:
             raise OutputFolderError(f"{candidate}: cannot create the folder: {_why(e)}") from None
         if _claim(candidate):
+            if made and created is not None:
+                created.append(candidate)
             return candidate
+
+
+def release_unused(folder: Path, created: Iterable[Path] = ()) -> None:
+    """Undoes a claim on ``folder`` that wrote nothing (the command failed or was stopped
+    before its first file): removes the manifest, then each folder of ``created`` (the
+    folders the claim made) that is empty, innermost first. A folder holding anything
+    besides the manifest is left as it is; so is everything when this fails."""
+    folder = Path(folder)
+    try:
+        if not folder.is_dir() or entries(folder):
+            return
+        (folder / MANIFEST).unlink(missing_ok=True)
+        for path in sorted(created, key=lambda p: len(p.parts), reverse=True):
+            if path.is_dir() and not any(path.iterdir()):
+                path.rmdir()
+    except (OSError, OutputFolderError):
+        pass
 
 
 def take_over(folder: Path) -> Manifest:

@@ -14,22 +14,34 @@ import dataclasses
 import math
 import re
 import typing
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import yaml
 from pydrake.common.yaml import yaml_load_typed
 
 from nsdrake.control.config import (
-    NULL_SPACE_SOURCES,
     ActuatorLimitsConfig,
     DesiredNullSpaceConfig,
     ImpedanceConfig,
     NullSpaceConfig,
 )
-from nsdrake.control.dynamics import AXIS_NAMES, ROTATION_AXIS_NAMES, parse_task_axes
+from nsdrake.control.dynamics import AXIS_NAMES
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
-from nsdrake.realism.config import RealismConfig, realism_problems
+from nsdrake.control.validation import (
+    choice_problem,
+    config_problems,
+    finite_problem,
+    fraction_problem,
+    gravity_problem,
+    length_problem,
+    non_negative_problem,
+    positive_problem,
+    task_axes_problem,
+)
+from nsdrake.realism.config import SHORTEST_STEP, RealismConfig, realism_problems, substeps
 from nsdrake.station.config import (
     CONTACT_APPROXIMATIONS,
     CONTACT_MODELS,
@@ -455,214 +467,215 @@ def _fail(source: str, where: str, problem: str):
     raise ScenarioError(f"{source}: {where}: {problem}")
 
 
+def _fail_if(source: str, where: str, problem: str | None) -> None:
+    if problem:
+        _fail(source, where, problem)
+
+
 def check_finite(source: str, where: str, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        _fail(source, where, f"must be a finite number, got {_show(value)}")
+    _fail_if(source, where, finite_problem(value))
 
 
 def check_positive(source: str, where: str, value) -> None:
-    check_finite(source, where, value)
-    if value <= 0:
-        _fail(source, where, f"must be > 0, got {_show(value)}")
+    _fail_if(source, where, positive_problem(value))
 
 
 def check_non_negative(source: str, where: str, value) -> None:
-    check_finite(source, where, value)
-    if value < 0:
-        _fail(source, where, f"must be >= 0, got {_show(value)}")
+    _fail_if(source, where, non_negative_problem(value))
 
 
 def check_choice(source: str, where: str, value, choices) -> None:
-    if value not in choices:
-        _fail(source, where, f"must be one of {', '.join(choices)}, got {_show(value)}")
+    _fail_if(source, where, choice_problem(value, choices))
 
 
 def validate(s: Scenario) -> None:
-    """Checks every field that does not need the plant; raises ScenarioError."""
+    """Checks every field that does not need the plant; raises ScenarioError for the first
+    problem. The controller's sections are checked by the controller's own rules
+    (:mod:`nsdrake.control.validation`), named after the scenario's fields."""
     src = s.source or "scenario"
-    check_positive(src, "duration", s.duration)
-    check_positive(src, "control_period", s.control_period)
+    for where, problem in scenario_problems(s):
+        _fail(src, where, problem)
+
+
+def scenario_problems(s: Scenario) -> Iterator[tuple[str, str]]:
+    """(field, problem) for every field that does not need the plant, in the order a
+    reader meets them; a later check may assume the earlier ones found nothing (the
+    caller stops at the first problem)."""
+    yield from _checked("duration", positive_problem(s.duration))
+    yield from _controller_problems(s)
     if s.control_period > s.duration:
-        _fail(src, "control_period", f"{s.control_period} s is longer than the duration {s.duration} s")
-    check_choice(src, "plane", s.plane, PLANES)
-    check_choice(src, "controller_structure", s.controller_structure, CONTROLLER_STRUCTURES)
-    for name, value in s.arm.initial_positions.items():
-        check_finite(src, f"arm.initial_positions.{_name(name)}", value)
-    for name, value in s.arm.initial_velocities.items():
-        check_finite(src, f"arm.initial_velocities.{_name(name)}", value)
+        yield "control_period", f"{s.control_period} s is longer than the duration {s.duration} s"
+    yield from _checked("plane", choice_problem(s.plane, PLANES))
+    yield from _checked("controller_structure", choice_problem(s.controller_structure, CONTROLLER_STRUCTURES))
+    if s.gravity:
+        yield from _checked("gravity", gravity_problem(s.gravity))
+    yield from _arm_and_plate_problems(s)
+    yield from _task_and_report_problems(s)
+    yield from _reference_problems(s)
+    yield from _checked("divergence.max_joint_speed", positive_problem(s.divergence.max_joint_speed))
+    yield from _checked("divergence.max_torque", positive_problem(s.divergence.max_torque))
+    for where, problem in realism_problems(s.realism, s.control_period):
+        yield f"realism.{where}", problem
+    yield from _step_problems(s)
+    yield from _obstacle_problems(s)
+
+
+def _checked(where: str, problem: str | None) -> Iterator[tuple[str, str]]:
+    if problem:
+        yield where, problem
+
+
+# The controller's fields as a scenario names them (the others keep their names).
+CONTROLLER_FIELDS = {"period": "control_period", "nominal_force": "reference.force"}
+
+
+def controller_fields(s: Scenario) -> dict:
+    """The scenario's part of a ControllerConfig, as keyword arguments."""
+    return {
+        "period": s.control_period,
+        "impedance": s.impedance,
+        "null_space": s.null_space,
+        "desired_null_space": s.desired_null_space,
+        "actuator_limits": s.actuator_limits,
+        "nominal_force": s.reference.force,
+    }
+
+
+def _controller_problems(s: Scenario) -> Iterator[tuple[str, str]]:
+    """The controller's sections, by the controller's rules (the same the Python API obeys)."""
+    for where, problem in config_problems(SimpleNamespace(**controller_fields(s))):
+        head, _, rest = where.partition(".")
+        yield CONTROLLER_FIELDS.get(head, head) + (f".{rest}" if rest else ""), problem
+
+
+def _step_problems(s: Scenario) -> Iterator[tuple[str, str]]:
+    """The plant's step, the control period over the substeps of the realism rungs that
+    are on, is no shorter than SHORTEST_STEP (no rung on: the control period itself)."""
+    k = substeps(s.realism)
+    step = s.control_period / k
+    if step >= SHORTEST_STEP:
+        return
+    if k == 1:
+        where = "control_period"
+    elif s.realism.physics.enabled and k == s.realism.physics.substeps:
+        where = "realism.physics.substeps"
+    else:
+        where = "realism.friction.min_substeps"
+    yield (
+        where,
+        f"a plant step of {step:.3g} s ({s.control_period:g} s / {k}) is shorter than {SHORTEST_STEP:g} s: "
+        f"more than {1 / SHORTEST_STEP:,.0f} plant steps per simulated second",
+    )
+
+
+def _arm_and_plate_problems(s: Scenario) -> Iterator[tuple[str, str]]:
+    for table in ("initial_positions", "initial_velocities"):
+        for name, value in getattr(s.arm, table).items():
+            yield from _checked(f"arm.{table}.{_name(name)}", finite_problem(value))
     if not s.arm.initial_positions:
-        _fail(src, "arm.initial_positions", "must give a position for every joint")
+        yield "arm.initial_positions", "must give a position for every joint"
     if len(s.plate.position) != 3:
-        _fail(src, "plate.position", f"must be [x, y, z], got {_show(s.plate.position)}")
+        yield "plate.position", f"must be [x, y, z], got {_show(s.plate.position)}"
     for i, value in enumerate(s.plate.position):
-        check_finite(src, f"plate.position[{i}]", value)
+        yield from _checked(f"plate.position[{i}]", finite_problem(value))
+    yield from _checked("plate.position", length_problem(s.plate.position, "its distance from the origin"))
     for name in ("yaw", "roll", "pitch"):
-        check_finite(src, f"plate.{name}", getattr(s.plate, name))
-    if s.gravity and len(s.gravity) != 3:
-        _fail(src, "gravity", f"must be [gx, gy, gz] or empty, got {s.gravity!r}")
-    for i, value in enumerate(s.gravity):
-        check_finite(src, f"gravity[{i}]", value)
+        yield from _checked(f"plate.{name}", finite_problem(getattr(s.plate, name)))
+    yield from _checked(
+        "contact.approximation", choice_problem(s.contact.approximation, CONTACT_APPROXIMATIONS)
+    )
+    yield from _checked("contact.model", choice_problem(s.contact.model, CONTACT_MODELS))
+
+
+def _task_and_report_problems(s: Scenario) -> Iterator[tuple[str, str]]:
+    problem = task_axes_problem(s.task.axes)
+    if problem:
+        yield f"task.axes{problem[0]}", problem[1]
     for i, check in enumerate(s.report.checks):
-        check_choice(src, f"report.checks[{i}]", check, REPORT_CHECKS)
+        yield from _checked(f"report.checks[{i}]", choice_problem(check, REPORT_CHECKS))
     for i, m in enumerate(s.report.required_modes):
         if m not in (0, 1, 2, 3, 4):
-            _fail(src, f"report.required_modes[{i}]", f"must be a mode 0-4, got {_show(m)}")
-    check_choice(src, "contact.approximation", s.contact.approximation, CONTACT_APPROXIMATIONS)
-    check_choice(src, "contact.model", s.contact.model, CONTACT_MODELS)
-    axes = s.task.axes
-    for i, a in enumerate(axes):
-        check_choice(src, f"task.axes[{i}]", a, AXIS_NAMES + ROTATION_AXIS_NAMES)
-    if not axes or len(set(axes)) != len(axes):
-        _fail(src, "task.axes", f"must be distinct axes, got {_show(axes)}")
-    try:
-        rows, _ = parse_task_axes(axes)
-    except ValueError as e:
-        _fail(src, "task.axes", _one_line(e))
+            yield f"report.required_modes[{i}]", f"must be a mode 0-4, got {_show(m)}"
     if s.report.swivel_frames and len(s.report.swivel_frames) != 3:
-        _fail(
-            src,
-            "report.swivel_frames",
-            f"must name three frames or none, got {_show(s.report.swivel_frames)}",
-        )
+        yield "report.swivel_frames", f"must name three frames or none, got {_show(s.report.swivel_frames)}"
     for name in ("camera_position", "camera_target"):
         value = getattr(s.report, name)
         if value and (len(value) != 3 or not all(math.isfinite(v) for v in value)):
-            _fail(src, f"report.{name}", f"must be [x, y, z] or empty, got {_show(value)}")
+            yield f"report.{name}", f"must be [x, y, z] or empty, got {_show(value)}"
+
+
+def _reference_problems(s: Scenario) -> Iterator[tuple[str, str]]:
     r = s.reference
-    check_choice(src, "reference.path", r.path, REFERENCE_PATHS)
-    check_choice(src, "reference.orientation", r.orientation, ORIENTATIONS)
+    yield from _checked("reference.path", choice_problem(r.path, REFERENCE_PATHS))
+    yield from _checked("reference.orientation", choice_problem(r.orientation, ORIENTATIONS))
     if r.path == "circle":
-        if len(rows) != 3:
-            _fail(src, "reference.path", f"a circle on the surface needs the task axes x, y, z, got {axes!r}")
-        check_positive(src, "reference.radius", r.radius)
-        check_positive(src, "reference.laps", r.laps)
-        check_finite(src, "reference.start_angle", r.start_angle)
-        check_non_negative(src, "reference.delay", r.delay)
-        if r.tangent_speed == 0:
-            _fail(src, "reference.tangent_speed", "a circle needs a non-zero speed")
-        length = 2 * math.pi * r.radius * r.laps
-        if length < abs(r.tangent_speed) * r.blend_time:
-            _fail(
-                src,
-                "reference.laps",
-                f"the circle ({length:.4g} m) is shorter than the speed blends need "
-                f"(|tangent_speed| x blend_time = {abs(r.tangent_speed) * r.blend_time:.4g} m)",
-            )
+        yield from _circle_problems(r, s.task.axes)
     for name in ("tangent_speed", "approach_speed"):
-        check_finite(src, f"reference.{name}", getattr(r, name))
-    check_non_negative(src, "reference.approach_speed", r.approach_speed)
-    for name in ("blend_time", "force_ramp_time"):
-        check_non_negative(src, f"reference.{name}", getattr(r, name))
-    check_positive(src, "reference.force", r.force)
-    check_positive(src, "reference.contact_threshold", r.contact_threshold)
-    check_positive(src, "reference.loss_time", r.loss_time)
-    check_non_negative(src, "reference.max_overtravel", r.max_overtravel)
-    check_non_negative(src, "reference.reach_margin", r.reach_margin)
-    if r.reach_margin >= 1.0:
-        _fail(src, "reference.reach_margin", f"must be below 1, got {r.reach_margin}")
-    check_finite(src, "reference.step_time", r.step_time)
+        yield from _checked(f"reference.{name}", finite_problem(getattr(r, name)))
+    checks = [
+        ("approach_speed", non_negative_problem(r.approach_speed)),
+        ("blend_time", non_negative_problem(r.blend_time)),
+        ("force_ramp_time", non_negative_problem(r.force_ramp_time)),
+        ("contact_threshold", positive_problem(r.contact_threshold)),
+        ("loss_time", positive_problem(r.loss_time)),
+        ("max_overtravel", non_negative_problem(r.max_overtravel)),
+        ("reach_margin", fraction_problem(r.reach_margin)),
+        ("step_time", finite_problem(r.step_time)),
+    ]
+    for name, problem in checks:
+        yield from _checked(f"reference.{name}", problem)
     if r.step_time > 0:
-        check_positive(src, "reference.step_force", r.step_force)
+        yield from _checked("reference.step_force", positive_problem(r.step_force))
     if r.contact_threshold >= r.force:
-        _fail(
-            src,
+        yield (
             "reference.contact_threshold",
             f"{r.contact_threshold} N must be below reference.force {r.force} N",
         )
-    imp = s.impedance
-    for name in ("K_p_tangent", "K_v_tangent", "K_v_normal", "K_f", "K_p_rotation", "K_v_rotation"):
-        check_positive(src, f"impedance.{name}", getattr(imp, name))
-    check_non_negative(src, "impedance.K_p_normal", imp.K_p_normal)
-    ns = s.null_space
-    check_positive(src, "null_space.K_n", ns.K_n)
-    check_choice(src, "null_space.pseudo_inverse", ns.pseudo_inverse, [k.value for k in PseudoInverseKind])
-    check_non_negative(src, "null_space.damping", ns.damping)
-    try:
-        s.generalized_inverse()
-    except ValueError as e:
-        _fail(src, "null_space.damping", _one_line(e))
-    d = s.desired_null_space
-    check_choice(src, "desired_null_space.source", d.source, NULL_SPACE_SOURCES)
-    for name, value in d.sweep.direction.items():
-        check_finite(src, f"desired_null_space.sweep.direction.{_name(name)}", value)
-    check_non_negative(src, "desired_null_space.sweep.amplitude", d.sweep.amplitude)
-    check_non_negative(src, "desired_null_space.sweep.frequency", d.sweep.frequency)
-    check_non_negative(src, "desired_null_space.sweep.start_time", d.sweep.start_time)
-    check_non_negative(src, "desired_null_space.sweep.ramp_time", d.sweep.ramp_time)
-    if d.source == "sweep" and not any(d.sweep.direction.values()):
-        _fail(src, "desired_null_space.sweep.direction", "a sweep needs a non-zero direction")
-    crit = "desired_null_space.criteria"
-    check_non_negative(src, f"{crit}.obstacle.gain", d.criteria.obstacle.gain)
-    check_positive(src, f"{crit}.obstacle.influence_distance", d.criteria.obstacle.influence_distance)
-    check_finite(src, f"{crit}.joint_torque.gain", d.criteria.joint_torque.gain)
-    if d.criteria.joint_torque.gain > 0:
-        _fail(
-            src,
-            f"{crit}.joint_torque.gain",
-            f"must be <= 0 (a negative gain minimises the torque), got {d.criteria.joint_torque.gain}",
+
+
+def _circle_problems(r: ReferenceConfig, axes) -> Iterator[tuple[str, str]]:
+    if len([a for a in axes if a in AXIS_NAMES]) != 3:
+        yield "reference.path", f"a circle on the surface needs the task axes x, y, z, got {axes!r}"
+    yield from _checked("reference.radius", positive_problem(r.radius))
+    yield from _checked("reference.laps", positive_problem(r.laps))
+    yield from _checked("reference.start_angle", finite_problem(r.start_angle))
+    yield from _checked("reference.delay", non_negative_problem(r.delay))
+    if r.tangent_speed == 0:
+        yield "reference.tangent_speed", "a circle needs a non-zero speed"
+    length = 2 * math.pi * r.radius * r.laps
+    if length < abs(r.tangent_speed) * r.blend_time:
+        yield (
+            "reference.laps",
+            f"the circle ({length:.4g} m) is shorter than the speed blends need "
+            f"(|tangent_speed| x blend_time = {abs(r.tangent_speed) * r.blend_time:.4g} m)",
         )
-    check_non_negative(src, f"{crit}.manipulability.gain", d.criteria.manipulability.gain)
-    check_non_negative(src, f"{crit}.joint_limits.gain", d.criteria.joint_limits.gain)
-    check_positive(src, f"{crit}.joint_limits.influence", d.criteria.joint_limits.influence)
-    sel = d.selector
-    for name in ("d_lim", "w_lim", "d_band", "w_band", "q_lim", "q_band", "blend_time"):
-        check_non_negative(src, f"desired_null_space.selector.{name}", getattr(sel, name))
-    if sel.q_lim > 0 and d.criteria.joint_limits.influence < sel.q_lim + sel.q_band:
-        _fail(
-            src,
-            f"{crit}.joint_limits.influence",
-            f"{d.criteria.joint_limits.influence} rad must be >= selector.q_lim + q_band = "
-            f"{sel.q_lim + sel.q_band} rad, or joint-limit avoidance would have no gradient "
-            "when it takes level 2",
-        )
-    if d.criteria.obstacle.influence_distance < sel.d_lim + sel.d_band:
-        _fail(
-            src,
-            f"{crit}.obstacle.influence_distance",
-            f"{d.criteria.obstacle.influence_distance} m must be >= selector.d_lim + d_band = "
-            f"{sel.d_lim + sel.d_band} m, or obstacle avoidance would have no gradient when it takes level 2",
-        )
-    for name, value in d.joint_speed_limits.items():
-        check_positive(src, f"desired_null_space.joint_speed_limits.{_name(name)}", value)
-    check_non_negative(src, "desired_null_space.speed_headroom", d.speed_headroom)
-    if d.speed_headroom >= 1.0:
-        _fail(src, "desired_null_space.speed_headroom", f"must be below 1, got {d.speed_headroom}")
-    for kind in ("torque", "torque_rate"):
-        for name, value in getattr(s.actuator_limits, kind).items():
-            check_positive(src, f"actuator_limits.{kind}.{name}", value)
-    check_positive(src, "divergence.max_joint_speed", s.divergence.max_joint_speed)
-    check_positive(src, "divergence.max_torque", s.divergence.max_torque)
-    for where, problem in realism_problems(s.realism, s.control_period):
-        _fail(src, f"realism.{where}", problem)
+
+
+def _obstacle_problems(s: Scenario) -> Iterator[tuple[str, str]]:
     names = set()
     for i, ob in enumerate(s.obstacles):
         where = f"obstacles[{i}]"
         if not ob.name:
-            _fail(src, f"{where}.name", "every obstacle needs a name")
+            yield f"{where}.name", "every obstacle needs a name"
         if ob.name in names:
-            _fail(src, f"{where}.name", f"duplicate obstacle name '{_name(ob.name)}'")
+            yield f"{where}.name", f"duplicate obstacle name '{_name(ob.name)}'"
         names.add(ob.name)
         if not ob.shape:
-            _fail(
-                src,
-                where,
-                f"obstacle '{_name(ob.name)}' has no geometry: "
-                f"give shape ({', '.join(OBSTACLE_SHAPES)}) and size",
-            )
-        check_choice(src, f"{where}.shape", ob.shape, tuple(OBSTACLE_SHAPES))
+            shapes = ", ".join(OBSTACLE_SHAPES)
+            yield where, f"obstacle '{_name(ob.name)}' has no geometry: give shape ({shapes}) and size"
+        yield from _checked(f"{where}.shape", choice_problem(ob.shape, tuple(OBSTACLE_SHAPES)))
         if len(ob.size) != OBSTACLE_SHAPES[ob.shape]:
-            _fail(
-                src,
-                f"{where}.size",
-                f"a {ob.shape} needs {OBSTACLE_SHAPES[ob.shape]} size entries, got {_show(ob.size)}",
-            )
+            entries = OBSTACLE_SHAPES[ob.shape]
+            yield f"{where}.size", f"a {ob.shape} needs {entries} size entries, got {_show(ob.size)}"
         for k, value in enumerate(ob.size):
-            check_positive(src, f"{where}.size[{k}]", value)
+            yield from _checked(f"{where}.size[{k}]", positive_problem(value))
+        yield from _checked(f"{where}.size", length_problem(ob.size, "its size"))
         if len(ob.position) != 3:
-            _fail(src, f"{where}.position", f"must be [x, y, z], got {_show(ob.position)}")
+            yield f"{where}.position", f"must be [x, y, z], got {_show(ob.position)}"
         for k, value in enumerate(ob.position):
-            check_finite(src, f"{where}.position[{k}]", value)
-        check_finite(src, f"{where}.yaw", ob.yaw)
+            yield from _checked(f"{where}.position[{k}]", finite_problem(value))
+        yield from _checked(f"{where}.position", length_problem(ob.position, "its distance from the origin"))
+        yield from _checked(f"{where}.yaw", finite_problem(ob.yaw))
 
 
 def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:

@@ -30,33 +30,51 @@ class DivergenceError(RuntimeError):
         super().__init__(f"diverged at t = {t:.4f} s: {reason}")
 
 
-def divergence_monitor(built: ControlledStation, scenario: Scenario):
-    """A Simulator monitor that ends the run, with its reason, at the first step whose
-    state or commanded torque is non-finite or beyond ``scenario.divergence``."""
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C (SIGINT) stopped the simulation. A KeyboardInterrupt, so that whoever does
+    not keep the partial run still stops; carries the traces up to that moment and the
+    diagram handles, as DivergenceError does."""
+
+    def __init__(self, t: float, traces: Traces, built: ControlledStation):
+        self.t, self.traces, self.built = t, traces, built
+        self.reason = f"interrupted at t = {t:.4f} s (Ctrl-C)"
+        super().__init__(self.reason)
+
+
+def state_problem(built: ControlledStation, limits, root_context) -> str | None:
+    """Why the run at ``root_context`` is no longer meaningful, or None: the plant's state
+    non-finite or a joint faster than ``limits.max_joint_speed``, or the torque the plant
+    receives non-finite or beyond ``limits.max_torque`` (a torque that cannot even be
+    computed is left to the caller's error)."""
     plant = built.station.plant
-    limits = scenario.divergence
     n = plant.num_positions()
+    state = plant.get_state_output_port().Eval(plant.GetMyContextFromRoot(root_context))
+    if not np.all(np.isfinite(state)):
+        return "the joint state is not finite"
+    if np.max(np.abs(state[n:])) > limits.max_joint_speed:
+        speed = np.max(np.abs(state[n:]))
+        return f"a joint speed reached {speed:.3g} rad/s (bound {limits.max_joint_speed:g})"
     # What the plant receives: between control instants of a plant stepping finer than
     # the controller (realism.physics) it is the held torque, and reading it does not
     # evaluate the controller at every plant step.
     actuation = built.diagram.GetSubsystemByName("actuation_map")
+    try:
+        tau = actuation.get_output_port().Eval(actuation.GetMyContextFromRoot(root_context))
+    except (RuntimeError, ValueError, ArithmeticError):
+        return None
+    if not np.all(np.isfinite(tau)):
+        return "the commanded torque is not finite"
+    if np.max(np.abs(tau)) > limits.max_torque:
+        return f"a commanded torque reached {np.max(np.abs(tau)):.3g} N m (bound {limits.max_torque:g})"
+    return None
+
+
+def divergence_monitor(built: ControlledStation, scenario: Scenario):
+    """A Simulator monitor that ends the run, with its reason, at the first step whose
+    state or commanded torque is non-finite or beyond ``scenario.divergence``."""
 
     def monitor(root_context):
-        state = plant.get_state_output_port().Eval(plant.GetMyContextFromRoot(root_context))
-        problem = None
-        if not np.all(np.isfinite(state)):
-            problem = "the joint state is not finite"
-        elif np.max(np.abs(state[n:])) > limits.max_joint_speed:
-            speed = np.max(np.abs(state[n:]))
-            problem = f"a joint speed reached {speed:.3g} rad/s (bound {limits.max_joint_speed:g})"
-        else:
-            tau = actuation.get_output_port().Eval(actuation.GetMyContextFromRoot(root_context))
-            if not np.all(np.isfinite(tau)):
-                problem = "the commanded torque is not finite"
-            elif np.max(np.abs(tau)) > limits.max_torque:
-                problem = (
-                    f"a commanded torque reached {np.max(np.abs(tau)):.3g} N m (bound {limits.max_torque:g})"
-                )
+        problem = state_problem(built, scenario.divergence, root_context)
         if problem is None:
             return EventStatus.Succeeded()
         return EventStatus.ReachedTermination(built.diagram, problem)
@@ -106,6 +124,17 @@ def run(
     if live:
         simulator.set_target_realtime_rate(1.0)
     simulator.set_monitor(divergence_monitor(built, scenario))
+    _advance(simulator, built, scenario, progress)
+    if built.visualizers is not None:
+        built.visualizers.publish_recording()
+    return collect_traces(built, context), built
+
+
+def _advance(simulator: Simulator, built: ControlledStation, scenario: Scenario, progress) -> None:
+    """Simulates to the scenario's duration. A step the monitor stops, a step Drake or a
+    system cannot take, and Ctrl-C each end the run with the traces so far (DivergenceError,
+    RunInterrupted)."""
+    context = simulator.get_context()
     chunks = 100 if progress is not None else 1
     try:
         simulator.Initialize()
@@ -117,23 +146,27 @@ def run(
                 )
             if progress is not None:
                 progress(k / chunks)
-    except (RuntimeError, ValueError, FloatingPointError) as e:
+    except KeyboardInterrupt:
+        raise RunInterrupted(context.get_time(), collect_traces(built, context), built) from None
+    except (RuntimeError, ValueError, ArithmeticError) as e:
         if isinstance(e, DivergenceError):
             raise
-        # Drake failed inside a step (e.g. its contact solver) or a controller raised.
-        raise DivergenceError(
-            context.get_time(), _one_line(e), collect_traces(built, context), built
-        ) from None
-    if built.visualizers is not None:
-        built.visualizers.publish_recording()
-    return collect_traces(built, context), built
+        # Drake failed inside a step (e.g. its contact solver) or a system raised (a linear
+        # solve on a state gone non-finite, an overflow): where the state or torque explains
+        # it, the monitor's words, else the error's.
+        reason = state_problem(built, scenario.divergence, context) or _one_line(e)
+        raise DivergenceError(context.get_time(), reason, collect_traces(built, context), built) from None
 
 
 def collect_traces(built: ControlledStation, root_context) -> Traces:
     """The loggers' records as named columns (see README for the column list)."""
     arm = built.station.arm_model
     n = arm.n
-    logs = {name: logger.FindLog(root_context) for name, logger in built.loggers.items()}
+    found = {name: logger.FindLog(root_context) for name, logger in built.loggers.items()}
+    # A run stopped inside a step (Ctrl-C, an exception) may have logged a row in some
+    # loggers and not yet in the others: every column ends at the last complete row.
+    rows = min(log.num_samples() for log in found.values())
+    logs = {name: _Rows(log, rows) for name, log in found.items()}
     t = logs["state"].sample_times()
     columns: dict[str, np.ndarray] = {"t": t}
 
@@ -180,6 +213,19 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
         columns["swivel"] = swivel_angles(built, state[:n], built.scenario.report.swivel_frames)
     add_realism_columns(built, logs, columns)
     return Traces(columns)
+
+
+class _Rows:
+    """A VectorLog's first ``rows`` samples, read as the log is."""
+
+    def __init__(self, log, rows: int):
+        self._times, self._data = log.sample_times()[:rows], log.data()[:, :rows]
+
+    def sample_times(self) -> np.ndarray:
+        return self._times
+
+    def data(self) -> np.ndarray:
+        return self._data
 
 
 def task_positions(built: ControlledStation, q: np.ndarray) -> np.ndarray:

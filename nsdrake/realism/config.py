@@ -178,6 +178,12 @@ class RealismConfig:
 RUNGS = ("physics", "force_sensor", "friction", "belt", "delay", "model_error")
 
 
+# Physical ranges: beyond them a setting is no real device's, and a run would take hours.
+SHORTEST_STEP = 1e-5  # [s] no plant step (control period / substeps) nor sensor sample shorter: 100 kHz
+LONGEST_DELAY = 100  # [periods] of computation delay (0.2 s at fig3's 2 ms); the hold keeps each one
+LARGEST_SEED = 2**32 - 1  # Drake's RandomGenerator (a 32-bit Mersenne twister) keeps 32 bits of a seed
+
+
 def substeps(realism: RealismConfig) -> int:
     """Plant steps per control period: the physics rung's, at least the friction rung's
     minimum, else 1."""
@@ -196,27 +202,7 @@ def realism_problems(realism: RealismConfig, control_period: float):
     p = realism.physics
     if isinstance(p.substeps, bool) or not is_power_of_two(p.substeps):
         yield "physics.substeps", f"must be a power of two >= 1 (1, 2, 4, 8, …), got {p.substeps!r}"
-    s = realism.force_sensor
-    for name in ("noise_force", "noise_moment", "filter_cutoff"):
-        value = getattr(s, name)
-        if not _finite(value) or value < 0:
-            yield f"force_sensor.{name}", f"must be a finite number >= 0, got {value!r}"
-    for name in ("bias_force", "bias_moment"):
-        value = getattr(s, name)
-        if len(value) != 3 or not all(_finite(v) for v in value):
-            yield f"force_sensor.{name}", f"must be three finite numbers [x, y, z], got {value!r}"
-    if not _finite(s.sample_period) or s.sample_period <= 0:
-        yield "force_sensor.sample_period", f"must be > 0, got {s.sample_period!r}"
-    elif s.enabled:
-        ratio = control_period / s.sample_period
-        if abs(ratio - round(ratio)) > 1e-9 * ratio or not is_power_of_two(round(ratio)):
-            yield (
-                "force_sensor.sample_period",
-                f"{s.sample_period:g} s must be the control period {control_period:g} s divided by a "
-                "power of two",
-            )
-    if isinstance(s.seed, bool) or s.seed < 0:
-        yield "force_sensor.seed", f"must be an integer >= 0, got {s.seed!r}"
+    yield from _sensor_problems(realism.force_sensor, control_period)
     f = realism.friction
     for name in ("coulomb", "viscous"):
         value = getattr(f, name)
@@ -233,11 +219,53 @@ def realism_problems(realism: RealismConfig, control_period: float):
             yield f"belt.{name}", f"must be > 0, got {value!r}"
     if not _finite(b.damping) or b.damping < 0:
         yield "belt.damping", f"must be a finite number >= 0, got {b.damping!r}"
-    if isinstance(realism.delay.periods, bool) or realism.delay.periods < 0:
-        yield "delay.periods", f"must be an integer >= 0, got {realism.delay.periods!r}"
+    periods = realism.delay.periods
+    if isinstance(periods, bool) or not isinstance(periods, int) or periods < 0:
+        yield "delay.periods", f"must be an integer >= 0, got {periods!r}"
+    elif periods > LONGEST_DELAY:
+        yield (
+            "delay.periods",
+            f"must be at most {LONGEST_DELAY} periods (no real controller lags further), got {periods!r}",
+        )
     e = realism.model_error.mass_error
     if not _finite(e) or e <= -1.0:
         yield "model_error.mass_error", f"must be a finite number > -1 (masses stay positive), got {e!r}"
+
+
+def _sensor_problems(s: ForceSensorConfig, control_period: float):
+    """The force sensor's values, its sample period within range and, when on, a power-of-two
+    fraction of the control period."""
+    for name in ("noise_force", "noise_moment", "filter_cutoff"):
+        value = getattr(s, name)
+        if not _finite(value) or value < 0:
+            yield f"force_sensor.{name}", f"must be a finite number >= 0, got {value!r}"
+    for name in ("bias_force", "bias_moment"):
+        value = getattr(s, name)
+        if len(value) != 3 or not all(_finite(v) for v in value):
+            yield f"force_sensor.{name}", f"must be three finite numbers [x, y, z], got {value!r}"
+    if not _finite(s.sample_period) or s.sample_period <= 0:
+        yield "force_sensor.sample_period", f"must be > 0, got {s.sample_period!r}"
+    elif s.sample_period < SHORTEST_STEP:
+        yield (
+            "force_sensor.sample_period",
+            f"{s.sample_period:g} s is shorter than {SHORTEST_STEP:g} s: no force sensor samples faster than "
+            f"{1 / SHORTEST_STEP / 1000:g} kHz",
+        )
+    elif s.enabled:
+        ratio = control_period / s.sample_period
+        if abs(ratio - round(ratio)) > 1e-9 * ratio or not is_power_of_two(round(ratio)):
+            yield (
+                "force_sensor.sample_period",
+                f"{s.sample_period:g} s must be the control period {control_period:g} s divided by a "
+                "power of two",
+            )
+    if isinstance(s.seed, bool) or not isinstance(s.seed, int) or s.seed < 0:
+        yield "force_sensor.seed", f"must be an integer >= 0, got {s.seed!r}"
+    elif s.seed > LARGEST_SEED:
+        yield (
+            "force_sensor.seed",
+            f"must be at most {LARGEST_SEED} (Drake's random generator keeps 32 bits of it), got {s.seed!r}",
+        )
 
 
 def _finite(x) -> bool:

@@ -71,6 +71,37 @@ def first_contact_index(traces: Traces, threshold: float) -> int | None:
     return int(hits[0]) if hits.size else None
 
 
+def measuring_window_gap(traces: Traces, contact_threshold: float, min_rows: int = 1) -> str | None:
+    """Why a run has no force figures, in words a user can act on, or None when it has:
+    the tool never reached the plate, or the window (from SETTLE_TIME after first contact
+    to the end) starts after the run ends or holds fewer than ``min_rows`` periods. The figures of
+    :func:`fig3_metrics`, the pose checks, ``nsdrake sweep`` and ``nsdrake compare``'s
+    force measures all start there."""
+    t = traces["t"]
+    if not len(t):
+        return "the run holds no control period: nothing to measure"
+    k0 = first_contact_index(traces, contact_threshold)
+    if k0 is None:
+        return (
+            f"no contact: the tool never pressed {contact_threshold:g} N on the plate in the "
+            f"{t[-1]:.3g} s run, so the force figures are empty"
+        )
+    start = float(t[k0]) + SETTLE_TIME
+    rows = int(np.sum(t >= start))
+    if start > t[-1]:
+        return (
+            f"the measuring window starts {SETTLE_TIME:g} s after first contact ({t[k0]:.3g} s), at "
+            f"{start:.3g} s, after the run ends at {t[-1]:.3g} s: its force figures are empty; run longer "
+            "(--duration)"
+        )
+    if rows < min_rows:
+        return (
+            f"the measuring window (from {start:.3g} s, {SETTLE_TIME:g} s after first contact) holds {rows} "
+            "control periods, too few to measure: its force figures are empty; run longer (--duration)"
+        )
+    return None
+
+
 def fig3_metrics(
     traces: Traces,
     *,
@@ -92,51 +123,10 @@ def fig3_metrics(
         d_lim: the selector's obstacle limit: after the first second d_min must
             stay above it [m].
     """
-    t = traces["t"]
-    metrics: list[Metric] = []
-    k0 = first_contact_index(traces, contact_threshold)
-    if k0 is None:
-        return [Metric("first_contact_time", math.inf, "s", "contact happens", False)]
-    t_contact = float(t[k0])
-    metrics.append(Metric("first_contact_time", t_contact, "s", "", None))
-    window = t >= t_contact + SETTLE_TIME
-    if not window.any():
-        return metrics + [Metric("window_rows", 0, "rows", "> 0 rows after settling", False)]
-    metrics.append(Metric("window_start", t_contact + SETTLE_TIME, "s", "", None))
-    metrics.append(Metric("window_rows", int(window.sum()), "rows", "", None))
-
-    f_n, f_d = traces["f_n"][window], traces["f_d"][window]
-    f_ref = float(np.max(f_d))
-    err = f_n - f_d
-    metrics.append(
-        Metric(
-            "normal_force_min",
-            float(f_n.min()),
-            "N",
-            "> 0 (tool never leaves the plate)",
-            bool(f_n.min() > 0),
-        )
-    )
-    rms_f = _rms(err)
-    metrics.append(
-        Metric(
-            "force_error_rms",
-            rms_f,
-            "N",
-            f"<= {FORCE_RMS_BOUND:.0%} of f_d = {FORCE_RMS_BOUND * f_ref:.4g} N",
-            rms_f <= FORCE_RMS_BOUND * f_ref,
-        )
-    )
-    max_f = float(np.max(np.abs(err)))
-    metrics.append(
-        Metric(
-            "force_error_max",
-            max_f,
-            "N",
-            f"<= {FORCE_MAX_BOUND:.0%} of f_d = {FORCE_MAX_BOUND * f_ref:.4g} N",
-            max_f <= FORCE_MAX_BOUND * f_ref,
-        )
-    )
+    metrics, window = _window(traces, contact_threshold)
+    if window is None:
+        return metrics
+    metrics += _force_metrics(traces, window)
     x = np.column_stack([traces[a] for a in task_axes])[window]
     x_d = np.column_stack([traces[f"{a}_d"] for a in task_axes])[window]
     rms_x = _rms((x - x_d) @ tangent)
@@ -149,46 +139,55 @@ def fig3_metrics(
             rms_x <= POSITION_RMS_BOUND,
         )
     )
+    metrics += _null_space_metrics(traces, window)
+    if d_lim is not None and "d_min" in traces:
+        metrics.append(_d_min_after_metric(traces, d_lim))
+    metrics.append(forbidden_contacts_metric(traces))
+    return metrics + _p_tau_metrics(traces, p_tau_without_null_space_task)
 
+
+def _null_space_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
+    """RMS ‖q̇_dⁿ‖ and RMS ‖eⁿ‖ over the window; the error's bound is relative to the
+    command, with an absolute floor for a run that commands almost nothing."""
     en = np.linalg.norm(traces.block("en")[window], axis=1)
     qns = np.linalg.norm(traces.block("qns")[window], axis=1)
     rms_en, rms_qns = _rms(en), _rms(qns)
     bound = max(NULL_SPACE_RELATIVE_BOUND * rms_qns, NULL_SPACE_ABSOLUTE_BOUND)
-    metrics.append(Metric("null_space_command_rms", rms_qns, "rad/s", "", None))
-    metrics.append(
+    return [
+        Metric("null_space_command_rms", rms_qns, "rad/s", "", None),
         Metric(
             "null_space_error_rms",
             rms_en,
             "rad/s",
             f"<= max(5% of RMS ||qns|| , 1e-3 rad/s) = {bound:.3g} rad/s",
             rms_en <= bound,
-        )
-    )
-    if d_lim is not None and "d_min" in traces:
-        late = t >= D_MIN_AFTER
-        d_late = float(traces["d_min"][late].min()) if late.any() else math.inf
-        metrics.append(
-            Metric(f"d_min_after_{D_MIN_AFTER:g}s", d_late, "m", f"> d_lim = {d_lim:g} m", d_late > d_lim)
-        )
-    metrics.append(forbidden_contacts_metric(traces))
+        ),
+    ]
 
+
+def _d_min_after_metric(traces: Traces, d_lim: float) -> Metric:
+    """The smallest d_min from D_MIN_AFTER on, against the selector's d_lim."""
+    late = traces["t"] >= D_MIN_AFTER
+    d_late = float(traces["d_min"][late].min()) if late.any() else math.inf
+    return Metric(f"d_min_after_{D_MIN_AFTER:g}s", d_late, "m", f"> d_lim = {d_lim:g} m", d_late > d_lim)
+
+
+def _p_tau_metrics(traces: Traces, p_tau_without_null_space_task: float | None) -> list[Metric]:
+    """The joint-torque criterion at the end, below the run without the null-space task's
+    when that run was made."""
     p_end = float(traces["p_tau"][-1])
     if p_tau_without_null_space_task is None:
-        metrics.append(Metric("p_tau_end", p_end, "N^2 m^2", "", None))
-    else:
-        metrics.append(
-            Metric(
-                "p_tau_end",
-                p_end,
-                "N^2 m^2",
-                f"< p_tau_end_without_null_space_task = {p_tau_without_null_space_task:.4g}",
-                p_end < p_tau_without_null_space_task,
-            )
-        )
-        metrics.append(
-            Metric("p_tau_end_without_null_space_task", p_tau_without_null_space_task, "N^2 m^2", "", None)
-        )
-    return metrics
+        return [Metric("p_tau_end", p_end, "N^2 m^2", "", None)]
+    return [
+        Metric(
+            "p_tau_end",
+            p_end,
+            "N^2 m^2",
+            f"< p_tau_end_without_null_space_task = {p_tau_without_null_space_task:.4g}",
+            p_end < p_tau_without_null_space_task,
+        ),
+        Metric("p_tau_end_without_null_space_task", p_tau_without_null_space_task, "N^2 m^2", "", None),
+    ]
 
 
 def joint_speed_metric(traces: Traces, limits: np.ndarray) -> Metric:
@@ -232,45 +231,75 @@ def priority_metrics(
       against twice the 99th percentile of Δτ over the other rows, first contact
       ± (−0.01, 0.3) s excluded.
     """
-    t = traces["t"]
     mode = traces["mode"].astype(int)
-    h = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    metrics = []
-    visited = sorted({int(m) for m in mode})
-    if required_modes:
-        missing = sorted(set(required_modes) - set(visited))
-        metrics.append(
-            Metric(
-                "modes_visited",
-                float(len(visited)),
-                "modes",
-                f"includes {list(required_modes)} (visited {visited}, missing {missing})",
-                not missing,
-            )
-        )
-    else:
-        metrics.append(Metric("modes_visited", float(len(visited)), "modes", f"visited {visited}", None))
-    criteria = {1: ("d_min", +1, "d_min grows"), 2: ("p_tau", -1, "p_tau falls"), 3: ("w", +1, "w grows")}
-    if "q_margin" in traces:  # an arm with joint limits: mode 4, joint-limit avoidance
-        criteria[4] = ("q_margin", +1, "the smallest joint-limit margin grows")
-    for m, (column, sign, words) in criteria.items():
-        spans = _intervals(mode == m)
-        active = float(sum((t[b] - t[a] + h) for a, b in spans))
-        metrics.append(Metric(f"mode{m}_time", active, "s", "", None))
-        judged = [(a, b) for a, b in spans if t[b] - t[a] >= blend_time]
-        if not judged:
+    metrics = [_modes_visited_metric(mode, required_modes)]
+    for m, (column, sign, words) in _MODE_CRITERIA.items():
+        if m == 4 and "q_margin" not in traces:  # mode 4 only on an arm with joint limits
             continue
-        changes = [sign * (traces[column][b] - traces[column][a]) for a, b in judged]
-        worst = float(min(changes))
-        metrics.append(
-            Metric(
-                f"mode{m}_{column}_change_min",
-                worst,
-                {"d_min": "m", "p_tau": "N^2 m^2", "w": "m^2", "q_margin": "rad"}[column],
-                f"> 0 in each of the {len(judged)} mode-{m} interval(s) of >= {blend_time:g} s ({words})",
-                worst > 0,
-            )
+        metrics += _mode_criterion_metrics(traces, mode, m, column, sign, words, blend_time)
+    return metrics + _switch_step_metrics(traces, mode, blend_time, contact_threshold)
+
+
+# Per mode: the criterion it puts on level 2, the sign of its improvement, in words.
+_MODE_CRITERIA = {
+    1: ("d_min", +1, "d_min grows"),
+    2: ("p_tau", -1, "p_tau falls"),
+    3: ("w", +1, "w grows"),
+    4: ("q_margin", +1, "the smallest joint-limit margin grows"),
+}
+_CRITERION_UNITS = {"d_min": "m", "p_tau": "N^2 m^2", "w": "m^2", "q_margin": "rad"}
+
+
+def _modes_visited_metric(mode: np.ndarray, required_modes: tuple[int, ...]) -> Metric:
+    visited = sorted({int(m) for m in mode})
+    if not required_modes:
+        return Metric("modes_visited", float(len(visited)), "modes", f"visited {visited}", None)
+    missing = sorted(set(required_modes) - set(visited))
+    return Metric(
+        "modes_visited",
+        float(len(visited)),
+        "modes",
+        f"includes {list(required_modes)} (visited {visited}, missing {missing})",
+        not missing,
+    )
+
+
+def _control_period(traces: Traces) -> float:
+    t = traces["t"]
+    return float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+
+
+def _mode_criterion_metrics(
+    traces: Traces, mode: np.ndarray, m: int, column: str, sign: int, words: str, blend_time: float
+) -> list[Metric]:
+    """The time spent in mode ``m`` and, over its intervals of at least ``blend_time``,
+    the smallest improvement of its criterion from the interval's start to its end."""
+    t, h = traces["t"], _control_period(traces)
+    spans = _intervals(mode == m)
+    metrics = [Metric(f"mode{m}_time", float(sum((t[b] - t[a] + h) for a, b in spans)), "s", "", None)]
+    judged = [(a, b) for a, b in spans if t[b] - t[a] >= blend_time]
+    if not judged:
+        return metrics
+    worst = float(min(sign * (traces[column][b] - traces[column][a]) for a, b in judged))
+    metrics.append(
+        Metric(
+            f"mode{m}_{column}_change_min",
+            worst,
+            _CRITERION_UNITS[column],
+            f"> 0 in each of the {len(judged)} mode-{m} interval(s) of >= {blend_time:g} s ({words})",
+            worst > 0,
         )
+    )
+    return metrics
+
+
+def _switch_step_metrics(
+    traces: Traces, mode: np.ndarray, blend_time: float, contact_threshold: float | None
+) -> list[Metric]:
+    """The number of switches, and the largest torque step within ``blend_time`` after a
+    switch against twice the 99th percentile of the steps elsewhere (first contact's
+    onset excluded)."""
+    t, h = traces["t"], _control_period(traces)
     steps = torque_steps(traces)
     switches = np.flatnonzero(np.diff(mode) != 0) + 1  # rows where a new mode starts
     at_switch = np.zeros(len(steps), dtype=bool)
@@ -282,21 +311,21 @@ def priority_metrics(
         if k0 is not None:
             lo, hi = CONTACT_ONSET_EXCLUDED
             elsewhere &= ~((t[:-1] >= t[k0] + lo) & (t[:-1] <= t[k0] + hi))
-    metrics.append(Metric("mode_switches", float(len(switches)), "switches", "", None))
-    if len(switches) and elsewhere.any():
-        largest = float(steps[at_switch].max())
-        p99 = float(np.percentile(steps[elsewhere], 99))
-        metrics.append(Metric("torque_step_p99_elsewhere", p99, "N m", "", None))
-        metrics.append(
-            Metric(
-                "torque_step_at_switch_max",
-                largest,
-                "N m",
-                f"<= {TORQUE_STEP_RATIO_BOUND:g} x p99 elsewhere = {TORQUE_STEP_RATIO_BOUND * p99:.4g} N m",
-                largest <= TORQUE_STEP_RATIO_BOUND * p99,
-            )
-        )
-    return metrics
+    metrics = [Metric("mode_switches", float(len(switches)), "switches", "", None)]
+    if not (len(switches) and elsewhere.any()):
+        return metrics
+    largest = float(steps[at_switch].max())
+    p99 = float(np.percentile(steps[elsewhere], 99))
+    return metrics + [
+        Metric("torque_step_p99_elsewhere", p99, "N m", "", None),
+        Metric(
+            "torque_step_at_switch_max",
+            largest,
+            "N m",
+            f"<= {TORQUE_STEP_RATIO_BOUND:g} x p99 elsewhere = {TORQUE_STEP_RATIO_BOUND * p99:.4g} N m",
+            largest <= TORQUE_STEP_RATIO_BOUND * p99,
+        ),
+    ]
 
 
 def write_metrics(path: Path, metrics: list[Metric], extra: dict | None = None) -> None:

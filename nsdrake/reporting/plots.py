@@ -156,74 +156,16 @@ def plot_pose(
     ``baseline``, the same run with q̇_dⁿ = 0); every joint's margin to its position,
     speed and torque limits as a fraction of the limit's scale; the elbow's swivel and
     the mode."""
-    from nsdrake.reporting.metrics import in_plane_errors
-
-    t = traces["t"]
     fig = plt.figure(figsize=(11, 13), constrained_layout=True)
     grid = fig.add_gridspec(5, 2)
-    ax = fig.add_subplot(grid[0, 0])
-    ax.plot(t, traces["f_n"], color="C0", label="measured $f_n$")
-    ax.plot(t, traces["f_d"], "--", color="C3", label="desired $f_d$")
-    ax.set_ylabel("normal force [N]")
-    ax.legend(loc="lower right", fontsize=8)
-    ax = path_axis = fig.add_subplot(grid[0, 1])
-    # The path on the surface: the two task axes the normal is not along.
-    plane = [a for a, c in zip(task_axes, normal, strict=True) if abs(c) < 0.5][:2]
-    if len(plane) == 2:
-        ax.plot(traces[f"{plane[0]}_d"], traces[f"{plane[1]}_d"], "--", color="C3", lw=2, label="reference")
-        ax.plot(traces[plane[0]], traces[plane[1]], color="C0", lw=0.8, label="tool")
-        ax.set_xlabel(f"{plane[0]} [m]")
-        ax.set_ylabel(f"{plane[1]} [m]")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.ticklabel_format(useOffset=True, style="sci", scilimits=(-3, 3))
-        ax.legend(loc="best", fontsize=8)
-    ax = fig.add_subplot(grid[1, :])
-    ax.plot(
-        t,
-        1e3 * in_plane_errors(traces, normal, task_axes),
-        color="C0",
-        label="position error along the surface",
-    )
-    ax.set_ylabel("position error [mm]")
-    if "rot_err" in traces:
-        right = ax.twinx()
-        right.plot(t, np.degrees(traces["rot_err"]), color="C2", lw=0.8, label="orientation error")
-        right.set_ylabel("orientation error [deg]")
-        right.legend(loc="upper right", fontsize=8)
-    ax.legend(loc="upper left", fontsize=8)
-    ax = fig.add_subplot(grid[2, :])
-    for k, name in enumerate(n for n in traces.names if n.startswith("d_") and n != "d_min"):
-        ax.plot(t, traces[name], color=f"C{k}", label=f"{name} (with null-space task)")
-        if baseline is not None and name in baseline:
-            ax.plot(baseline["t"], baseline[name], ":", color=f"C{k}", label=f"{name} without")
-    if d_lim is not None:
-        ax.axhline(d_lim, color="k", ls="--", lw=0.8, label=r"$d_{lim}$")
-    ax.set_ylabel("link–obstacle distance [m]")
-    ax.legend(loc="best", fontsize=8, ncol=2)
-    for cell, (kind, label) in zip(
-        (grid[3, 0], grid[3, 1], grid[4, 0]),
-        (("q", "position margin [rad]"), ("v", "speed margin [rad/s]"), ("tau", "torque margin [N m]")),
-        strict=True,
-    ):
-        ax = fig.add_subplot(cell)
-        block = traces.block(f"{kind}_margin")
-        for i in range(block.shape[1]):
-            ax.plot(t, block[:, i], lw=0.9, label=f"joint {i + 1}")
-        ax.axhline(0.0, color="k", lw=0.8)
-        ax.set_ylabel(label)
-        if kind == "q":
-            ax.legend(loc="best", fontsize=7, ncol=4)
-        ax.set_xlabel("time [s]")
-    ax = fig.add_subplot(grid[4, 1])
-    _mode_axis(ax, traces, fontsize=7)
-    if "swivel" in traces:
-        right = ax.twinx()
-        right.plot(t, traces["swivel"], color="C4", label="elbow swivel")
-        if baseline is not None and "swivel" in baseline:
-            right.plot(baseline["t"], baseline["swivel"], ":", color="C4", label="without null-space task")
-        right.set_ylabel("elbow swivel [rad]")
-        right.legend(loc="upper right", fontsize=8)
-    ax.set_xlabel("time [s]")
+    _force_axis(fig.add_subplot(grid[0, 0]), traces)
+    path_axis = fig.add_subplot(grid[0, 1])
+    _surface_path_axis(path_axis, traces, normal, task_axes)
+    _pose_error_axis(fig.add_subplot(grid[1, :]), traces, normal, task_axes)
+    _obstacle_distance_axis(fig.add_subplot(grid[2, :]), traces, baseline, d_lim)
+    for cell, kind in zip((grid[3, 0], grid[3, 1], grid[4, 0]), ("q", "v", "tau"), strict=True):
+        _margin_axis(fig.add_subplot(cell), traces, kind)
+    _swivel_and_mode_axis(fig.add_subplot(grid[4, 1]), traces, baseline)
     if contact_time is not None:
         for a in fig.axes:
             if a is not path_axis:
@@ -232,3 +174,79 @@ def plot_pose(
         fig.suptitle(textwrap.fill(title, 100), fontsize=10)
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _force_axis(ax, traces: Traces) -> None:
+    ax.plot(traces["t"], traces["f_n"], color="C0", label="measured $f_n$")
+    ax.plot(traces["t"], traces["f_d"], "--", color="C3", label="desired $f_d$")
+    ax.set_ylabel("normal force [N]")
+    ax.legend(loc="lower right", fontsize=8)
+
+
+def _surface_path_axis(ax, traces: Traces, normal: np.ndarray, task_axes: tuple[str, ...]) -> None:
+    """The path on the surface: the two task axes the normal is not along (empty if fewer)."""
+    plane = [a for a, c in zip(task_axes, normal, strict=True) if abs(c) < 0.5][:2]
+    if len(plane) != 2:
+        return
+    ax.plot(traces[f"{plane[0]}_d"], traces[f"{plane[1]}_d"], "--", color="C3", lw=2, label="reference")
+    ax.plot(traces[plane[0]], traces[plane[1]], color="C0", lw=0.8, label="tool")
+    ax.set_xlabel(f"{plane[0]} [m]")
+    ax.set_ylabel(f"{plane[1]} [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.ticklabel_format(useOffset=True, style="sci", scilimits=(-3, 3))
+    ax.legend(loc="best", fontsize=8)
+
+
+def _pose_error_axis(ax, traces: Traces, normal: np.ndarray, task_axes: tuple[str, ...]) -> None:
+    """The position error along the surface and, on a right axis, the orientation error."""
+    from nsdrake.reporting.metrics import in_plane_errors
+
+    t = traces["t"]
+    error = 1e3 * in_plane_errors(traces, normal, task_axes)
+    ax.plot(t, error, color="C0", label="position error along the surface")
+    ax.set_ylabel("position error [mm]")
+    if "rot_err" in traces:
+        right = ax.twinx()
+        right.plot(t, np.degrees(traces["rot_err"]), color="C2", lw=0.8, label="orientation error")
+        right.set_ylabel("orientation error [deg]")
+        right.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper left", fontsize=8)
+
+
+def _obstacle_distance_axis(ax, traces: Traces, baseline: Traces | None, d_lim: float | None) -> None:
+    """Every d_<obstacle> column, dotted from ``baseline``, with the selector's d_lim."""
+    for k, name in enumerate(n for n in traces.names if n.startswith("d_") and n != "d_min"):
+        ax.plot(traces["t"], traces[name], color=f"C{k}", label=f"{name} (with null-space task)")
+        if baseline is not None and name in baseline:
+            ax.plot(baseline["t"], baseline[name], ":", color=f"C{k}", label=f"{name} without")
+    if d_lim is not None:
+        ax.axhline(d_lim, color="k", ls="--", lw=0.8, label=r"$d_{lim}$")
+    ax.set_ylabel("link–obstacle distance [m]")
+    ax.legend(loc="best", fontsize=8, ncol=2)
+
+
+_MARGIN_LABELS = {"q": "position margin [rad]", "v": "speed margin [rad/s]", "tau": "torque margin [N m]"}
+
+
+def _margin_axis(ax, traces: Traces, kind: str) -> None:
+    """Each joint's ``<kind>_margin`` column (kind q, v or tau) against zero, the limit."""
+    block = traces.block(f"{kind}_margin")
+    for i in range(block.shape[1]):
+        ax.plot(traces["t"], block[:, i], lw=0.9, label=f"joint {i + 1}")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_ylabel(_MARGIN_LABELS[kind])
+    if kind == "q":
+        ax.legend(loc="best", fontsize=7, ncol=4)
+    ax.set_xlabel("time [s]")
+
+
+def _swivel_and_mode_axis(ax, traces: Traces, baseline: Traces | None) -> None:
+    _mode_axis(ax, traces, fontsize=7)
+    if "swivel" in traces:
+        right = ax.twinx()
+        right.plot(traces["t"], traces["swivel"], color="C4", label="elbow swivel")
+        if baseline is not None and "swivel" in baseline:
+            right.plot(baseline["t"], baseline["swivel"], ":", color="C4", label="without null-space task")
+        right.set_ylabel("elbow swivel [rad]")
+        right.legend(loc="upper right", fontsize=8)
+    ax.set_xlabel("time [s]")

@@ -112,21 +112,6 @@ def render_report(
 ) -> str:
     """The report page as a string; paths in ``replay`` and ``files`` are relative links.
     ``failure``: why the run stopped early (it is then marked failed)."""
-    bounded = [m for m in metrics if m.passed is not None]
-    failed = [m for m in bounded if not m.passed]
-    if failure:
-        banner = (
-            f'<span class="banner fail">run FAILED: {_e(failure)}; '
-            "everything below is up to that moment</span>"
-        )
-    elif failed:
-        banner = (
-            f'<span class="banner fail">{len(failed)} of {len(bounded)} bounded metrics FAIL: '
-            f"{_e(', '.join(m.name for m in failed))}</span>"
-        )
-    else:
-        banner = f'<span class="banner pass">all {len(bounded)} bounded metrics pass</span>'
-    generated = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -134,7 +119,7 @@ def render_report(
         f"<title>{_e(title)}</title><style>{_STYLE}</style></head><body>",
         f"<h1>{_e(title)}</h1>",
         f'<p class="muted">{_e(description)}</p>' if description else "",
-        f"<p>{banner}</p>",
+        f"<p>{_banner(metrics, failure)}</p>",
     ]
     if replay:
         parts.append(
@@ -142,9 +127,7 @@ def render_report(
             '<span class="muted">(Meshcat: the arm, the plate and the contact force; '
             "time slider under Open Controls &rarr; Animations)</span></p>"
         )
-    for note in notes:
-        parts.append(f'<p class="muted">{_e(note)}</p>')
-
+    parts += [f'<p class="muted">{_e(note)}</p>' for note in notes]
     parts += [
         '<h2 id="metrics">Metrics</h2>',
         "<table><thead><tr><th>metric</th><th>value</th><th>unit</th><th>bound</th>"
@@ -152,16 +135,41 @@ def render_report(
         _metric_rows(metrics),
         "</tbody></table>",
     ]
+    parts += _plot_section(plots) + _diagram_section(diagram) + _scenario_and_files(parameters, files)
+    return "\n".join(p for p in parts if p)
 
+
+def _banner(metrics: Sequence[Metric], failure: str | None) -> str:
+    """The verdict at the top: the run failed, bounded metrics failed, or all pass."""
+    bounded = [m for m in metrics if m.passed is not None]
+    failed = [m for m in bounded if not m.passed]
+    if failure:
+        return (
+            f'<span class="banner fail">run FAILED: {_e(failure)}; '
+            "everything below is up to that moment</span>"
+        )
+    if failed:
+        return (
+            f'<span class="banner fail">{len(failed)} of {len(bounded)} bounded metrics FAIL: '
+            f"{_e(', '.join(m.name for m in failed))}</span>"
+        )
+    return f'<span class="banner pass">all {len(bounded)} bounded metrics pass</span>'
+
+
+def _plot_section(plots: Iterable[Path]) -> list[str]:
+    """Each plot as an inlined PNG; nothing without plots."""
     plots = list(plots)
-    if plots:
-        parts.append('<h2 id="plots">Plots</h2>')
-        for plot in plots:
-            parts.append(
-                f'<div class="figure"><img alt="{_e(Path(plot).name)}" src="{_png_data_uri(plot)}"></div>'
-            )
+    if not plots:
+        return []
+    return ['<h2 id="plots">Plots</h2>'] + [
+        f'<div class="figure"><img alt="{_e(Path(plot).name)}" src="{_png_data_uri(plot)}"></div>'
+        for plot in plots
+    ]
 
-    parts.append('<h2 id="diagram">Diagram</h2>')
+
+def _diagram_section(diagram: DiagramPicture | None) -> list[str]:
+    """The diagram's SVG inlined, or, without Graphviz, the note and the .dot source."""
+    parts = ['<h2 id="diagram">Diagram</h2>']
     if diagram is not None and diagram.svg is not None:
         parts.append(
             '<p class="muted">Every system of the Drake diagram, named after its role, and the signals '
@@ -176,8 +184,13 @@ def render_report(
             f"<details><summary>{_e(diagram.dot.name)}</summary><pre>"
             f"{_e(diagram.dot.read_text(encoding='utf-8'))}</pre></details>"
         )
+    return parts
 
-    parts += [
+
+def _scenario_and_files(parameters: dict, files: Iterable[str]) -> list[str]:
+    """The scenario's parameters as a table, the links to the run's files, the footer."""
+    generated = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    return [
         '<h2 id="scenario">Scenario</h2>',
         "<table><thead><tr><th>parameter</th><th>value</th></tr></thead><tbody>",
         "\n".join(
@@ -191,7 +204,6 @@ def render_report(
         f'<p class="muted">Written by nsdrake on {_e(generated)}.</p>',
         "</body></html>",
     ]
-    return "\n".join(p for p in parts if p)
 
 
 def write_report(out: Path, **kwargs) -> Path:

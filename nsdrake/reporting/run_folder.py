@@ -25,7 +25,7 @@ from nsdrake.experiment.output import (  # noqa: F401 (re-exported: diagrams/fig
 )
 from nsdrake.experiment.scenario import Scenario
 from nsdrake.experiment.scenario_station import add_scenario_station
-from nsdrake.experiment.simulate import DivergenceError, run
+from nsdrake.experiment.simulate import DivergenceError, RunInterrupted, run
 from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.metrics import (
     Metric,
@@ -68,6 +68,7 @@ class RunResult:
     metrics: list[Metric]
     notes: list[str] = field(default_factory=list)  # one line each, for the user (e.g. no Graphviz)
     failure: str | None = None  # why the run stopped early ("diverged at t = … s: …")
+    interrupted: bool = False  # Ctrl-C stopped it (failure says when)
 
     @property
     def passed(self) -> bool:
@@ -99,8 +100,10 @@ def run_to_folder(
 
     With a ``meshcat`` (a live viewer), the main run is shown in it as it runs,
     at real time; the comparison run is never shown nor recorded. A run that
-    diverges (:class:`nsdrake.experiment.simulate.DivergenceError`) writes the same files up
-    to that moment, marked failed, and returns with ``failure`` set. In a folder
+    diverges (:class:`nsdrake.experiment.simulate.DivergenceError`) or is interrupted
+    (Ctrl-C: :class:`nsdrake.experiment.simulate.RunInterrupted`) writes the same files up
+    to that moment, marked failed or interrupted (metrics.json's ``status``), and returns
+    with ``failure`` set (and ``interrupted``). In a folder
     claimed by prepare_output_folder or default_output_folder, the manifest then
     lists these files.
     """
@@ -130,44 +133,26 @@ RUN_FILES = (
 def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, meshcat) -> RunResult:
     declare(out, RUN_FILES)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
-    compare = scenario.report.compare_without_null_space_task
-    stages = 2 if compare else 1
-    report = (lambda k: lambda f: progress((k + f) / stages)) if progress else (lambda k: None)
     live = meshcat is not None
     if meshcat is None and replay:
         meshcat = start_meshcat(live=False)
-    failure = None
-    try:
-        traces, built = run(scenario, progress=report(0), meshcat=meshcat, live=live)
-    except DivergenceError as e:
-        traces, built, failure = e.traces, e.built, str(e)
-        if built.visualizers is not None:
-            built.visualizers.publish_recording()
-    traces.write_csv(out / "traces.csv")
+    sim = _simulate(scenario, out, progress, meshcat, live)
     replay_path = write_replay(meshcat, out / "replay.html") if replay else None
-    picture = write_diagram_picture(built.diagram, out)
-    baseline = None
-    if compare and failure is None:
-        try:
-            baseline_traces, _ = run(scenario, null_space_task=False, progress=report(1))
-        except DivergenceError as e:
-            failure = f"the comparison run (q̇_dⁿ = 0) {e}"
-        else:
-            baseline_traces.write_csv(out / "traces_without_null_space_task.csv")
-            baseline = Traces.read_csv(out / "traces_without_null_space_task.csv")
+    picture = write_diagram_picture(sim.built.diagram, out)
     traces = Traces.read_csv(out / "traces.csv")
-    metrics = compute_metrics(scenario, built.station, traces, baseline) if failure is None else []
+    failure = sim.failure
+    metrics = compute_metrics(scenario, sim.built.station, traces, sim.baseline) if failure is None else []
     events = contact_events(traces)
     extra = {
         "scenario": scenario.source,
         "duration": scenario.duration,
-        "status": "failed" if failure else "ok",
+        "status": "interrupted" if sim.interrupted else "failed" if failure else "ok",
         "contact_events": [{"event": e, "t": t} for e, t in events],
     }
     if failure:
         extra["failure"] = failure
     write_metrics(out / "metrics.json", metrics, extra)
-    plots = write_plots(scenario, built, traces, baseline, out)
+    plots = write_plots(scenario, sim.built, traces, sim.baseline, out)
     notes = [contact_note(events)] if any(e == "lost" for e, _ in events) else []
     notes += [picture.note] if picture.note else []
     write_report(
@@ -182,7 +167,44 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
         notes=notes,
         failure=failure,
     )
-    return RunResult(out=out, metrics=metrics, notes=notes, failure=failure)
+    return RunResult(out=out, metrics=metrics, notes=notes, failure=failure, interrupted=sim.interrupted)
+
+
+@dataclass
+class _Simulated:
+    built: object  # ControlledStation of the main run
+    baseline: Traces | None  # the comparison run's traces (q̇_dⁿ = 0), if it ran to the end
+    failure: str | None  # why the run stopped early
+    interrupted: bool  # Ctrl-C stopped it
+
+
+def _simulate(scenario: Scenario, out: Path, progress, meshcat, live: bool) -> _Simulated:
+    """Runs the scenario (and its comparison run) and writes traces.csv (and
+    traces_without_null_space_task.csv); a run that diverges or is interrupted writes
+    its traces up to that moment."""
+    stages = 2 if scenario.report.compare_without_null_space_task else 1
+    report = (lambda k: lambda f: progress((k + f) / stages)) if progress else (lambda k: None)
+    try:
+        traces, built = run(scenario, progress=report(0), meshcat=meshcat, live=live)
+    except (DivergenceError, RunInterrupted) as e:
+        e.traces.write_csv(out / "traces.csv")
+        if e.built.visualizers is not None:
+            e.built.visualizers.publish_recording()
+        stopped = str(e) if isinstance(e, DivergenceError) else e.reason
+        return _Simulated(e.built, None, stopped, isinstance(e, RunInterrupted))
+    traces.write_csv(out / "traces.csv")
+    if stages == 1:
+        return _Simulated(built, None, None, False)
+    baseline_csv = out / "traces_without_null_space_task.csv"
+    try:
+        baseline_traces, _ = run(scenario, null_space_task=False, progress=report(1))
+    except (DivergenceError, RunInterrupted) as e:
+        e.traces.write_csv(baseline_csv)
+        if isinstance(e, RunInterrupted):
+            return _Simulated(built, None, f"the comparison run (q̇_dⁿ = 0) was {e.reason}", True)
+        return _Simulated(built, None, f"the comparison run (q̇_dⁿ = 0) {e}", False)
+    baseline_traces.write_csv(baseline_csv)
+    return _Simulated(built, Traces.read_csv(baseline_csv), None, False)
 
 
 def contact_note(events: list[tuple[str, float]]) -> str:

@@ -41,15 +41,24 @@ class ControlHold(LeafSystem):
     read its input, so the controller is evaluated once per period, not at every
     plant step or sensor sample in between.
 
+    With ``direct_feedthrough`` False, ``applied`` is always the held value, never the
+    input: a sample taken at t_k reaches the output once the instant's updates are done.
+    That is what a *continuous* plant needs: it integrates over [t_k, t_{k+1}) after
+    every update at t_k, so it still receives u(t_k), and no algebraic loop closes
+    through the hold (with a force sensor on the plant's reaction forces, which depend
+    on the actuation, the default hold's feedthrough makes one). On a discrete plant,
+    which steps in the instant's own unrestricted update, it would add a period of delay.
+
     The discrete state is [held (n); pending samples (d n); time of the last sample].
     """
 
-    def __init__(self, *, size: int, period: float, delay_periods: int = 0):
+    def __init__(self, *, size: int, period: float, delay_periods: int = 0, direct_feedthrough: bool = True):
         super().__init__()
         if delay_periods < 0:
             raise ValueError("ControlHold needs delay_periods >= 0")
         self._n = size
         self._d = delay_periods
+        self._feedthrough = direct_feedthrough
         # A control instant comes a period after the last sample, up to the rounding of
         # event times; every other event (plant steps, sensor samples) falls at least a
         # power-of-two fraction of the period earlier.
@@ -58,7 +67,7 @@ class ControlHold(LeafSystem):
         initial = np.concatenate([np.zeros(size * (1 + delay_periods)), [-math.inf]])
         self._state = self.DeclareDiscreteState(BasicVector(initial))
         deps = {self.time_ticket(), self.discrete_state_ticket(self._state)}
-        if delay_periods == 0:
+        if delay_periods == 0 and direct_feedthrough:
             deps.add(self.input_port_ticket(self._input.get_index()))
         self.DeclareVectorOutputPort(
             "applied", size, lambda c, o: o.SetFromVector(self._applied(c)), prerequisites_of_calc=deps
@@ -71,18 +80,20 @@ class ControlHold(LeafSystem):
         return context.get_time() - t_last > self._instant_gap
 
     def _applied(self, context) -> np.ndarray:
-        x = context.get_discrete_state(self._state).value()
-        n = self._n
-        if not self.is_control_instant(context):
-            return x[:n].copy()
+        if self._feedthrough and self.is_control_instant(context):
+            return self._due(context)
+        return context.get_discrete_state(self._state).value()[: self._n].copy()
+
+    def _due(self, context) -> np.ndarray:
+        """The value applied from this control instant on: u(t_k), or the oldest pending sample."""
         if self._d == 0:
             return self._input.Eval(context).copy()
-        return x[n : 2 * n].copy()  # the oldest pending sample
+        return context.get_discrete_state(self._state).value()[self._n : 2 * self._n].copy()
 
     def _sample(self, context, state):
         n, d = self._n, self._d
         x = context.get_discrete_state(self._state).value()
-        held = self._applied(context)
+        held = self._due(context) if self.is_control_instant(context) else x[:n].copy()
         pending = x[n : n * (1 + d)]
         if d:
             pending = np.concatenate([pending[n:], self._input.Eval(context)])

@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from pydrake.common.eigen_geometry import AngleAxis
@@ -41,6 +42,7 @@ from pydrake.systems.primitives import MatrixGain
 from nsdrake.control.criteria.obstacle import proximity_geometries
 from nsdrake.control.dynamics import ArmModel
 from nsdrake.control.model import Obstacle
+from nsdrake.control.validation import arm_problem
 from nsdrake.station.config import ArmConfig, ContactConfig, ObstacleConfig, PlateConfig, StationError
 from nsdrake.station.contact_monitor import ContactMonitor
 from nsdrake.station.elastic import ElasticMap, add_elastic_arm, rigid_arm_plant
@@ -155,6 +157,45 @@ def add_station(
     ``base_dir``; every problem is a one-line StationError naming ``source``. Without
     ``sensing``, only the plant and its scene graph (no ports): a diagram Drake can
     convert to AutoDiffXd, for geometry queries."""
+    world = _add_world(
+        builder,
+        arm_urdf=arm.urdf,
+        plate=plate,
+        contact=contact,
+        gravity=gravity,
+        time_step=time_step,
+        obstacles=obstacles,
+        belt=belt,
+        base_dir=base_dir,
+        source=source,
+    )
+    station = _station_on(world, arm, task_axes, belt, source)
+    _add_geometries(station, world.plate_body)
+    if sensing:
+        _add_sensing_and_actuation(builder, station)
+    return station
+
+
+class _World(NamedTuple):
+    """The finalized plant and what :func:`_add_world` put in it."""
+
+    plant: MultibodyPlant
+    scene_graph: object
+    arm: ModelInstanceIndex
+    plate: ModelInstanceIndex
+    plate_body: object
+    sensor_joint: WeldJoint
+    obstacle_bodies: list
+    X_WP: RigidTransform
+    arm_file: Path
+    gravity: np.ndarray
+
+
+def _add_world(
+    builder, *, arm_urdf, plate, contact, gravity, time_step, obstacles, belt, base_dir, source
+) -> _World:
+    """The plant and its scene graph with the arm (behind belts, with ``belt``), the plate
+    welded to the world through the sensor joint, the obstacles and gravity; finalized."""
     config = MultibodyPlantConfig(
         time_step=time_step,
         contact_model=contact.model,
@@ -163,7 +204,7 @@ def add_station(
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
     scene_graph.set_name("scene_graph")
-    arm_file = _model_file(source, "arm.urdf", arm.urdf, base_dir)
+    arm_file = _model_file(source, "arm.urdf", arm_urdf, base_dir)
     plate_file = _model_file(source, "plate.urdf", plate.urdf, base_dir)
     arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, source)
     plate_body = _the_one_body(plant, plate_instance, source)
@@ -172,41 +213,51 @@ def add_station(
     obstacle_bodies = _add_obstacles(plant, scene_graph, obstacles, plate_body)
     gravity = np.asarray(gravity, dtype=float)
     plant.mutable_gravity_field().set_gravity_vector(gravity)
-    plant.Finalize()
+    _finalize(plant, source)
+    return _World(
+        plant,
+        scene_graph,
+        arm_instance,
+        plate_instance,
+        plate_body,
+        sensor_joint,
+        obstacle_bodies,
+        X_WP,
+        arm_file,
+        gravity,
+    )
 
-    arm_model = _arm_model(plant, arm_instance, arm, arm_file, task_axes, belt, gravity, source)
+
+def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> Station:
+    """The arm's model on the task axes, its initial state and the plate's directions on
+    the task axes, on the finalized ``world``."""
+    plant = world.plant
+    arm_model = _arm_model(plant, world.arm, arm, world.arm_file, task_axes, belt, world.gravity, source)
     q0, v0 = _initial_state(arm, arm_model.joint_names, source)
-    elastic, plant_q0, plant_v0 = None, q0, v0
-    if belt is not None:
-        elastic, plant_q0, plant_v0 = _preloaded_belts(plant, arm_instance, arm_model, belt, q0, v0)
-    plant.SetDefaultPositions(plant_q0)  # survives context resets (DRAKE_NOTES)
+    elastic, plant_q0, plant_v0 = _plant_initial_state(plant, world.arm, arm_model, belt, q0, v0)
     try:
-        normal, tangent = surface_directions(X_WP.rotation().matrix(), arm_model.rows)
+        normal, tangent = surface_directions(world.X_WP.rotation().matrix(), arm_model.rows)
     except ValueError as e:
         raise StationError(f"{source}: plate: {e} {list(task_axes)}") from None
-    station = Station(
+    return Station(
         plant=plant,
-        scene_graph=scene_graph,
-        arm=arm_instance,
-        plate=plate_instance,
+        scene_graph=world.scene_graph,
+        arm=world.arm,
+        plate=world.plate,
         arm_model=arm_model,
-        sensor_joint=sensor_joint,
+        sensor_joint=world.sensor_joint,
         normal=normal,
         tangent=tangent,
         q0=q0,
         v0=v0,
-        arm_file=arm_file,
-        gravity=gravity,
-        obstacle_bodies=obstacle_bodies,
-        X_WP=X_WP,
+        arm_file=world.arm_file,
+        gravity=world.gravity,
+        obstacle_bodies=world.obstacle_bodies,
+        X_WP=world.X_WP,
         elastic=elastic,
         plant_q0=plant_q0,
         plant_v0=plant_v0,
     )
-    _add_geometries(station, plate_body)
-    if sensing:
-        _add_sensing_and_actuation(builder, station)
-    return station
 
 
 def _parse(plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, src: str):
@@ -242,12 +293,26 @@ def _arm_model(plant, arm_instance, arm: ArmConfig, arm_file, task_axes, belt, g
         arm_model = ArmModel(tool.GetParentPlant(), tool, tuple(task_axes))
     except ValueError as e:
         raise StationError(f"{src}: arm.urdf: {e}") from None
+    problem = arm_problem(arm_model.n, arm_model.m, task_axes)  # before any terms are computed
+    if problem:
+        where = "task.axes" if problem[0] == "task_axes" else f"arm.urdf: {arm_file.name}"
+        raise StationError(f"{src}: {where}: {problem[1]}")
     if plant.num_actuators() != arm_model.n:
         raise StationError(
             f"{src}: arm.urdf: the arm needs one actuator per joint ({arm_model.n}), "
             f"it has {plant.num_actuators()}"
         )
     return arm_model
+
+
+def _finalize(plant: MultibodyPlant, source: str) -> None:
+    """Finalizes the plant; what the model checks did not foresee is one line."""
+    try:
+        plant.Finalize()
+    except RuntimeError as e:
+        text = " ".join(str(e).split())
+        text = text if len(text) <= 240 else text[:239] + "…"
+        raise StationError(f"{source}: arm.urdf: Drake cannot build the plant: {text}") from None
 
 
 def _short(name) -> str:
@@ -274,19 +339,21 @@ def _initial_state(arm: ArmConfig, names: tuple[str, ...], src: str) -> tuple[np
     return q0, v0
 
 
-def _preloaded_belts(plant, arm_instance, arm_model: ArmModel, belt, q0, v0):
-    """The belts' map and the plant's initial state, the belts preloaded by gravity so that
-    the arm starts at rest: the gravity torque on each belt coordinate (links and rotors
-    beyond it) does not depend on δ at fixed q."""
+def _plant_initial_state(plant, arm_instance, arm_model: ArmModel, belt, q0, v0):
+    """(elastic map or None, the plant's q0, its v0): the arm's own without belts; behind
+    belts, the belts preloaded by gravity so that the arm starts at rest (the gravity
+    torque on each belt coordinate, links and rotors beyond it, does not depend on δ at
+    fixed q). Sets the plant's default positions, which survive context resets."""
+    if belt is None:
+        plant.SetDefaultPositions(q0)
+        return None, q0, v0
     elastic = ElasticMap.build(plant, arm_instance, arm_model.joint_names, belt.stiffness)
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, elastic.plant_positions(q0))
     tau_g = plant.CalcGravityGeneralizedForces(context)[elastic.belt_v]
-    return (
-        elastic,
-        elastic.plant_positions(q0, elastic.static_deflection(tau_g)),
-        elastic.plant_velocities(v0),
-    )
+    plant_q0 = elastic.plant_positions(q0, elastic.static_deflection(tau_g))
+    plant.SetDefaultPositions(plant_q0)  # DRAKE_NOTES
+    return elastic, plant_q0, elastic.plant_velocities(v0)
 
 
 def _add_geometries(station: Station, plate_body) -> None:

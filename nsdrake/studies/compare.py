@@ -27,6 +27,7 @@ import multiprocessing.connection
 import os
 import re
 import signal
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,16 +48,19 @@ from nsdrake.experiment.scenario import (
     read_yaml,
 )
 from nsdrake.experiment.traces import Traces
-from nsdrake.reporting.metrics import SETTLE_TIME, first_contact_index, torque_steps
+from nsdrake.reporting.metrics import SETTLE_TIME, first_contact_index, measuring_window_gap, torque_steps
 from nsdrake.studies.measures import (
     MODE_CRITERION,
     MODE_NAME,
+    OSCILLATION_FLOOR_SHARE,
     commanded_step_rates,
+    drift_rate,
     force_oscillation,
     wrong_way_share,
 )
 
 FAMILY_DIR = Path(__file__).resolve().parent / "families"
+MIN_WINDOW_ROWS = 8  # [control periods] the fewest the realism measure's window needs (its spectrum)
 
 
 @dataclass(frozen=True)
@@ -273,35 +277,37 @@ def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
     }
     row["all_bounds_met"] = all(m.passed for m in metrics if m.passed is not None)
     row["torque_step_max"] = float(torque_steps(traces).max())
-    return row
+    gap = measuring_window_gap(traces, s.reference.contact_threshold)
+    return {**row, "note": gap} if gap else row
 
 
 def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
     """The realism ladder (nsdrake/realism.py), in the fig3 window (from 0.5 s after first
     contact to the end): the measured normal force's error (what the controller and the
-    paper's Fig. 3 see) and the true contact force's, how the force oscillates around
-    f_d (:func:`nsdrake.studies.measures.force_oscillation`), the tangential position
-    error, ‖eⁿ‖ and ν."""
+    paper's Fig. 3 see), its drift (least-squares slope) and the share of it that the
+    impedance law's normal spring adds, K_p,n nᵀ(x_d − x) / K_f (mean; the normal
+    reference is frozen where contact was detected, so a tool that lagged its approach
+    reference is pressed harder for the rest of the run), the true contact force's
+    error, how the force oscillates around f_d (:func:`nsdrake.studies.measures.force_oscillation`;
+    no frequency below the noise floor, :data:`~nsdrake.studies.measures.OSCILLATION_FLOOR_SHARE`
+    of f_d), the tangential position error, ‖eⁿ‖ and ν."""
     s = ctx.scenario
     t = traces["t"]
-    row: dict = {}
     k0 = first_contact_index(traces, s.reference.contact_threshold)
+    gap = measuring_window_gap(traces, s.reference.contact_threshold, min_rows=MIN_WINDOW_ROWS)
     if k0 is None:
-        return {**row, "first_contact_time": math.inf}
+        return {"first_contact_time": math.inf, "note": gap}
     window = t >= t[k0] + SETTLE_TIME
-    row["first_contact_time"] = float(t[k0])
-    if window.sum() < 8:
-        return row
-    error = (traces["f_n"] - traces["f_d"])[window]
-    row["force_error_rms"] = _rms(error)
-    row["force_error_peak"] = float(np.abs(error).max())
-    row["force_error_mean"] = float(error.mean())
-    true = traces["f_n_true"] if "f_n_true" in traces else traces["f_n"]
-    true_error = (true - traces["f_d"])[window]
-    row["true_force_error_rms"] = _rms(true_error)
-    row["true_force_error_mean"] = float(true_error.mean())
-    frequency, rms, p2p = force_oscillation(t[window], error)
-    row["force_oscillation_frequency"] = frequency
+    row: dict = {"first_contact_time": float(t[k0])}
+    if gap:  # the row's force figures stay blank, and the note says why
+        return {**row, "note": gap}
+    row |= _force_error_figures(traces, ctx, window)
+    frequency, rms, p2p = force_oscillation(
+        t[window],
+        (traces["f_n"] - traces["f_d"])[window],
+        floor=OSCILLATION_FLOOR_SHARE * float(traces["f_d"][window].max()),
+    )
+    row["force_oscillation_frequency"] = frequency if math.isfinite(frequency) else ""  # "": none
     row["force_oscillation_rms"] = rms
     row["force_oscillation_p2p"] = p2p
     pos_err = np.column_stack([traces[a] - traces[f"{a}_d"] for a in ctx.arm.task_axes])[window]
@@ -311,15 +317,62 @@ def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
     return row
 
 
+def _force_error_figures(traces: Traces, ctx: RunFacts, window: np.ndarray) -> dict:
+    """The measured and the true force's error in ``window``, the error's drift, and the
+    normal spring's share of it (:func:`measure_realism`)."""
+    imp = ctx.scenario.impedance
+    t = traces["t"][window]
+    error = (traces["f_n"] - traces["f_d"])[window]
+    true = traces["f_n_true"] if "f_n_true" in traces else traces["f_n"]
+    true_error = (true - traces["f_d"])[window]
+    axes = ctx.arm.task_axes[: len(ctx.normal)]
+    offset = np.column_stack([traces[f"{a}_d"] - traces[a] for a in axes])[window] @ ctx.normal
+    return {
+        "force_error_rms": _rms(error),
+        "force_error_peak": float(np.abs(error).max()),
+        "force_error_mean": float(error.mean()),
+        "force_error_drift": drift_rate(t, error),
+        "reference_offset_force": float(imp.K_p_normal * offset.mean() / imp.K_f),
+        "true_force_error_rms": _rms(true_error),
+        "true_force_error_mean": float(true_error.mean()),
+    }
+
+
 def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
     """Section 3.4 in closed loop. For each criterion while it is the active level-2
     criterion (Fig. 1's mode) and q̇_dⁿ ≠ 0: the share of control periods in which its
     logged value moved against the sign of its gain (task motion included), the share
     in which the commanded step alone, Φᵀ q̇_dⁿ, points the wrong way (the paper's
     claim; joint torque and manipulability, Φ recomputed from q), and its value at
-    the start and the end of the run; and the smallest link–obstacle distance and the
-    most contacts of links with obstacles (a criterion can improve by driving a link
-    into the plate when nothing guards it)."""
+    the start and the end; and, over the whole run, the smallest link–obstacle distance
+    and the most contacts of links with obstacles.
+
+    A run in which a link touches the plate or an obstacle has failed: nothing guards
+    the links in this family, so a criterion can improve by driving a link into the
+    plate, and from then on the arm is jammed against it and the task is lost. Its row
+    says when and how hard (``failed_at``), and its criterion figures cover only the
+    control periods before that moment (the end is the last one), so that they describe
+    the gradient step and not the jammed arm."""
+    forbidden = np.flatnonzero(traces["forbidden_contacts"] > 0)
+    clean = int(forbidden[0]) if forbidden.size else len(traces)
+    row: dict = _gradient_step_figures(_first_rows(traces, clean), ctx)
+    row["d_min_min"] = float(traces["d_min"].min())
+    row["forbidden_contacts_max"] = int(traces["forbidden_contacts"].max())
+    if forbidden.size:
+        k = int(forbidden[0])
+        row["failed_at"] = (
+            f"{traces['t'][k]:.4g} s: a link touched the plate or an obstacle "
+            f"(normal force up to {traces['f_n'][k:].max():.3g} N after)"
+        )
+    return row
+
+
+def _first_rows(traces: Traces, rows: int) -> Traces:
+    return Traces({name: traces[name][:rows] for name in traces.names})
+
+
+def _gradient_step_figures(traces: Traces, ctx: RunFacts) -> dict:
+    """:func:`measure_gradient_projection`'s criterion figures, over ``traces``."""
     s = ctx.scenario
     d = s.desired_null_space
     gains = {1: d.criteria.obstacle.gain, 2: d.criteria.joint_torque.gain, 3: d.criteria.manipulability.gain}
@@ -341,9 +394,6 @@ def measure_gradient_projection(traces: Traces, ctx: RunFacts) -> dict:
             row[f"{name}_commanded_step_wrong_share"] = float(wrong[:-1].sum()) / periods
         row[f"{name}_start"] = float(values[0])
         row[f"{name}_end"] = float(values[-1])
-    # Whether the criterion's optimum was reached by pushing a link into an obstacle.
-    row["d_min_min"] = float(traces["d_min"].min())
-    row["forbidden_contacts_max"] = int(traces["forbidden_contacts"].max())
     return row
 
 
@@ -359,6 +409,9 @@ MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
 
 # --- running ------------------------------------------------------------------------
 
+VARIANT_TIMEOUT = 900.0  # [s] of wall time after which a variant still running is stopped (--variant-timeout)
+STOP_GRACE = 10.0  # [s] a stopped or interrupted variant has to write its traces before it is killed
+
 
 @dataclass(frozen=True)
 class _Task:
@@ -373,20 +426,29 @@ FAULT_VARIABLE = "NSDRAKE_TEST_FAULT"
 
 
 def _injected_fault(index: int) -> None:
-    """Test hook: with NSDRAKE_TEST_FAULT=INDEX:exit (or INDEX:raise) in the environment,
-    variant INDEX dies as a segfault would, leaving no result (or raises). The tests use it
-    to check that ``nsdrake compare`` survives a crashing variant; unset, it does nothing."""
+    """Test hook: with NSDRAKE_TEST_FAULT=INDEX:KIND in the environment, variant INDEX dies
+    as a segfault would, leaving no result (exit), raises (raise), hangs until interrupted
+    (hang), or hangs deaf to Ctrl-C (hang_hard: only a kill ends it). The tests use it to
+    check that ``nsdrake compare`` survives such a variant; unset, it does nothing."""
     spec = os.environ.get(FAULT_VARIABLE, "")
     if spec.partition(":")[0] != str(index):
         return
-    if spec.partition(":")[2] == "exit":
+    kind = spec.partition(":")[2]
+    if kind == "exit":
         os._exit(70)
+    if kind in ("hang", "hang_hard"):
+        if kind == "hang_hard":
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        while True:
+            time.sleep(1.0)
     raise RuntimeError(f"{FAULT_VARIABLE} asked variant {index} to fail")
 
 
-def _run_variant(task: _Task) -> dict:
-    """Simulates one variant, writes its traces and measures them (from the file)."""
-    from nsdrake.experiment.simulate import DivergenceError, run
+def _run_variant(task: _Task) -> tuple[str, object]:
+    """Simulates one variant, writes its traces and measures them (from the file):
+    ("ok", row), or ("interrupted", t) when Ctrl-C stopped it (its traces so far are
+    written)."""
+    from nsdrake.experiment.simulate import DivergenceError, RunInterrupted, run
 
     _injected_fault(task.index)
     scenario = variant_scenario(task.family, task.index, task.config, task.duration)
@@ -395,23 +457,43 @@ def _run_variant(task: _Task) -> dict:
         traces, built = run(scenario, auto_structure="fused")  # the same traces, cheaper
     except DivergenceError as e:  # a row that says so, with what it measured up to then
         traces, built, diverged = e.traces, e.built, f"{e.t:.4g} s: {e.reason}"
+    except RunInterrupted as e:
+        task.folder.mkdir(parents=True, exist_ok=True)
+        e.traces.write_csv(task.folder / "traces.csv")
+        return "interrupted", e.t
     task.folder.mkdir(parents=True, exist_ok=True)
     traces.write_csv(task.folder / "traces.csv")
     traces = Traces.read_csv(task.folder / "traces.csv")
     row = MEASURES[task.family.measure](traces, RunFacts(scenario=scenario, station=built.station))
-    return {"diverged_at": diverged, **row} if diverged else row
+    if diverged:  # diverged_at says why its figures are blank
+        row.pop("note", None)
+        return "ok", {"diverged_at": diverged, **row}
+    return "ok", row
 
 
 def _failure(e: BaseException) -> str:
     return f"failed: {type(e).__name__}: {_cut(e, 200)}"
 
 
+def _interrupt_once(signum, frame) -> None:
+    """A worker's SIGINT handler: the first one interrupts (the run keeps its traces), any
+    later one is ignored, so that the traces and the report reach the parent."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
 def _variant_process(task: _Task, conn) -> None:
-    """Worker process: one variant; sends ("ok", row) or ("failed", reason), then exits."""
+    """Worker process: one variant; sends ("ok", row), ("interrupted", t) or ("failed",
+    reason), then exits. It starts with SIGINT blocked (:func:`start_quietly`), so that a
+    Ctrl-C during its start-up waits for the handler instead of a traceback."""
+    signal.signal(signal.SIGINT, _interrupt_once)
     try:
-        message = ("ok", _run_variant(task))
-    except BaseException as e:  # every failure, Ctrl-C included, becomes the variant's row
-        message = ("failed", _failure(e))
+        if hasattr(signal, "pthread_sigmask"):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        message = _run_variant(task)
+    except BaseException as e:  # every failure, an interruption outside the run included, is the row's
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        message = ("interrupted", None) if isinstance(e, KeyboardInterrupt) else ("failed", _failure(e))
     conn.send(message)
     conn.close()
 
@@ -426,36 +508,151 @@ def _crash(exitcode: int | None) -> str:
     return f"crashed: the process exited with status {exitcode} without a result"
 
 
-def _run_in_processes(tasks: list[_Task], jobs: int, done: Callable[[int, str, object], None]) -> None:
-    """Runs each task in a process of its own, ``jobs`` at a time. A worker reports through
-    a pipe; one that dies without reporting (segfault, os._exit, killed) closes its pipe, so
-    the wait always ends and the variant is reported as crashed."""
-    ctx = multiprocessing.get_context("spawn")
-    pending = list(tasks)
-    running: dict = {}  # receiving end of the pipe -> (variant index, process)
+def _interrupted_row(t: float | None) -> dict:
+    kept = f" at t = {t:.4g} s; its traces so far are kept" if t is not None else " before it simulated"
+    return {"error": f"interrupted{kept}"}
+
+
+def _timed_out_row(timeout: float, t: float | None) -> dict:
+    kept = f"; its traces up to t = {t:.4g} s are kept" if t is not None else ""
+    return {"error": f"failed: timed out after {timeout:g} s (--variant-timeout){kept}"}
+
+
+def start_quietly(process) -> None:
+    """Starts ``process`` with SIGINT blocked (its mask is inherited): a Ctrl-C that lands
+    while it starts up is held until it has installed its handler, and this process gets
+    it as soon as the start returns."""
+    if not hasattr(signal, "pthread_sigmask"):
+        process.start()
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        while pending or running:
-            while pending and len(running) < jobs:
-                task = pending.pop(0)
-                receive, send = ctx.Pipe(duplex=False)
-                process = ctx.Process(target=_variant_process, args=(task, send), daemon=True)
-                process.start()
-                send.close()  # the worker holds the only writing end: its death means EOF here
-                running[receive] = (task.index, process)
-            for receive in multiprocessing.connection.wait(list(running)):
-                index, process = running.pop(receive)
-                try:
-                    status, value = receive.recv()
-                except (EOFError, OSError):
-                    status, value = "failed", None
-                receive.close()
-                process.join()
-                done(index, status, value if value is not None else _crash(process.exitcode))
-    finally:  # on Ctrl-C or an error here: no worker outlives the command
-        for _, process in running.values():
-            process.terminate()
-        for _, process in running.values():
-            process.join()
+        process.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+@dataclass
+class _Worker:
+    index: int
+    process: object  # multiprocessing.Process
+    deadline: float  # [s, monotonic] when it is stopped (SIGINT), or killed once stopped
+    stopped: str | None = None  # why it was sent SIGINT: "timeout" or "interrupt"
+
+
+class _Pool:
+    """Variants in processes of their own, ``jobs`` at a time. A worker reports through a
+    pipe; one that dies without reporting (segfault, os._exit, killed) closes its pipe, so
+    the wait always ends and the variant is reported as crashed. A worker still running
+    after ``timeout`` is sent SIGINT (it writes its traces so far) and killed STOP_GRACE
+    later if it has not reported."""
+
+    def __init__(self, jobs: int, timeout: float, done: Callable[[int, dict], None]):
+        self.ctx = multiprocessing.get_context("spawn")
+        self.jobs, self.timeout, self.done = jobs, timeout, done
+        self.running: dict = {}  # receiving end of the pipe -> _Worker
+
+    def start(self, task: _Task) -> None:
+        receive, send = self.ctx.Pipe(duplex=False)
+        process = self.ctx.Process(target=_variant_process, args=(task, send), daemon=True)
+        start_quietly(process)
+        send.close()  # the worker holds the only writing end: its death means EOF here
+        self.running[receive] = _Worker(task.index, process, time.monotonic() + self.timeout)
+
+    def wait(self) -> None:
+        """Waits for the next report or deadline; reports what finished, stops what is late."""
+        now = time.monotonic()
+        soonest = min(w.deadline for w in self.running.values())
+        ready = multiprocessing.connection.wait(list(self.running), timeout=max(0.0, soonest - now))
+        for receive in ready:
+            self._finish(receive)
+        now = time.monotonic()
+        for receive, w in list(self.running.items()):
+            if w.deadline > now:
+                continue
+            if w.stopped is None:
+                self.stop(w, "timeout")
+            else:  # deaf to SIGINT: killed, and reported without traces
+                w.process.kill()
+                self._finish(receive)
+
+    def stop(self, w: _Worker, why: str) -> None:
+        w.stopped, w.deadline = why, time.monotonic() + STOP_GRACE
+        if w.process.is_alive():
+            os.kill(w.process.pid, signal.SIGINT)
+
+    def _finish(self, receive) -> None:
+        w = self.running.pop(receive)
+        try:
+            status, value = receive.recv() if receive.poll() else ("crashed", None)
+        except (EOFError, OSError):
+            status, value = "crashed", None
+        receive.close()
+        w.process.join()
+        if w.stopped == "timeout" and status != "ok":
+            row = _timed_out_row(self.timeout, value if status == "interrupted" else None)
+        elif w.stopped == "interrupt" and status != "ok":
+            row = _interrupted_row(value if status == "interrupted" else None)
+        elif status == "ok":
+            row = value
+        elif status == "interrupted":
+            row = _interrupted_row(value)
+        else:
+            row = {"error": value if status == "failed" else _crash(w.process.exitcode)}
+        self.done(w.index, row)
+
+    def interrupt(self) -> None:
+        """Ctrl-C: every running variant is stopped (the terminal may have sent it SIGINT
+        already) and has STOP_GRACE to report its traces so far."""
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not lose the table
+        for w in self.running.values():
+            self.stop(w, "interrupt")
+        while self.running:
+            self.wait()
+
+    def close(self) -> None:
+        for w in self.running.values():  # after an error here: no worker outlives the command
+            w.process.kill()
+        for w in self.running.values():
+            w.process.join()
+
+
+def _run_in_processes(tasks: list[_Task], jobs: int, timeout: float, done) -> bool:
+    """Runs every task in a :class:`_Pool`; True if Ctrl-C stopped it (the tasks not yet
+    started are then not run)."""
+    pool = _Pool(jobs, timeout, done)
+    pending = list(tasks)
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        while pending or pool.running:
+            while pending and len(pool.running) < jobs:
+                pool.start(pending.pop(0))
+            pool.wait()
+    except KeyboardInterrupt:
+        pool.interrupt()
+        return True
+    finally:
+        pool.close()
+        signal.signal(signal.SIGINT, previous)
+    return False
+
+
+def _run_here(tasks: list[_Task], done) -> bool:
+    """Runs every task in this process, one after the other; True if Ctrl-C stopped it."""
+    for task in tasks:
+        try:
+            status, value = _run_variant(task)
+        except KeyboardInterrupt:
+            done(task.index, _interrupted_row(None))
+            return True
+        except Exception as e:  # the variant's row says why; the others still run
+            done(task.index, {"error": _failure(e)})
+            continue
+        if status == "interrupted":
+            done(task.index, _interrupted_row(value))
+            return True
+        done(task.index, value)
+    return False
 
 
 @dataclass
@@ -463,11 +660,17 @@ class FamilyResult:
     family: Family
     rows: list[dict]  # one per variant, in the family's order, with "variant" first
     out: Path
+    interrupted: bool = False  # Ctrl-C stopped the comparison (the table has every row so far)
 
     @property
     def failures(self) -> dict[str, str]:
         """Variant name -> why it has no figures (its row's "error")."""
         return {row["variant"]: row["error"] for row in self.rows if "error" in row}
+
+    @property
+    def notes(self) -> dict[str, str]:
+        """Variant name -> why some of its figures are blank (its row's "note")."""
+        return {row["variant"]: row["note"] for row in self.rows if row.get("note")}
 
 
 def run_family(
@@ -479,20 +682,24 @@ def run_family(
     jobs: int = 1,
     isolate: bool | None = None,
     progress: Callable[[float], None] | None = None,
+    variant_timeout: float = VARIANT_TIMEOUT,
 ) -> FamilyResult:
     """Runs every variant, writes the table and the overlay plot.
 
     With ``isolate`` (the default when ``jobs`` > 1) each variant runs in a process of its
-    own, ``jobs`` at a time; otherwise one after the other in this process. A variant that
-    raises, or whose process dies, becomes a row with its reason under "error"; the others
-    run on, and the table is written with every row.
+    own, ``jobs`` at a time, and is stopped after ``variant_timeout`` seconds of wall time;
+    otherwise one after the other in this process (no time limit). A variant that raises,
+    whose process dies, or that runs out of time becomes a row with its reason under
+    "error"; the others run on, and the table is written with every row. Ctrl-C stops
+    every variant (each keeps its traces so far), writes the table with the rows so far
+    and returns with ``interrupted``.
     """
     for i in range(len(family.variants)):
         variant_scenario(family, i, config, duration)  # every input error before any simulation
     folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
     declare(out, [*COMPARE_FILES, *(f"{f.relative_to(out).as_posix()}/traces.csv" for f in folders)])
     try:
-        return _run_family(family, out, folders, config, duration, jobs, isolate, progress)
+        return _run_family(family, out, folders, config, duration, jobs, isolate, progress, variant_timeout)
     finally:  # done or failed: the manifest lists what the run wrote, for a later --overwrite
         record_written(out)
 
@@ -501,28 +708,26 @@ def run_family(
 COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png")
 
 
-def _run_family(family, out, folders, config, duration, jobs, isolate, progress) -> FamilyResult:
+def _run_family(family, out, folders, config, duration, jobs, isolate, progress, timeout) -> FamilyResult:
     tasks = [_Task(family, i, config, duration, folders[i]) for i in range(len(family.variants))]
     rows: dict[int, dict] = {}
 
-    def done(index: int, status: str, value) -> None:
-        rows[index] = value if status == "ok" else {"error": value}
+    def done(index: int, row: dict) -> None:
+        rows[index] = row
         if progress:
             progress(len(rows) / len(tasks))
 
     if isolate or (isolate is None and jobs > 1):
-        _run_in_processes(tasks, max(1, jobs), done)
+        interrupted = _run_in_processes(tasks, max(1, jobs), timeout, done)
     else:
-        for task in tasks:
-            try:
-                row = _run_variant(task)
-            except Exception as e:  # the variant's row says why; the others still run
-                done(task.index, "failed", _failure(e))
-            else:
-                done(task.index, "ok", row)
+        interrupted = _run_here(tasks, done)
+    for i in range(len(tasks)):
+        rows.setdefault(i, {"error": "not run: the comparison was interrupted"})
     table = [{"variant": family.variants[i].name, **rows[i]} for i in range(len(tasks))]
     _add_ratios(family, table)
     write_table(out, family, table)
+    if interrupted:  # no plots: the table and each variant's traces so far
+        return FamilyResult(family=family, rows=table, out=out, interrupted=True)
     ran = [(v, f) for v, f, row in zip(family.variants, folders, table, strict=True) if "error" not in row]
     if ran:
         plot_family(
@@ -567,9 +772,10 @@ def _format(value) -> str:
 def write_table(out: Path, family: Family, table: list[dict]) -> None:
     """table.csv (full precision) and table.md (4 significant digits)."""
     columns = list(dict.fromkeys(key for row in table for key in row))
-    if "error" in columns:  # why a variant has no figures, next to its name
-        columns.remove("error")
-        columns.insert(1, "error")
+    for key in ("note", "error"):  # why a variant has no (or blank) figures, next to its name
+        if key in columns:
+            columns.remove(key)
+            columns.insert(1, key)
     with (out / "table.csv").open("w", newline="") as f:
         writer = csv.DictWriter(f, columns)
         writer.writeheader()

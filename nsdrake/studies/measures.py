@@ -24,17 +24,25 @@ from nsdrake.control.dynamics import ArmModel
 from nsdrake.experiment.traces import Traces
 
 OSCILLATION_CUTOFF = 5.0  # [Hz] slower changes of the force error count as drift, not oscillation
+# An oscillation whose RMS is below this share of the desired force is below the noise floor:
+# it has no frequency (0.01 N for fig3's 10 N; the clean run's part above 5 Hz is 6e-6 N, numerical
+# ripple, the friction rung's 0.001 N, while the sensor noise leaves 0.07 N and the belts 0.2 N) [-].
+OSCILLATION_FLOOR_SHARE = 1e-3
 # Modes of Fig. 1 (nsdrake.control.priority.Mode) and the trace column of their criterion.
 MODE_CRITERION = {1: "p_obstacle", 2: "p_tau", 3: "w"}
 MODE_NAME = {1: "obstacle", 2: "joint_torque", 3: "manipulability"}
 
 
-def force_oscillation(t: np.ndarray, error: np.ndarray, cutoff: float = OSCILLATION_CUTOFF):
+def force_oscillation(
+    t: np.ndarray, error: np.ndarray, cutoff: float = OSCILLATION_CUTOFF, floor: float = 0.0
+):
     """(frequency [Hz], RMS, peak-to-peak) of the oscillating part of a force error e(t)
     sampled at regular times ``t``: e through a zero-phase 4th-order Butterworth
     high-pass at ``cutoff`` (drift slower than that removed). The frequency is the
     largest peak of that part's Hann-windowed amplitude spectrum at or above
-    ``cutoff`` (nan for fewer than 32 samples)."""
+    ``cutoff``, nan where the part's RMS is below ``floor`` [N] (the strongest bin of
+    a ripple at the noise floor is no oscillation's frequency: with nothing there it
+    is the first bin above the cutoff). All nan for fewer than 32 samples."""
     from scipy.signal import butter, sosfiltfilt
 
     t = np.asarray(t, dtype=float)
@@ -47,8 +55,14 @@ def force_oscillation(t: np.ndarray, error: np.ndarray, cutoff: float = OSCILLAT
     spectrum = np.abs(np.fft.rfft(fast * np.hanning(len(fast))))
     frequencies = np.fft.rfftfreq(len(fast), dt)
     band = frequencies >= cutoff
-    frequency = float(frequencies[band][np.argmax(spectrum[band])])
-    return frequency, float(np.sqrt(np.mean(fast**2))), float(np.ptp(fast))
+    rms = float(np.sqrt(np.mean(fast**2)))
+    frequency = float(frequencies[band][np.argmax(spectrum[band])]) if rms >= floor else math.nan
+    return frequency, rms, float(np.ptp(fast))
+
+
+def drift_rate(t: np.ndarray, values: np.ndarray) -> float:
+    """The slope of the least-squares line through ``values`` over ``t`` [unit/s]."""
+    return float(np.polyfit(np.asarray(t, dtype=float) - t[0], np.asarray(values, dtype=float), 1)[0])
 
 
 def wrong_way_share(

@@ -34,17 +34,21 @@ from nsdrake.experiment.output import (
     read_manifest,
     record_written,
     refuse_foreign,
+    release_unused,
     remove_listed,
     take_over,
 )
 from nsdrake.studies.sweep_spec import (
     BASELINE_METRIC,
+    MAX_RUNS,
     Run,
     SweepSpec,
     _cell,
     _label,
+    check_size,
     load_sweep,
     plan_runs,
+    sweep_size,
 )
 
 # --- the output folder ------------------------------------------------------------------
@@ -139,17 +143,45 @@ def run_folder(out: Path, index: int) -> Path:
     return Path(out) / "runs" / f"{index:04d}"
 
 
+# What a stored result.json holds (store writes it): field -> the types it may have.
+RECORD_FIELDS = {
+    "index": (int,),
+    "hash": (str,),
+    "seed": (int,),
+    "values": (dict,),
+    "status": (str,),
+    "reason": (str,),
+    "crashed": (bool,),
+    "baseline": (bool,),
+    "metrics": (dict,),
+}
+
+
+def _typed(value, types: tuple) -> bool:
+    """``value`` is of one of ``types`` (a bool counts as a bool only, not as an int)."""
+    return isinstance(value, types) and (bool in types or not isinstance(value, bool))
+
+
 def finished(out: Path, run: Run, spec: SweepSpec) -> dict | None:
     """The stored result of ``run`` if it finished with these parameters (a worker that
     died is tried again, and so is a run without the comparison run a metric now needs),
-    else None."""
+    else None. A result that is not complete (a field missing or of another type, the
+    traces of a run that finished missing: a file cut short, edited or half restored) is
+    run again too."""
+    folder = run_folder(out, run.index)
     try:
-        record = json.loads((run_folder(out, run.index) / "result.json").read_text())
+        record = json.loads((folder / "result.json").read_text())
     except (OSError, ValueError):
         return None
-    if record.get("hash") != run.hash or record.get("crashed"):
+    if not isinstance(record, dict) or not all(_typed(record.get(k), t) for k, t in RECORD_FIELDS.items()):
         return None
-    if BASELINE_METRIC in spec.metrics and not record.get("baseline"):
+    if record["hash"] != run.hash or record["index"] != run.index or record["crashed"]:
+        return None
+    if record["status"] not in ("ok", "failed") or set(record["values"]) != set(run.values):
+        return None
+    if record["status"] == "ok" and not (folder / "traces.csv").is_file():
+        return None
+    if BASELINE_METRIC in spec.metrics and not record["baseline"]:
         return None
     return record
 
@@ -279,6 +311,7 @@ class SweepProgress:
         self.stream = stream if stream is not None else sys.stderr
         self.enabled = self.stream.isatty()
         self.total, self.width = total, width
+        self.partial = False  # a bar is drawn and its line not ended
 
     def __call__(self, done: int, failed: int = 0):
         if not self.enabled:
@@ -286,6 +319,7 @@ class SweepProgress:
         k = int(self.width * done / max(self.total, 1))
         tail = f" ({failed} failed)" if failed else ""
         self.stream.write(f"\r[{'#' * k}{'.' * (self.width - k)}] {done}/{self.total}{tail}")
+        self.partial = done < self.total
         if done >= self.total:
             self.stream.write("\n")
         self.stream.flush()
@@ -348,22 +382,29 @@ def _run_sweep(spec, runs, out, *, engine, jobs, scheduler, progress) -> SweepOu
 
 
 def sweep_command(args) -> int:
-    """``nsdrake sweep``: every input checked (spec, engine, each run's scenario, the
-    folder) before the first run; exit status 1 if any run failed."""
+    """``nsdrake sweep``: every input checked (spec, size, engine, each run's scenario, the
+    folder) before the first run; exit status 1 if any run failed, 130 after Ctrl-C."""
     from nsdrake.reporting.run_folder import default_output_folder
     from nsdrake.studies.sweep_engines import check_engine
 
     spec = load_sweep(args.spec)
+    check_size(spec, getattr(args, "max_runs", MAX_RUNS))
     check_engine(args.engine, args.scheduler)
+    print(f"nsdrake: sweep {spec.name}: {sweep_size(spec)}; checking every run's scenario", flush=True)
     runs = plan_runs(spec)
-    out = Path(args.out) if args.out is not None else default_output_folder(f"sweep-{spec.name}")
-    where = f"a Dask cluster at {args.scheduler}" if args.scheduler else (
-        f"a local Dask cluster of {args.jobs} workers" if args.engine == "dask" else
-        f"{args.jobs} processes" if args.jobs > 1 else "this process"
-    )  # fmt: skip
-    resume = f"nsdrake sweep {args.spec} --out {out}"
-    prepare_sweep_folder(out, spec, runs, overwrite=args.overwrite)  # refused before a word is printed
-    print(f"nsdrake: sweeping {spec.name}: {len(runs)} runs on {where} into {out}/")
+    created: list[Path] = []
+    out = (
+        Path(args.out)
+        if args.out is not None
+        else default_output_folder(f"sweep-{spec.name}", created=created)
+    )
+    try:
+        prepare_sweep_folder(out, spec, runs, overwrite=args.overwrite)  # refused before "sweeping … into"
+    except BaseException:
+        release_unused(out, created)
+        raise
+    print(f"nsdrake: sweeping {spec.name}: {len(runs)} runs on {_engine_words(args)} into {out}/")
+    progress = SweepProgress(len(runs))
     try:
         outcome = run_sweep(
             spec,
@@ -372,21 +413,47 @@ def sweep_command(args) -> int:
             engine=args.engine,
             jobs=args.jobs,
             scheduler=args.scheduler,
-            progress=SweepProgress(len(runs)),
+            progress=progress,
             prepared=True,
         )
     except KeyboardInterrupt:
         kept = sum(1 for r in runs if finished(out, r, spec) is not None)
-        print(f"\nnsdrake: interrupted; {kept} of {len(runs)} runs are kept in {out}/; resume with: {resume}",
-              file=sys.stderr)  # fmt: skip
+        if progress.partial:
+            progress.stream.write("\n")
+        print(f"nsdrake: interrupted; {kept} of {len(runs)} runs are kept in {out}/; resume with: "
+              f"nsdrake sweep {args.spec} --out {out}", file=sys.stderr)  # fmt: skip
         return 130
+    _summary(outcome, runs, out)
+    return 1 if outcome.failed else 0
+
+
+def _engine_words(args) -> str:
+    if args.scheduler:
+        return f"a Dask cluster at {args.scheduler}"
+    if args.engine == "dask":
+        return f"a local Dask cluster of {args.jobs} workers"
+    return f"{args.jobs} processes" if args.jobs > 1 else "this process"
+
+
+def _summary(outcome: SweepOutcome, runs: list[Run], out: Path) -> None:
+    """What was simulated, which runs have no force figures and why, which failed."""
     skipped = len(runs) - len(outcome.simulated)
     print(
         f"nsdrake: {len(outcome.simulated)} runs simulated"
         + (f", {skipped} already finished (resumed)" if skipped else "")
         + f"; wrote {out}/: results.csv, sweep.png, runs/NNNN/traces.csv"
     )
+    empty = [
+        i
+        for i in sorted(outcome.records)
+        if outcome.records[i]["status"] == "ok" and outcome.records[i]["reason"]
+    ]
+    if empty:
+        first = outcome.records[empty[0]]
+        print(
+            f"nsdrake: {len(empty)} of {len(runs)} runs have empty force figures (all_bounds_met false); "
+            f"run {empty[0]}: {first['reason']} (results.csv's reason says why for each)"
+        )
     for i in outcome.failed:
         print(f"nsdrake: error: run {i} ({_label(outcome.records[i]['values'])}) failed: "
               f"{outcome.records[i]['reason']}", file=sys.stderr)  # fmt: skip
-    return 1 if outcome.failed else 0

@@ -17,6 +17,7 @@ import signal
 from collections.abc import Iterator
 from multiprocessing.connection import wait
 
+from nsdrake.studies.compare import start_quietly
 from nsdrake.studies.sweep_spec import SweepError
 from nsdrake.studies.sweep_worker import crash_if_asked, simulate_run
 
@@ -24,8 +25,12 @@ ENGINES = ("process", "dask")
 DASK_MISSING = "--engine dask needs Dask: pip install 'nsdrake[cluster]'"
 
 
+CONNECT_TIMEOUT = 10.0  # [s] a --scheduler has this long to answer as a Dask scheduler
+
+
 def check_engine(engine: str, scheduler: str | None) -> None:
-    """One line, before anything runs: the engine exists and can be imported."""
+    """One line, before anything runs: the engine exists and can be imported, and a
+    ``scheduler`` is a Dask scheduler that answers (:func:`check_scheduler`)."""
     if engine not in ENGINES:
         raise SweepError(f"--engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     if scheduler is not None and engine != "dask":
@@ -35,6 +40,46 @@ def check_engine(engine: str, scheduler: str | None) -> None:
             import dask.distributed  # noqa: F401
         except ImportError:
             raise SweepError(DASK_MISSING) from None
+    if scheduler is not None:
+        check_scheduler(scheduler, CONNECT_TIMEOUT)
+
+
+def check_scheduler(address: str, timeout: float) -> dict:
+    """The identity of the Dask scheduler at ``address``; SweepError (one line) if the
+    address is malformed, nothing answers within ``timeout`` seconds, or what answers is
+    not a Dask scheduler (a server of another kind, which Dask's own client would wait on
+    for ever: its handshake has no time limit)."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def identity() -> object:
+        comm = await connect(address, timeout=timeout)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    where = f"--scheduler {_short(address)}"
+    try:
+        answer = asyncio.run(asyncio.wait_for(identity(), timeout))
+    except (asyncio.TimeoutError, TimeoutError):
+        raise SweepError(f"{where}: no Dask scheduler answered within {timeout:g} s") from None
+    except ValueError as e:  # malformed: Dask's address parser says why
+        raise SweepError(f"{where}: not a scheduler address ({_short(e)}); e.g. tcp://HOST:8786") from None
+    except Exception as e:  # refused, unreachable, or a server that speaks another protocol
+        raise SweepError(f"{where}: cannot reach a Dask scheduler: {_short(e)}") from None
+    if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+        raise SweepError(
+            f"{where}: the server there is not a Dask scheduler (it answered {_short(repr(answer))})"
+        )
+    return answer
+
+
+def _short(text, length: int = 160) -> str:
+    line = " ".join(str(text).split())
+    return line if len(line) <= length else line[: length - 1] + "…"
 
 
 def results(tasks: list[dict], *, engine: str, jobs: int, scheduler: str | None = None) -> Iterator[dict]:
@@ -80,7 +125,7 @@ class _Slot:
     def __init__(self, ctx):
         self.conn, child = ctx.Pipe()
         self.process = ctx.Process(target=_worker, args=(child,), daemon=True, name="nsdrake-sweep-worker")
-        self.process.start()
+        start_quietly(self.process)  # Ctrl-C while it starts: no traceback from it
         child.close()
         self.task: dict | None = None
 
@@ -158,7 +203,7 @@ def _dask(tasks: list[dict], jobs: int, scheduler: str | None) -> Iterator[dict]
                 dashboard_address=None,
                 silence_logs=logging.ERROR,
             )
-        client = Client(cluster if cluster is not None else scheduler)
+        client = Client(cluster if cluster is not None else scheduler, timeout=CONNECT_TIMEOUT)
     try:
         futures = {
             # The key names the run's scenario and seed: two sweeps sharing a scheduler

@@ -40,7 +40,9 @@ from nsdrake.experiment.scenario import (
     Scenario,
     ScenarioError,
     _kind,
+    _name,
     _one_line,
+    _show,
     check_shape,
     load_scenario,
     read_yaml,
@@ -144,8 +146,9 @@ def shipped_sweeps() -> list[str]:
 
 
 def spec_path(spec: str) -> Path:
-    """A shipped sweep's file, or the path given (anything with a / or a .yaml suffix)."""
-    if "/" in spec or os.sep in spec or spec.endswith((".yaml", ".yml")):
+    """A shipped sweep's file, or the path given (anything with a /, a suffix such as .yaml
+    or .json, or the name of a file that exists)."""
+    if "/" in spec or os.sep in spec or Path(spec).suffix or Path(spec).is_file():
         return Path(spec)
     known = shipped_sweeps()
     if spec not in known:
@@ -187,7 +190,7 @@ def _number(x) -> bool:
 def _axis(src: str, path, spec) -> Axis:
     where = f"axes.{path}"
     if not isinstance(path, str):
-        raise SweepError(f"{src}: axes: {path!r}: a field path must be a string")
+        raise SweepError(f"{src}: axes: {_show(path)}: a field path must be a string")
     try:
         schema = field_type(path)
     except ValueError as e:
@@ -206,18 +209,18 @@ def _axis(src: str, path, spec) -> Axis:
         if schema is not float:
             raise SweepError(f"{src}: {where}: random samples need a number field; {path} is {_kind(schema)}")
         if not isinstance(r, dict) or set(r) != {"low", "high", "count"}:
-            raise SweepError(f"{src}: {where}: must be a mapping with low, high and count, got {r!r}")
+            raise SweepError(f"{src}: {where}: must be a mapping with low, high and count, got {_show(r)}")
         if not _number(r["low"]):
-            raise SweepError(f"{src}: {where}.low: must be a finite number, got {r['low']!r}")
+            raise SweepError(f"{src}: {where}.low: must be a finite number, got {_show(r['low'])}")
         if not _number(r["high"]) or r["high"] <= r["low"]:
             raise SweepError(
-                f"{src}: {where}.high: must be a number above low = {r['low']}, got {r['high']!r}"
+                f"{src}: {where}.high: must be a number above low = {r['low']}, got {_show(r['high'])}"
             )
         if not isinstance(r["count"], int) or isinstance(r["count"], bool) or r["count"] < 1:
-            raise SweepError(f"{src}: {where}.count: must be a whole number >= 1, got {r['count']!r}")
+            raise SweepError(f"{src}: {where}.count: must be a whole number >= 1, got {_show(r['count'])}")
         return Axis(path, None, (float(r["low"]), float(r["high"]), r["count"]))
     raise SweepError(
-        f"{src}: {where}: must be a list of values or {{random: {{low, high, count}}}}, got {spec!r}"
+        f"{src}: {where}: must be a list of values or {{random: {{low, high, count}}}}, got {_show(spec)}"
     )
 
 
@@ -229,37 +232,62 @@ def load_sweep(spec: str) -> SweepSpec:
     except ScenarioError as e:
         raise SweepError(str(e)) from None
     src = str(path)
+    _check_fields(src, data)
+    duration = data.get("duration")
+    if duration is not None and (not _number(duration) or duration <= 0):
+        raise SweepError(f"{src}: duration: must be a number of seconds > 0, got {_show(duration)}")
+    seed = data.get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise SweepError(f"{src}: seed: must be a whole number >= 0, got {_show(seed)}")
+    return SweepSpec(
+        name=path.stem,
+        source=src,
+        description=data.get("description", ""),
+        base=data["base"],
+        config=_config(src, data.get("config"), path),
+        duration=float(duration) if duration is not None else None,
+        seed=seed,
+        axes=_axes(src, data.get("axes")),
+        metrics=_metrics(src, data.get("metrics")),
+        text=text,
+    )
+
+
+def _check_fields(src: str, data) -> None:
+    """The file is a mapping of known fields, with a shipped base and a text description."""
     if not isinstance(data, dict):
         raise SweepError(f"{src}: the file: must be a mapping with {', '.join(SPEC_FIELDS)}")
     for key in data:
         if key not in SPEC_FIELDS:
-            raise SweepError(f"{src}: {key}: unknown field; valid fields are {', '.join(SPEC_FIELDS)}")
+            raise SweepError(f"{src}: {_name(key)}: unknown field; valid fields are {', '.join(SPEC_FIELDS)}")
     if "base" not in data:
         raise SweepError(f"{src}: base: missing; name a shipped scenario ({', '.join(shipped_scenarios())})")
-    if data["base"] not in shipped_scenarios():
+    if not isinstance(data["base"], str) or data["base"] not in shipped_scenarios():
         raise SweepError(
-            f"{src}: base: unknown scenario {data['base']!r}; the shipped scenarios are "
+            f"{src}: base: unknown scenario {_show(data['base'])}; the shipped scenarios are "
             f"{', '.join(shipped_scenarios())}"
         )
     description = data.get("description", "")
     if not isinstance(description, str):
-        raise SweepError(f"{src}: description: must be a string, got {description!r}")
-    config = data.get("config")
-    if config is not None:
-        if not isinstance(config, str) or not config:
-            raise SweepError(f"{src}: config: must be a path to a YAML file, got {config!r}")
-        config = (path.parent / config) if not Path(config).is_absolute() else Path(config)
-        if not config.is_file():
-            raise SweepError(f"{src}: config: no such file {config}")
-    duration = data.get("duration")
-    if duration is not None and (not _number(duration) or duration <= 0):
-        raise SweepError(f"{src}: duration: must be a number of seconds > 0, got {duration!r}")
-    seed = data.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise SweepError(f"{src}: seed: must be a whole number >= 0, got {seed!r}")
-    axes_data = data.get("axes")
+        raise SweepError(f"{src}: description: must be a string, got {_show(description)}")
+
+
+def _config(src: str, config, path: Path) -> Path | None:
+    if config is None:
+        return None
+    if not isinstance(config, str) or not config:
+        raise SweepError(f"{src}: config: must be a path to a YAML file, got {_show(config)}")
+    config = (path.parent / config) if not Path(config).is_absolute() else Path(config)
+    if not config.is_file():
+        raise SweepError(f"{src}: config: no such file {config}")
+    return config
+
+
+def _axes(src: str, axes_data) -> tuple[Axis, ...]:
     if not isinstance(axes_data, dict) or not axes_data:
-        raise SweepError(f"{src}: axes: must map at least one field path to its values, got {axes_data!r}")
+        raise SweepError(
+            f"{src}: axes: must map at least one field path to its values, got {_show(axes_data)}"
+        )
     axes = tuple(_axis(src, p, v) for p, v in axes_data.items())
     for a, b in itertools.combinations(axes, 2):
         if a.path.startswith(b.path + ".") or b.path.startswith(a.path + "."):
@@ -270,30 +298,59 @@ def load_sweep(spec: str) -> SweepSpec:
             f"{src}: axes: the random axes are sampled together and must share one count, got "
             f"{', '.join(map(str, counts))}"
         )
-    metrics = data.get("metrics")
+    return axes
+
+
+def _metrics(src: str, metrics) -> tuple[str, ...]:
     if not isinstance(metrics, list) or not metrics:
         raise SweepError(
             f"{src}: metrics: must be a list of metric names; valid names are {', '.join(METRICS)}"
         )
     for i, m in enumerate(metrics):
-        if m not in METRICS:
+        if not isinstance(m, str) or m not in METRICS:
             raise SweepError(
-                f"{src}: metrics[{i}]: unknown metric {m!r}; valid names are {', '.join(METRICS)}"
+                f"{src}: metrics[{i}]: unknown metric {_show(m)}; valid names are {', '.join(METRICS)}"
             )
     if len(set(metrics)) != len(metrics):
         raise SweepError(f"{src}: metrics: names must be distinct")
-    return SweepSpec(
-        name=path.stem,
-        source=src,
-        description=description,
-        base=data["base"],
-        config=config,
-        duration=float(duration) if duration is not None else None,
-        seed=seed,
-        axes=axes,
-        metrics=tuple(metrics),
-        text=text,
-    )
+    return tuple(metrics)
+
+
+# A sweep of more runs than this is refused unless --max-runs raises it: 1000 runs of the
+# shipped robustness sweep's kind (3.5 s of fig3 each) take about 75 minutes on two cores,
+# and checking their scenarios alone about a minute.
+MAX_RUNS = 1000
+
+
+def run_count(spec: SweepSpec) -> int:
+    """How many runs the spec makes: the product of the grid axes' lengths, times the
+    random axes' shared count (computed without listing the runs)."""
+    count = math.prod(len(a.values) for a in spec.axes if a.values is not None)
+    counts = [a.random[2] for a in spec.axes if a.random is not None]
+    return count * (counts[0] if counts else 1)
+
+
+def sweep_size(spec: SweepSpec) -> str:
+    """The size in words: "18 runs (3 x 3 x 2)"."""
+    factors = [str(len(a.values)) for a in spec.axes if a.values is not None]
+    counts = [a.random[2] for a in spec.axes if a.random is not None]
+    if counts:
+        factors.append(f"{counts[0]} random samples")
+    total = run_count(spec)
+    shape = f" ({' x '.join(factors)})" if len(factors) > 1 else ""
+    return f"{total} run{'s' if total != 1 else ''}{shape}"
+
+
+def check_size(spec: SweepSpec, max_runs: int = MAX_RUNS) -> int:
+    """The number of runs; a sweep of more than ``max_runs`` is refused (SweepError) before
+    any run is listed."""
+    total = run_count(spec)
+    if total > max_runs:
+        raise SweepError(
+            f"{spec.source}: axes: {sweep_size(spec)} is more than --max-runs {max_runs} allows; "
+            f"pass --max-runs {total} to run them all, or sweep fewer values"
+        )
+    return total
 
 
 # --- the runs ---------------------------------------------------------------------------

@@ -29,6 +29,7 @@ def simulate_run(task: dict) -> dict:
     from pydrake.common.yaml import yaml_load_typed
 
     from nsdrake.experiment.simulate import DivergenceError, run
+    from nsdrake.reporting.metrics import measuring_window_gap
     from nsdrake.reporting.run_folder import compute_metrics
 
     start = time.perf_counter()
@@ -56,6 +57,8 @@ def simulate_run(task: dict) -> dict:
             values = {m.name: _plain(m.value) for m in metrics}
             values["all_bounds_met"] = all(m.passed for m in metrics if m.passed is not None)
             result["metrics"] = values
+            # A run without force figures is not a failure, but its row says why they are empty.
+            result["reason"] = measuring_window_gap(traces, scenario.reference.contact_threshold) or ""
     except Exception as e:  # a failing run is a row, not the end of the sweep
         reason = _one_line(e) or type(e).__name__
         result.update(status="failed", reason=f"{type(e).__name__}: {reason}")

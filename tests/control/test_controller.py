@@ -19,6 +19,12 @@ import numpy as np
 import pytest
 from drake_reference import AutoDiffArm, christoffel_C, plant_terms
 from pydrake.systems.framework import DiagramBuilder
+from reference_math import (
+    dynamically_consistent_inverse,
+    null_space_projector,
+    task_space_inertia,
+    task_velocity_compensation,
+)
 
 from nsdrake.control.priority import ORDERINGS, Criterion, Level, Mode, prioritized_velocity
 from nsdrake.control.systems.criteria import unpack_criterion
@@ -65,10 +71,10 @@ def expected_torque(scenario, station, p_WSo, inputs, qdot_ns_d, previous_qdot_n
     ref = plant_terms(arm, q, v)
     H, J = ref["H"], ref["J"]
     H_inv = np.linalg.inv(H)
-    Lam = np.linalg.inv(J @ H_inv @ J.T)
+    Lam = task_space_inertia(J, H_inv)
     Jbar, Jbar_dot = AutoDiffArm(arm).Jbar_and_dot(q, v)
-    assert np.allclose(Jbar, H_inv @ J.T @ Lam, rtol=1e-12, atol=1e-12)
-    N = np.eye(n) - Jbar @ J
+    assert np.allclose(Jbar, dynamically_consistent_inverse(J, H_inv), rtol=1e-12, atol=1e-12)
+    N = null_space_projector(J, Jbar)
     # Impedance (Eqs. 6–8): the plate's normal is +y, its tangent +x.
     imp = scenario.impedance
     W = inputs["measured_wrench"]
@@ -97,7 +103,7 @@ def expected_torque(scenario, station, p_WSo, inputs, qdot_ns_d, previous_qdot_n
         a = a + (qdot_ns_d - previous_qdot_ns_d) / scenario.control_period
     if ns.task_velocity_compensation:
         Jdot = AutoDiffArm(arm).Jdot(q, v)
-        a = a + (Jbar_dot @ J + Jbar @ Jdot) @ v
+        a = a + task_velocity_compensation(J, Jdot, Jbar, Jbar_dot, v)
     if ns.coriolis_compensation:
         a = a + H_inv @ christoffel_C(arm, q, v) @ e
     return tau + H @ N @ a
@@ -156,8 +162,7 @@ def test_null_space_outputs_match_eqs_14_and_23():
     fixed_inputs(controller, context, q, v, rng)
     ref = plant_terms(arm, q, v)
     H, J = ref["H"], ref["J"]
-    H_inv = np.linalg.inv(H)
-    N = np.eye(n) - H_inv @ J.T @ np.linalg.inv(J @ H_inv @ J.T) @ J
+    N = null_space_projector(J, dynamically_consistent_inverse(J, np.linalg.inv(H)))
     e = controller.GetOutputPort("desired_null_space_velocity").Eval(context) - N @ v
     assert np.allclose(
         controller.GetOutputPort("null_space_velocity_error").Eval(context), e, rtol=0, atol=1e-12
@@ -191,7 +196,7 @@ def test_selector_blends_from_the_old_ordering_after_a_switch():
     ref = plant_terms(station.arm_model, q, v)
     H, J = ref["H"], ref["J"]
     H_inv = np.linalg.inv(H)
-    N = np.eye(len(q)) - H_inv @ J.T @ np.linalg.inv(J @ H_inv @ J.T) @ J
+    N = null_space_projector(J, dynamically_consistent_inverse(J, H_inv))
     crit = scenario.desired_null_space.criteria
     gains = {
         Criterion.obstacle: crit.obstacle.gain,

@@ -16,6 +16,7 @@ from conftest import PANDA_POSE_AXES, PANDA_Q0, panda_arm, panda_configurations,
 from drake_reference import AutoDiffArm, christoffel_C, plant_terms
 from pydrake.common.eigen_geometry import AngleAxis, Quaternion
 from pydrake.math import RotationMatrix
+from reference_math import null_space_projector, task_space_inertia, task_velocity_compensation
 
 from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
 from nsdrake.control.controller import ControllerConfigError
@@ -248,9 +249,9 @@ def expected_pose_torque(arm, config, inputs, qdot_ns_d, previous):
     ref = plant_terms(arm, q, v)
     H, J = ref["H"], ref["J"]
     H_inv = np.linalg.inv(H)
-    Lam = np.linalg.inv(J @ H_inv @ J.T)
+    Lam = task_space_inertia(J, H_inv)
     Jbar, Jbar_dot = AutoDiffArm(arm).Jbar_and_dot(q, v)
-    N = np.eye(n) - Jbar @ J
+    N = null_space_projector(J, Jbar)
     imp = config.impedance
     W = inputs["measured_wrench"]  # about the tool point (no wrench_point)
     m_t, rot = arm.m_t, arm.rot_rows
@@ -283,7 +284,8 @@ def expected_pose_torque(arm, config, inputs, qdot_ns_d, previous):
     ns = config.null_space
     e = qdot_ns_d - N @ v
     Jdot = AutoDiffArm(arm).Jdot(q, v)
-    a = ns.K_n * e + (qdot_ns_d - previous) / config.period + (Jbar_dot @ J + Jbar @ Jdot) @ v
+    a = ns.K_n * e + (qdot_ns_d - previous) / config.period
+    a = a + task_velocity_compensation(J, Jdot, Jbar, Jbar_dot, v)
     a = a + H_inv @ christoffel_C(arm, q, v) @ e
     return tau + H @ N @ a
 

@@ -20,6 +20,7 @@ from reference_math import (
     null_space_projector,
     pinv_derivative,
     pinv_of,
+    task_space_inertia,
     task_velocity_compensation,
     weighted_inverse,
 )
@@ -52,8 +53,7 @@ def test_right_inverse_and_idempotent_projector(arm):
 def test_eq13_matches_its_definition(arm):
     for q, v in random_states(arm.n, 10, seed=12):
         T = terms_at(arm, q, v, coriolis=False)
-        Lambda = np.linalg.inv(T.J @ T.H_inv @ T.J.T)
-        expected = T.H_inv @ T.J.T @ Lambda
+        expected = T.H_inv @ T.J.T @ task_space_inertia(T.J, T.H_inv)  # Eq. 13 as written
         assert rel(dynamically_consistent_inverse(T.J, T.H_inv) - expected, np.max(np.abs(expected))) < TOL
         assert rel(KINDS[0].at(T).J_pinv - expected, np.max(np.abs(expected))) < TOL
         assert rel(moore_penrose_inverse(T.J) - np.linalg.pinv(T.J), 10) < TOL

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from conftest import fig3_with
 
-from nsdrake.experiment.checks import sampled_loop_radius
+from nsdrake.control.validation import sampled_loop_radius
 from nsdrake.experiment.scenario import ScenarioError
 from nsdrake.reporting.run_folder import check_scenario
 from nsdrake.station.models import models_dir

@@ -73,6 +73,57 @@ def test_the_slide_stops_at_the_edge_of_the_reach():
     assert np.all(ref.at(60.0, state=state)[1] == 0.0)
 
 
+PERIOD = 0.002  # [s]
+
+
+def loss_declared_at(drop: float, loss_time: float) -> tuple[float, int]:
+    """SurfaceReferenceSystem alone, sampling every PERIOD: the normal force at 5 N from
+    t = 0, then at 0.1 N from half a period before the control instant ``drop`` (so the
+    first sample below the threshold is the one at ``drop``, whatever the rounding of event
+    times). Returns the time the contact was declared lost (its state's t_lost) and how
+    many of the instants from ``drop`` on left ``in_contact`` at 1 (read between instants)."""
+    from pydrake.systems.analysis import Simulator
+
+    from nsdrake.experiment.reference_system import SurfaceReferenceSystem
+
+    system = SurfaceReferenceSystem(
+        reference=reference(),
+        task_rows=np.array([0, 1]),
+        contact_threshold=THRESHOLD,
+        period=PERIOD,
+        loss_time=loss_time,
+    )
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    wrench = system.GetInputPort("measured_wrench")
+    wrench.FixValue(context, [0, 0, 0, 0, 5.0, 0])
+    simulator.AdvanceTo(drop - PERIOD / 2)
+    assert system.get_output_port().Eval(context)[-1] == 1.0  # in contact since t = 0
+    wrench.FixValue(context, [0, 0, 0, 0, 0.1, 0])
+    kept = 0
+    for k in range(1, 200):
+        simulator.AdvanceTo(drop + (k - 0.5) * PERIOD)  # after the update at drop + (k - 1) T
+        kept += system.get_output_port().Eval(context)[-1] == 1.0
+    return float(context.get_discrete_state(0).value()[2]), kept
+
+
+@pytest.mark.parametrize("loss_time", [0.05, 0.051, 0.002])
+@pytest.mark.parametrize("step", [37, 50, 113])
+def test_contact_loss_is_declared_after_exactly_loss_time_below_the_threshold(step, loss_time):
+    """The force drops below the threshold at control instant t_a: the loss is declared at
+    the first instant at which it has been below for loss_time, t_a + ⌈loss_time / T⌉ T (to
+    the rounding of instants), not a period earlier or later, and in_contact reads 1 until
+    then. Instants are multiples of T in floating point (0.074 + 0.05 is not 0.124): the
+    1 ns slack of update_contact keeps a loss_time that is a whole number of periods exact.
+    Catches the time below the threshold counted from the latest low sample instead of
+    the first, and the slack lost (two of the nine cases then declare a period late)."""
+    drop = step * PERIOD
+    periods = int(np.ceil(loss_time / PERIOD - 1e-9))
+    t_lost, kept = loss_declared_at(drop, loss_time)
+    assert t_lost == pytest.approx(drop + periods * PERIOD, abs=1e-12)
+    assert kept == periods
+
+
 @pytest.mark.slow
 def test_fig3_for_30_s_slides_off_the_plate_and_finishes(tmp_path):
     """The issue's run: the tool leaves the plate at about 13.4 s. The run finishes,

@@ -7,16 +7,23 @@ import dataclasses
 import json
 
 import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
 
 from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.run_folder import run_to_folder
 
 
 def unstable_fig3():
-    """fig3 with K_n T = 3, beyond the null-space loop's discrete stability bound (2):
-    the scenario checks would refuse it, so it is built past them, as a bug might."""
+    """fig3 whose controller believes the arm 11 times heavier than it is (the realism
+    ladder's model error at +1000%): every model-based gain acts 11 times stronger, so the
+    normal velocity loop has T K_v = 0.002 × 200 × 11 = 4.4, beyond the sampled loop's
+    bound of 2. No check can refuse it (the checks see the controller's own model); the
+    run diverges within a few periods."""
     s = load_scenario("fig3", duration=1.0)
-    return dataclasses.replace(s, null_space=dataclasses.replace(s.null_space, K_n=1500.0))
+    error = dataclasses.replace(s.realism.model_error, enabled=True, mass_error=10.0)
+    return dataclasses.replace(s, realism=dataclasses.replace(s.realism, model_error=error))
 
 
 def test_a_diverging_run_keeps_its_traces_and_is_marked_failed(tmp_path):
@@ -52,3 +59,79 @@ def test_the_command_line_prints_one_line_and_exits_non_zero(tmp_path, capsys):
     assert len(err) == 1
     assert err[0].startswith("nsdrake: error: ") and "diverged at t = " in err[0] and "joint speed" in err[0]
     assert (out / "traces.csv").exists() and (out / "report.html").exists()
+
+
+class _PoisonedSimulator(Simulator):
+    """A Simulator whose plant state holds a NaN joint speed when the run starts (Drake's
+    SetVelocities refuses one, a diverging plant or a faulty estimator does not)."""
+
+    def Initialize(self):
+        plant = self.get_system().GetSubsystemByName("plant")
+        context = plant.GetMyMutableContextFromRoot(self.get_mutable_context())
+        x = context.get_discrete_state_vector().CopyToVector()
+        x[plant.num_positions()] = np.nan
+        context.get_mutable_discrete_state_vector().SetFromVector(x)
+        return super().Initialize()
+
+
+def test_a_non_finite_state_ends_the_run_with_the_monitors_line(monkeypatch):
+    """Issue 15, item 3: a non-finite estimated_state made a system raise inside the step
+    (Drake's "Detected NaN in the actuation input port", or a linear solve), whose text
+    became the reason. The run now ends as the monitor would have ended it, and keeps its
+    traces."""
+    import nsdrake.experiment.simulate as simulate
+
+    monkeypatch.setattr(simulate, "Simulator", _PoisonedSimulator)
+    with pytest.raises(simulate.DivergenceError) as info:
+        simulate.run(load_scenario("fig3", duration=0.1))
+    assert str(info.value) == "diverged at t = 0.0000 s: the joint state is not finite"
+    assert isinstance(info.value.traces, Traces)
+
+
+def test_an_overflow_inside_a_system_is_a_failed_run_not_a_traceback(monkeypatch):
+    """An OverflowError (an ArithmeticError, not one of the errors the run caught) raised
+    by a system in the middle of the run ends it as a divergence, in one line, with the
+    traces so far."""
+    import nsdrake.experiment.simulate as simulate
+    from nsdrake.control.plan import ControllerPlan
+
+    real = ControllerPlan.run
+    calls = []
+
+    def overflowing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) > 100:  # several stage calls a period: about a dozen periods
+            raise OverflowError(34, "Numerical result out of range")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(ControllerPlan, "run", overflowing)
+    with pytest.raises(simulate.DivergenceError) as info:
+        simulate.run(load_scenario("fig3", duration=0.2))
+    assert str(info.value).endswith("s: (34, 'Numerical result out of range')")
+    assert 5 <= len(info.value.traces) <= 21
+
+
+def test_ctrl_c_inside_a_step_keeps_every_complete_row(monkeypatch):
+    """Ctrl-C lands inside a step, between two loggers' publishes (here in the contact
+    monitor, which only its logger evaluates): some loggers have the new row, others not,
+    and the traces failed with "trace columns differ in length". The run ends as
+    RunInterrupted (a KeyboardInterrupt) with the rows every logger has."""
+    import nsdrake.experiment.simulate as simulate
+    from nsdrake.station.contact_monitor import ContactMonitor
+
+    real = ContactMonitor._calc
+    calls = []
+
+    def interrupted(self, context, output):
+        calls.append(1)
+        if len(calls) == 20:
+            raise KeyboardInterrupt
+        return real(self, context, output)
+
+    monkeypatch.setattr(ContactMonitor, "_calc", interrupted)
+    with pytest.raises(KeyboardInterrupt) as info:
+        simulate.run(load_scenario("fig3", duration=0.5))
+    stopped = info.value
+    assert isinstance(stopped, simulate.RunInterrupted)
+    assert stopped.reason == f"interrupted at t = {stopped.t:.4f} s (Ctrl-C)"
+    assert len(stopped.traces) == 19 and stopped.traces["t"][-1] == pytest.approx(0.036)

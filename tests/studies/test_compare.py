@@ -217,3 +217,78 @@ def test_subset_of_a_family_runs_its_own_variants_in_worker_processes(tmp_path):
     assert [row["variant"] for row in rows] == ["full law", "no compensation at all"]
     assert full[1]["nu_final"] != full[2]["nu_final"]  # the test can tell the two apart
     assert rows[1]["nu_final"] == full[2]["nu_final"]
+
+
+@pytest.mark.parametrize(
+    ("fault", "grace"),
+    [("hang", None), pytest.param("hang_hard", 1.0, marks=pytest.mark.slow)],
+    ids=["hangs until stopped", "deaf to SIGINT, killed"],
+)
+def test_a_hung_variant_is_stopped_at_its_time_limit_and_the_others_finish(
+    tmp_path, monkeypatch, capsys, fault, grace
+):
+    """Issue 15, item 8: a variant that hangs (neither finishes nor dies) blocked the whole
+    comparison for ever. After --variant-timeout it is stopped (SIGINT, then killed if it
+    does not answer within STOP_GRACE): its row says so, the others' rows are complete,
+    the command exits 1 in about the time limit."""
+    import time
+
+    import nsdrake.studies.compare as compare
+
+    monkeypatch.setenv("NSDRAKE_TEST_FAULT", f"1:{fault}")
+    if grace is not None:
+        monkeypatch.setattr(compare, "STOP_GRACE", grace)
+    out = tmp_path / "lyap"
+    start = time.monotonic()
+    with deadline(180):
+        code = main(["compare", "lyapunov", "--duration", "0.2", "--out", str(out), "--jobs", "2",
+                     "--variant-timeout", "6"])  # fmt: skip
+    assert code == 1
+    assert time.monotonic() - start < 60
+    with (out / "table.csv").open() as f:
+        rows = {row["variant"]: row for row in csv.DictReader(f)}
+    reason = "failed: timed out after 6 s (--variant-timeout)"
+    assert rows["no Coriolis compensation"]["error"] == reason
+    for name in ("full law", "no compensation at all"):
+        assert rows[name]["error"] == "" and float(rows[name]["nu_final"]) > 0
+    err = capsys.readouterr().err
+    assert f"nsdrake: variant 'no Coriolis compensation' {reason}" in err and "1 of 3 variants failed" in err
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "soon", "nan"])
+def test_a_bad_variant_timeout_is_one_line(capsys, value):
+    try:
+        code = main(["compare", "lyapunov", "--variant-timeout", value])
+    except SystemExit as e:
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--variant-timeout must be" in err
+
+
+def test_blank_force_figures_say_why_in_the_row(tmp_path):
+    """Issue 15, item 9: `compare realism --duration 2` left the belt row's force figures
+    blank because its window (0.5 s after first contact at 1.69 s) starts after the run
+    ends; nothing said so. The realism measure's row says it (the clean variant at 1.5 s:
+    contact at 1.27 s, window from 1.77 s), next to the variant's name in the table."""
+    result = run_family(subset("realism", 0), tmp_path / "realism", duration=1.5, jobs=1)
+    row = result.rows[0]
+    assert "force_error_rms" not in row and row["first_contact_time"] == pytest.approx(1.272, abs=2e-3)
+    assert row["note"] == (
+        "the measuring window starts 0.5 s after first contact (1.27 s), at 1.77 s, after the run ends at "
+        "1.5 s: its force figures are empty; run longer (--duration)"
+    )
+    assert result.notes == {row["variant"]: row["note"]}
+    assert "| variant | note | first_contact_time |" in (tmp_path / "realism" / "table.md").read_text()
+
+
+@pytest.mark.slow
+def test_the_command_line_prints_why_figures_are_blank(tmp_path, capsys):
+    """The gravity family's fig3 measure at 0.3 s (no contact at all): a line per variant."""
+    out = tmp_path / "gravity"
+    assert main(["compare", "gravity", "--duration", "0.3", "--out", str(out), "--jobs", "2"]) == 0
+    printed = capsys.readouterr().out
+    note = "no contact: the tool never pressed 0.5 N on the plate in the 0.3 s run, so the force figures are "
+    note += "empty"
+    for name in ("horizontal", "vertical, gravity compensated", "vertical, no gravity compensation"):
+        assert f"nsdrake: variant '{name}': {note}" in printed

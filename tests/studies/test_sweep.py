@@ -6,9 +6,11 @@ time in each mode), three per sweep, so that the whole file stays around a minut
 
 from __future__ import annotations
 
+import csv
 import io
 import json
 import shutil
+import signal
 import time
 
 import numpy as np
@@ -44,6 +46,18 @@ def reference(tmp_path_factory):
     out = folder / "serial"
     assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
     return spec, out
+
+
+# The reason of a 0.2 s fig3 run: it ends before the tool reaches the plate (at 1.27 s).
+NO_CONTACT = (
+    "no contact: the tool never pressed 0.5 N on the plate in the 0.2 s run, so the force figures are empty"
+)
+
+
+def table_rows(out) -> list[list[str]]:
+    """results.csv's rows after the header, as CSV cells (a reason may hold commas)."""
+    with (out / "results.csv").open(newline="") as f:
+        return list(csv.reader(f))[1:]
 
 
 def run_files(out):
@@ -216,8 +230,9 @@ def test_two_processes_write_the_same_bytes_as_one(reference, tmp_path):
     assert lines[0] == (
         "index,null_space.K_n,seed,status,reason,first_contact_time,joint_speed_ratio_max,mode2_time,all_bounds_met"
     )
-    assert [line.split(",")[0] for line in lines[1:]] == ["0", "1", "2"]
-    assert len({line.split(",")[6] for line in lines[1:]}) == 3  # K_n changes the joint speeds
+    rows = table_rows(serial)
+    assert [row[0] for row in rows] == ["0", "1", "2"]
+    assert len({row[6] for row in rows}) == 3  # K_n changes the joint speeds
     assert (out / "sweep.png").stat().st_size > 0
 
 
@@ -293,7 +308,7 @@ def test_a_changed_spec_is_refused_in_the_old_folder_unless_overwrite(reference,
     assert (out / "results.csv").read_bytes() == (serial / "results.csv").read_bytes()
     assert main(["sweep", str(changed), "--out", str(out), "--jobs", "1", "--overwrite"]) == 0
     assert "1 runs simulated, 2 already finished" in capsys.readouterr().out
-    assert (out / "results.csv").read_text().splitlines()[3].split(",")[1] == "150.0"
+    assert table_rows(out)[2][1] == "150.0"
     assert main(["sweep", str(spec), "--out", str(tmp_path / "elsewhere"), "--jobs", "1"]) == 0
     assert (tmp_path / "elsewhere/results.csv").read_bytes() == (serial / "results.csv").read_bytes()
 
@@ -420,9 +435,8 @@ def test_a_failing_run_and_a_dying_worker_are_rows_and_the_exit_status_is_1(tmp_
     monkeypatch.setenv(CRASH_ENV, "2")  # the worker process that gets run 2 exits
     assert main(["sweep", str(spec), "--out", str(out), "--jobs", "2"]) == 1
     err = capsys.readouterr().err
-    rows = [line.split(",") for line in (out / "results.csv").read_text().splitlines()[1:]]
-    status = {row[0]: (row[4], row[5]) for row in rows}
-    assert status["0"] == ("ok", "")
+    status = {row[0]: (row[4], row[5]) for row in table_rows(out)}
+    assert status["0"] == ("ok", NO_CONTACT)
     assert status["1"][0] == "failed" and status["1"][1].startswith("diverged at t = ")
     assert status["2"] == ("failed", "the worker process died (exit code 70)")
     assert "run 1 (divergence.max_torque=0.001, null_space.K_n=100.0) failed: diverged at t =" in err
@@ -430,8 +444,7 @@ def test_a_failing_run_and_a_dying_worker_are_rows_and_the_exit_status_is_1(tmp_
     monkeypatch.delenv(CRASH_ENV)
     assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 1
     assert "1 runs simulated, 2 already finished" in capsys.readouterr().out
-    rows = [line.split(",") for line in (out / "results.csv").read_text().splitlines()[1:]]
-    assert [row[4] for row in rows] == ["ok", "failed", "ok"]
+    assert [row[4] for row in table_rows(out)] == ["ok", "failed", "ok"]
     assert json.loads((out / "runs/0002/result.json").read_text())["crashed"] is False
 
 
@@ -471,3 +484,209 @@ def test_metric_names_are_those_nsdrake_run_computes(tmp_path):
     names = {m.name for m in compute_metrics(scenario, built.station, pressing, pressing)}
     assert names <= set(METRICS)
     assert {name for name, check in METRICS.items() if check == "fig3"} <= names
+
+
+# --- hostile specs, sizes, schedulers, stored results (issue 15) ---------------------------
+
+NOT_A_SPEC = {
+    "a YAML list": (
+        "spec.yaml",
+        "- base: fig3\n- axes: {}\n",
+        "the file: must be a mapping with description",
+    ),
+    "a number": ("spec.yaml", "42\n", "the file: must be a mapping with description"),
+    "a JSON list": ("spec.json", '[{"base": "fig3"}]', "the file: must be a mapping with description"),
+    "a JSON string": ("spec.json", '"fig3"', "the file: must be a mapping with description"),
+    "base a list": (
+        "spec.yaml",
+        SPEC.replace("base: fig3", "base: [fig3]"),
+        "base: unknown scenario ['fig3']",
+    ),
+    "axes a list": ("spec.yaml", _spec_with("axes: [null_space.K_n]\n"), "axes: must map at least one field"),
+    "a metric that is a list": (
+        "spec.yaml",
+        _spec_with("metrics: [[force_error_rms]]\n"),
+        "metrics[0]: unknown metric ['force_error_rms']; valid names are",
+    ),
+    "a field that is a list": ("spec.json", '{"base": "fig3", "x": 1, "axes": []}', "x: unknown field"),
+}
+
+
+@pytest.mark.parametrize("case", list(NOT_A_SPEC))
+def test_a_spec_that_is_valid_yaml_or_json_but_not_a_mapping_is_one_line(tmp_path, monkeypatch, capsys, case):
+    """Issue 15, item 5: valid YAML or JSON of the wrong shape (a list where a mapping or
+    a name belongs) ended in a TypeError traceback. A .json spec is named by its file
+    name alone too (no ./)."""
+    name, text, expected = NOT_A_SPEC[case]
+    (tmp_path / name).write_text(text)
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", name, "--out", "out", "--jobs", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"nsdrake: error: {name}: ") and expected in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_sweep_too_large_is_refused_before_any_run_is_listed_unless_max_runs(tmp_path, capsys):
+    """Issue 15, item 4: a sweep of millions of runs started (and first spent hours
+    checking each run's scenario) without a word. Its size is refused at once, naming the
+    limit and how to raise it; random samples of 10^12 are refused without drawing them;
+    with --max-runs raised the size passes (here the first run's scenario is then refused,
+    the checks that come after the size)."""
+    values = ", ".join(["-1.0"] + [f"{10.0 + k}" for k in range(39)])
+    spec = write_spec(
+        tmp_path, _spec_with(f"axes:\n  null_space.K_n: [{values}]\n  impedance.K_f: {[1.0] * 30}\n")
+    )
+    start = time.perf_counter()
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 2
+    assert time.perf_counter() - start < 5
+    assert capsys.readouterr().err == (
+        f"nsdrake: error: {spec}: axes: 1200 runs (40 x 30) is more than --max-runs 1000 allows; "
+        "pass --max-runs 1200 to run them all, or sweep fewer values\n"
+    )
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out"), "--max-runs", "1200"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "nsdrake: sweep spec: 1200 runs (40 x 30); checking every run's scenario\n"
+    assert "(run 0: null_space.K_n=-1.0, impedance.K_f=1.0): null_space.K_n: must be > 0" in captured.err
+    huge = write_spec(
+        tmp_path, _spec_with("axes:\n  null_space.K_n: {random: {low: 10, high: 50, count: 1000000000000}}\n")
+    )
+    start = time.perf_counter()
+    assert main(["sweep", str(huge), "--max-runs", "5"]) == 2
+    assert time.perf_counter() - start < 5
+    assert "1000000000000 runs is more than --max-runs 5 allows" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "runs").exists()
+
+
+def test_the_size_is_stated_before_the_checks_and_sweeping_only_after_the_folder(tmp_path, capsys):
+    """ "sweeping … into DIR/" is printed only once the folder is claimed: a refused folder
+    gets the size line and the error, never "sweeping"."""
+    spec = write_spec(tmp_path)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "mine.txt").write_text("mine")
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out"), "--jobs", "1"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "nsdrake: sweep spec: 3 runs; checking every run's scenario\n"
+    assert captured.err.count("\n") == 1 and "folder is not empty" in captured.err
+
+
+@pytest.mark.parametrize(
+    ("address", "expected"),
+    [
+        ("foo:bar:baz", "not a scheduler address (invalid address 'foo:bar:baz'"),
+        ("http://127.0.0.1:8786", "not a scheduler address (unknown address scheme 'http'"),
+        ("tcp://", "not a scheduler address (missing port number"),
+    ],
+)
+def test_a_malformed_scheduler_address_is_one_line_before_anything_runs(tmp_path, capsys, address, expected):
+    pytest.importorskip("dask.distributed", reason="Dask not installed: pip install 'nsdrake[cluster]'")
+    spec = write_spec(tmp_path)
+    out = tmp_path / "out"
+    assert main(["sweep", str(spec), "--engine", "dask", "--scheduler", address, "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.count("\n") == 1 and captured.err.startswith(
+        f"nsdrake: error: --scheduler {address}: "
+    )
+    assert expected in captured.err and captured.out == "" and not out.exists()
+
+
+def test_a_server_that_is_not_a_dask_scheduler_fails_within_the_connect_timeout(
+    tmp_path, capsys, monkeypatch
+):
+    """Issue 15, item 5: a --scheduler address where a server of another kind listens (here
+    a plain TCP server on 127.0.0.1 that accepts and says nothing) hung the sweep for ever,
+    after claiming its folder: Dask's handshake has no time limit. Refused within the
+    connect timeout, before the folder is made."""
+    import socket
+    import threading
+
+    import nsdrake.studies.sweep_engines as engines
+
+    pytest.importorskip("dask.distributed", reason="Dask not installed: pip install 'nsdrake[cluster]'")
+    monkeypatch.setattr(engines, "CONNECT_TIMEOUT", 2.0)  # 10 s as shipped; the same code path
+    server = socket.create_server(("127.0.0.1", 0))
+    accepted = []
+    thread = threading.Thread(target=lambda: accepted.append(server.accept()), daemon=True)
+    thread.start()
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    spec, out = write_spec(tmp_path), tmp_path / "out"
+    start = time.perf_counter()
+
+    def hung(signum, frame):
+        raise TimeoutError("the sweep still waits on the server after 60 s")
+
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(60)
+    try:
+        assert main(["sweep", str(spec), "--engine", "dask", "--scheduler", address, "--out", str(out)]) == 2
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+        server.close()
+    assert time.perf_counter() - start < 2.0 + 5
+    assert accepted  # it did connect: the server, not the address, was wrong
+    assert (
+        capsys.readouterr().err
+        == f"nsdrake: error: --scheduler {address}: no Dask scheduler answered within 2 s\n"
+    )
+    assert not out.exists()
+
+
+def test_a_real_scheduler_answers_the_probe():
+    """The probe itself: a Dask scheduler (an in-process LocalCluster's) is recognised."""
+    pytest.importorskip("dask.distributed", reason="Dask not installed: pip install 'nsdrake[cluster]'")
+    from dask.distributed import LocalCluster
+
+    from nsdrake.studies.sweep_engines import check_scheduler
+
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+        assert check_scheduler(cluster.scheduler_address, 10.0)["type"] == "Scheduler"
+
+
+@pytest.mark.parametrize(
+    "damage",
+    ["a field missing", "a list, not a mapping", "a field of another type", "cut short", "traces gone"],
+)
+def test_a_resumed_sweep_runs_again_a_run_whose_stored_result_is_incomplete(
+    reference, tmp_path, capsys, damage
+):
+    """Issue 15, item 5: a result.json without its "status" (a file edited, restored from a
+    half backup) ended the resumed sweep in a KeyError traceback. Such a run is run again,
+    and the table has the bytes of an undamaged sweep."""
+    spec, serial = reference
+    out = tmp_path / "resumed"
+    shutil.copytree(serial, out)
+    result = out / "runs/0001/result.json"
+    record = json.loads(result.read_text())
+    if damage == "a field missing":
+        del record["status"]
+        result.write_text(json.dumps(record))
+    elif damage == "a list, not a mapping":
+        result.write_text(json.dumps([record]))
+    elif damage == "a field of another type":
+        record["values"] = list(record["values"].items())
+        result.write_text(json.dumps(record))
+    elif damage == "cut short":
+        result.write_text(result.read_text()[:40])
+    else:
+        (out / "runs/0001/traces.csv").unlink()
+    capsys.readouterr()
+    assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
+    assert "1 runs simulated, 2 already finished (resumed)" in capsys.readouterr().out
+    assert (out / "results.csv").read_bytes() == (serial / "results.csv").read_bytes()
+    assert run_files(out) == run_files(serial)
+
+
+def test_runs_that_never_reach_contact_say_why_in_the_row_and_at_the_end(reference, tmp_path, capsys):
+    """Issue 15, item 9: the 0.2 s runs end before contact; their force figures were empty
+    and all_bounds_met false without a word. Each row's reason says why, and so does a
+    line at the end."""
+    spec, serial = reference
+    assert [row[4] for row in table_rows(serial)] == [NO_CONTACT] * 3
+    assert [row[8] for row in table_rows(serial)] == ["false"] * 3
+    out = tmp_path / "again"
+    shutil.copytree(serial, out)
+    capsys.readouterr()
+    assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
+    assert f"nsdrake: 3 of 3 runs have empty force figures (all_bounds_met false); run 0: {NO_CONTACT}" in (
+        capsys.readouterr().out
+    )

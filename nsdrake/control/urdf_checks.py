@@ -1,0 +1,137 @@
+"""What a URDF must be before Drake or Pinocchio reads it: the one home of these rules,
+for the controller's model (:meth:`nsdrake.ControllerModel.from_urdf`) and the simulated
+station's model files (:mod:`nsdrake.station.model_checks`).
+
+Physically valid links: a mass > 0, an inertia that is positive definite and meets the
+triangle inequality, geometry sizes > 0 (Drake would simulate a negative mass, warn and
+"repair" an impossible inertia, fail on a bad size with a raw parser line; Pinocchio and
+Drake disagree on a massless link, which a model check would then blame on the
+libraries). A tree of joints: every joint names a parent and a child link, no link is
+the child of two joints and no chain of joints returns to where it started (a kinematic
+loop, which Drake refuses when the plant is finalized with a long line and Pinocchio
+cannot represent).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+
+import numpy as np
+
+GEOMETRY_SIZES = {
+    "box": ("size",),
+    "sphere": ("radius",),
+    "cylinder": ("radius", "length"),
+    "capsule": ("radius", "length"),
+}
+
+
+class _NotANumberError(ValueError):
+    pass
+
+
+def _numbers(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split()]
+    except ValueError:
+        raise _NotANumberError(f"'{text[:40]}' is not a number") from None
+
+
+def parse_urdf(text: str) -> ET.Element:
+    """The URDF text's root element; ValueError (one line) if it is not XML or not a <robot>."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        raise ValueError(f"not XML: {e}") from None
+    if root.tag != "robot":
+        raise ValueError(f"not a URDF: the root element is <{str(root.tag)[:40]}>, not <robot>")
+    return root
+
+
+def urdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
+    """(where, problem) for every link that is physically invalid and every joint that
+    breaks the tree (module docstring); ``where`` names the link or joint."""
+    for link in root.iter("link"):
+        where = f"link '{link.get('name')}'"
+        try:
+            problem = _link_problem(link)
+        except _NotANumberError as e:
+            problem = str(e)
+        if problem:
+            yield where, problem
+    yield from _tree_problems(root)
+
+
+def _link_problem(link) -> str | None:
+    inertial = link.find("inertial")
+    if inertial is not None:
+        problem = _inertial_problem(inertial)
+        if problem:
+            return problem
+    for element in (*link.findall("collision"), *link.findall("visual")):
+        geometry = element.find("geometry")
+        for shape in () if geometry is None else list(geometry):
+            for attribute in GEOMETRY_SIZES.get(shape.tag, ()):
+                for value in _numbers(shape.get(attribute, "1")):
+                    if not value > 0 or not math.isfinite(value):
+                        return f"{element.tag} {shape.tag} {attribute} {value:g} must be > 0"
+    return None
+
+
+def _inertial_problem(inertial) -> str | None:
+    mass = inertial.find("mass")
+    if mass is not None:
+        values = _numbers(mass.get("value", "0"))
+        if len(values) != 1:
+            return f"mass '{mass.get('value')}' must be one number"
+        if not values[0] > 0 or not math.isfinite(values[0]):
+            return f"mass {values[0]:g} kg must be > 0"
+    inertia = inertial.find("inertia")
+    if inertia is None:
+        return None
+    get = {k: _numbers(inertia.get(k, "0") or "0")[0] for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")}
+    I = np.array(
+        [
+            [get["ixx"], get["ixy"], get["ixz"]],
+            [get["ixy"], get["iyy"], get["iyz"]],
+            [get["ixz"], get["iyz"], get["izz"]],
+        ]
+    )
+    if not np.all(np.isfinite(I)):
+        return f"inertia must be finite, got {I[np.triu_indices(3)].tolist()}"
+    moments = np.linalg.eigvalsh(I)
+    if moments[0] <= 0:
+        return f"inertia must be positive definite, its principal moments are {np.round(moments, 9).tolist()}"
+    if moments[0] + moments[1] < moments[2] * (1 - 1e-9):
+        return f"inertia breaks the triangle inequality: principal moments {np.round(moments, 9).tolist()}"
+    return None
+
+
+def _tree_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
+    parent_of: dict[str, tuple[str, str]] = {}  # child link -> (joint, parent link)
+    for joint in root.findall("joint"):
+        name = joint.get("name")
+        parent, child = joint.find("parent"), joint.find("child")
+        if parent is None or child is None or not parent.get("link") or not child.get("link"):
+            yield f"joint '{name}'", "needs a <parent link=…/> and a <child link=…/>"
+            return
+        child_link = child.get("link")
+        if child_link in parent_of:
+            other = parent_of[child_link][0]
+            yield (
+                f"link '{child_link}'",
+                f"child of two joints ('{other}' and '{name}'): a kinematic loop; nsdrake's arms are "
+                "trees of joints",
+            )
+            return
+        parent_of[child_link] = (name, parent.get("link"))
+    for start in parent_of:
+        seen, link = [start], parent_of[start][1]
+        while link in parent_of:
+            if link in seen:
+                yield f"link '{link}'", "its own ancestor: the joints form a kinematic loop"
+                return
+            seen.append(link)
+            link = parent_of[link][1]

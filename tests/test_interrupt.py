@@ -1,0 +1,172 @@
+"""Ctrl-C (issue 15, item 6): `nsdrake run` and `nsdrake compare` stopped by SIGINT end with
+one line and exit status 130, keep the traces computed so far (marked interrupted, as the
+divergence monitor marks a failed run), leave a manifest that lists them, and the folder
+is reclaimed by --overwrite. Each command runs in a process of its own, as a user's."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import pty
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from nsdrake.cli import main
+from nsdrake.experiment.traces import Traces
+
+
+def listed(folder: Path) -> set[str]:
+    return {line for line in (folder / ".nsdrake-run").read_text().splitlines() if not line.startswith("#")}
+
+
+def wait_for_progress(fd: int, process: subprocess.Popen, percent: int, seconds: float = 240) -> None:
+    """Reads the progress bar a terminal (``fd``, a pty's master end) shows until it reaches
+    ``percent``: the simulation is then under way."""
+    seen, deadline = b"", time.monotonic() + seconds
+    while time.monotonic() < deadline and process.poll() is None:
+        if select.select([fd], [], [], 0.1)[0]:
+            seen += os.read(fd, 4096)
+            bars = seen.decode(errors="replace").split("\r")
+            shown = [b.split("]")[1].split("%")[0] for b in bars if "]" in b and "%" in b.split("]")[1]]
+            if shown and int(shown[-1]) >= percent:
+                return
+    raise AssertionError(f"no progress to {percent}% within {seconds} s: {seen[-200:]!r}")
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_a_run_keeps_its_traces_marked_interrupted(tmp_path):
+    """Catches the 40-60-line traceback (KeyboardInterrupt out of Drake's AdvanceTo), a run
+    folder without its traces, a status of "ok" or "failed" for a run the user stopped, a
+    manifest that misses what was written, and a folder --overwrite will not take back."""
+    out = tmp_path / "run"
+    command = [
+        sys.executable,
+        "-m",
+        "nsdrake",
+        "run",
+        "fig3",
+        "--duration",
+        "30",
+        "--no-replay",
+        "--out",
+        str(out),
+    ]
+    terminal, stderr = (
+        pty.openpty()
+    )  # a terminal for stderr: the progress bar says when the run is simulating
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=stderr, text=True)
+    os.close(stderr)
+    try:
+        wait_for_progress(terminal, process, 2)
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=120)
+        shown = b""
+        while select.select([terminal], [], [], 0.2)[0]:
+            try:
+                shown += os.read(terminal, 4096)
+            except OSError:  # the other end closed
+                break
+    finally:
+        process.kill()
+        os.close(terminal)
+    assert process.returncode == 130
+    lines = shown.decode().replace("\r\n", "\n").split("\n")
+    after_bar = [line for line in lines if line and "\r" not in line and not line.startswith("fig3 [")]
+    assert len(after_bar) == 1 and "Traceback" not in shown.decode(), shown
+    assert after_bar[0].startswith("nsdrake: interrupted at t = ") and after_bar[0].endswith(
+        f"s (Ctrl-C); the run so far is in {out}/, marked interrupted"
+    )
+    t_stop = float(after_bar[0].split("t = ")[1].split(" s")[0])
+    traces = Traces.read_csv(out / "traces.csv")
+    assert 0.6 < t_stop < 30 and abs(traces["t"][-1] - t_stop) <= 0.002 + 1e-9
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "interrupted" and metrics["failure"].startswith("interrupted at t = ")
+    assert "run FAILED: interrupted at t = " in (out / "report.html").read_text()
+    assert {p.name for p in out.iterdir()} - {".nsdrake-run"} == listed(out)
+    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--overwrite", "--no-replay"]) in (
+        0,
+        1,
+    )
+    assert len(Traces.read_csv(out / "traces.csv")) == 51
+
+
+def workers(pid: int) -> list[int]:
+    """The variant processes of the command ``pid`` (multiprocessing's resource tracker,
+    also its child, excepted)."""
+    path = Path(f"/proc/{pid}/task/{pid}/children")
+    found = []
+    for child in path.read_text().split() if path.exists() else []:
+        try:
+            if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
+                found.append(int(child))
+        except OSError:
+            pass
+    return found
+
+
+def cpu_seconds(pid: int) -> float:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux's /proc to see the workers")
+@pytest.mark.parametrize("to", ["the command", "its process group"])
+def test_ctrl_c_during_a_comparison_keeps_each_variants_traces(tmp_path, to):
+    """A terminal sends SIGINT to the whole process group (the command and its variant
+    processes); `kill -INT` to the command alone. Either way: exit 130, one line, the
+    table with a row per variant (those running marked interrupted at their time, with
+    their traces so far; the one not started marked so), and --overwrite takes the folder."""
+    out = tmp_path / "lyap"
+    command = [sys.executable, "-m", "nsdrake", "compare", "lyapunov", "--duration", "60", "--jobs", "2"]
+    process = subprocess.Popen(
+        [*command, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 240
+        # Both variant processes past their start-up (about 3 s of CPU): simulating.
+        while not (len(workers(process.pid)) == 2 and all(cpu_seconds(c) > 8 for c in workers(process.pid))):
+            assert time.monotonic() < deadline and process.poll() is None
+            time.sleep(0.2)
+        if to == "the command":
+            process.send_signal(signal.SIGINT)
+        else:
+            os.killpg(process.pid, signal.SIGINT)
+        _, err = process.communicate(timeout=120)
+    finally:
+        process.kill()
+    assert process.returncode == 130
+    assert err == (
+        f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "
+        "(unfinished rows marked interrupted)\n"
+    )
+    with (out / "table.csv").open() as f:
+        rows = {row["variant"]: row["error"] for row in csv.DictReader(f)}
+    assert rows["no compensation at all"] == "not run: the comparison was interrupted"
+    for name, folder in (
+        ("full law", "00-full-law"),
+        ("no Coriolis compensation", "01-no-coriolis-compensation"),
+    ):
+        assert rows[name].startswith("interrupted at t = ") and rows[name].endswith(
+            "s; its traces so far are kept"
+        )
+        t_stop = float(rows[name].split("t = ")[1].split(" s")[0])
+        traces = Traces.read_csv(out / "variants" / folder / "traces.csv")
+        assert 1.0 < t_stop < 60 and abs(traces["t"][-1] - t_stop) <= 0.002 * 1.01 + 1e-3 * t_stop
+    on_disk = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()} - {".nsdrake-run"}
+    assert on_disk <= listed(out) and "table.md" in on_disk
+    assert (
+        main(["compare", "lyapunov", "--duration", "0.1", "--out", str(out), "--overwrite", "--jobs", "1"])
+        == 0
+    )
