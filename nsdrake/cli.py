@@ -30,6 +30,7 @@ from nsdrake.experiment.output import (
     release_unused,
 )
 from nsdrake.experiment.scenario import ScenarioError, load_scenario, shipped_scenarios
+from nsdrake.reporting.progress import Progress
 from nsdrake.reporting.run_folder import check_scenario, run_to_folder
 from nsdrake.station.visualization import start_meshcat
 from nsdrake.studies.compare import (
@@ -148,36 +149,6 @@ def _seconds(text: str) -> float:
     return value
 
 
-class _Progress:
-    """A progress bar on a terminal; silent when stderr is not one (CI logs)."""
-
-    def __init__(self, label: str):
-        self.enabled = sys.stderr.isatty()
-        self.label = label
-        self.start = time.perf_counter()
-        self.partial = False  # a bar is drawn and its line not ended
-
-    def end_line(self) -> None:
-        """Ends a bar left half-drawn (the run stopped), so that a message starts a line."""
-        if self.partial:
-            sys.stderr.write("\n")
-            self.partial = False
-
-    def __call__(self, fraction: float):
-        if not self.enabled:
-            return
-        width = 30
-        done = int(round(width * fraction))
-        elapsed = time.perf_counter() - self.start
-        sys.stderr.write(
-            f"\r{self.label} [{'#' * done}{'.' * (width - done)}] {fraction:4.0%} {elapsed:5.1f} s"
-        )
-        self.partial = fraction < 1.0
-        if fraction >= 1.0:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 def _run(args) -> int:
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     check_scenario(scenario)  # model files, joint names: fail before anything is written
@@ -188,7 +159,8 @@ def _run(args) -> int:
             print(f"nsdrake: error: cannot start Meshcat: {' '.join(str(e).split())}", file=sys.stderr)
             return 2
         print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
-        progress = _Progress(args.scenario)
+        runs = 2 if scenario.report.compare_without_null_space_task else 1
+        progress = Progress(args.scenario, 1.0, simulated=runs * scenario.duration)
         try:
             result = run_to_folder(
                 scenario, out, progress=progress, replay=not args.no_replay, meshcat=meshcat
@@ -220,7 +192,7 @@ def _compare(args) -> int:
         variant_scenario(family, i, args.config, args.duration)
     with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
         print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
-        progress = _Progress(args.family)
+        progress = Progress(args.family, 1.0)
         result = run_family(
             family,
             out,

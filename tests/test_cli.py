@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from nsdrake.cli import _Progress, main
+from nsdrake.cli import main
 from nsdrake.experiment.output import OutputFolderError, default_output_folder, prepare_output_folder
 from nsdrake.experiment.traces import Traces
 
@@ -54,19 +54,6 @@ def test_meshcat_flag_prints_a_localhost_url(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert re.search(r"Meshcat is at http://localhost:\d+", printed), printed
     assert (out / "replay.html").is_file()
-
-
-@pytest.mark.parametrize("tty", [False, True])
-def test_progress_bar_only_on_a_terminal(monkeypatch, capsys, tty):
-    monkeypatch.setattr(sys.stderr, "isatty", lambda: tty, raising=False)
-    progress = _Progress("fig3")
-    for k in range(5):
-        progress(k / 4)
-    err = capsys.readouterr().err
-    if tty:
-        assert err.count("\r") == 5 and "100%" in err and err.endswith("\n")
-    else:
-        assert err == ""
 
 
 def test_written_scenario_reloads_to_the_same_run(tmp_path):

@@ -1,0 +1,88 @@
+"""How long work shows that it is alive: the progress of `nsdrake run`, `compare` and `sweep`.
+
+On a terminal, a bar redrawn in place (``\\r``). Anywhere else (a pipe, a CI log) a bar
+would be a wall of carriage returns, and silence looks hung: panda_wipe's run takes
+minutes. There, one short line every :data:`LOG_INTERVAL` seconds of wall time says how
+far the work is (and, for a simulation, how much time it has simulated and at what
+real-time factor), and nothing more.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+
+LOG_INTERVAL = 10.0  # [s of wall time] between two progress lines when not on a terminal
+
+
+class Progress:
+    """``progress(done, failed=0)``: ``done`` of ``total`` (runs, variants, or a fraction
+    of 1). ``simulated``: the simulated seconds that ``total`` stands for (a run's
+    simulations), for the log line's simulated time and real-time factor. ``clock`` and
+    ``interval`` are the wall clock and the log lines' spacing (tests give their own)."""
+
+    def __init__(
+        self,
+        label: str,
+        total: float,
+        *,
+        unit: str = "",
+        simulated: float | None = None,
+        stream=None,
+        width: int = 30,
+        clock: Callable[[], float] = time.monotonic,
+        interval: float = LOG_INTERVAL,
+    ):
+        self.stream = stream if stream is not None else sys.stderr
+        self.on_terminal = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.label, self.total, self.unit, self.simulated = label, total, unit, simulated
+        self.width, self.clock, self.interval = width, clock, interval
+        self.start = clock()
+        self.next_line = self.start + interval
+        self.partial = False  # a bar is drawn and its line not ended
+
+    def __call__(self, done: float, failed: int = 0) -> None:
+        if self.on_terminal:
+            self._draw(done, failed)
+            return
+        now = self.clock()
+        if now >= self.next_line and done < self.total:
+            self.stream.write(self.log_line(done, failed, now - self.start) + "\n")
+            self.stream.flush()
+            self.next_line = now + self.interval
+
+    def end_line(self) -> None:
+        """Ends a bar left half-drawn (the work stopped), so that a message starts a line."""
+        if self.partial:
+            self.stream.write("\n")
+            self.partial = False
+
+    def count(self, done: float) -> str:
+        if self.unit:
+            return f"{done:g}/{self.total:g} {self.unit}"
+        return f"{done / self.total:4.0%}"
+
+    def log_line(self, done: float, failed: int, elapsed: float) -> str:
+        """``fig3: 43%, 4.3 s simulated in 12 s (0.36x real time)``; ``realism: 3/9 variants, 40 s``."""
+        text = f"{self.label}: {self.count(done).strip()}"
+        if failed:
+            text += f" ({failed} failed)"
+        if self.simulated is not None:
+            simulated = self.simulated * done / self.total
+            rate = simulated / elapsed if elapsed > 0 else float("inf")
+            return f"{text}, {simulated:.3g} s simulated in {elapsed:.0f} s ({rate:.2g}x real time)"
+        return f"{text}, {elapsed:.0f} s"
+
+    def _draw(self, done: float, failed: int) -> None:
+        k = int(round(self.width * done / self.total)) if self.total else self.width
+        tail = f" ({failed} failed)" if failed else ""
+        elapsed = self.clock() - self.start
+        head = f"{self.label} " if not self.unit else ""
+        clock = f" {elapsed:5.1f} s" if not self.unit else ""
+        count = self.count(done) if not self.unit else f"{done:g}/{self.total:g}"
+        self.stream.write(f"\r{head}[{'#' * k}{'.' * (self.width - k)}] {count}{tail}{clock}")
+        self.partial = done < self.total
+        if not self.partial:
+            self.stream.write("\n")
+        self.stream.flush()

@@ -1,0 +1,67 @@
+"""Progress of long work (nsdrake/reporting/progress.py): a bar on a terminal, one line every
+LOG_INTERVAL seconds of wall time elsewhere, so that a CI log shows a run is alive."""
+
+from __future__ import annotations
+
+import io
+import sys
+
+from nsdrake.cli import main
+from nsdrake.reporting.progress import LOG_INTERVAL, Progress
+
+
+class Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+class Clock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_a_log_gets_one_line_per_interval_with_simulated_time_and_real_time_factor():
+    """Catches a line per call (a wall of text in a CI log), no line at all, a line after
+    the work is done, and a simulated time or real-time factor computed from the wrong
+    quantity: 20 calls over 35 s of a fake clock give lines at 10, 20 and 30 s."""
+    log, clock = io.StringIO(), Clock()
+    progress = Progress("panda_wipe", 1.0, simulated=56.0, stream=log, clock=clock)
+    for k in range(1, 21):
+        clock.now = 100.0 + 35.0 * k / 20
+        progress(k / 20)
+    lines = log.getvalue().splitlines()
+    assert len(lines) == 3, lines
+    # the first line at k = 6 (10.5 s): 30% of 56 s simulated, 16.8 s, at 1.6x real time
+    assert lines[0] == "panda_wipe: 30%, 16.8 s simulated in 10 s (1.6x real time)"
+    assert all(line.startswith("panda_wipe: ") for line in lines)
+
+
+def test_a_terminal_gets_a_bar_and_no_log_line():
+    tty, clock = Terminal(), Clock()
+    progress = Progress("fig3", 1.0, stream=tty, clock=clock)
+    for k in range(5):
+        clock.now += LOG_INTERVAL
+        progress(k / 4)
+    text = tty.getvalue()
+    assert text.count("\r") == 5 and "100%" in text and text.endswith("\n")
+    assert "simulated" not in text
+
+
+def test_counted_work_says_what_it_counts_and_what_failed():
+    log, clock = io.StringIO(), Clock()
+    progress = Progress("gains", 40, unit="runs", stream=log, clock=clock)
+    clock.now += LOG_INTERVAL
+    progress(12, failed=2)
+    assert log.getvalue() == "gains: 12/40 runs (2 failed), 10 s\n"
+
+
+def test_nsdrake_run_in_a_pipe_prints_no_bar(tmp_path, capsys, monkeypatch):
+    """The command itself, stderr not a terminal and a run far shorter than LOG_INTERVAL:
+    no carriage return and no progress line in the log."""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False, raising=False)
+    assert main(["run", "fig3", "--duration", "0.1", "--no-replay", "--out", str(tmp_path / "r")]) in (0, 1)
+    err = capsys.readouterr().err
+    assert "\r" not in err and "simulated in" not in err
