@@ -4,10 +4,14 @@
                           [--meshcat] [--no-replay]
     nsdrake compare FAMILY [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--jobs N] [--overwrite]
     nsdrake sweep SPEC [--out DIR] [--jobs N] [--engine process|dask] [--scheduler ADDRESS] [--overwrite]
+    nsdrake drive SCENARIO (--lcm URL | --simulated-driver) [--config FILE.yaml] [--out DIR]
+                           [--duration SECONDS] [--overwrite] [--realtime-rate RATE]
+    nsdrake sim-driver SCENARIO --lcm URL [--config FILE.yaml] [--duration SECONDS]
     nsdrake list
 
 Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
-status 2, before any simulation starts.
+status 2, before any simulation starts; a run that fails (a bound missed, a divergence,
+a fault on the wire) exits with status 1.
 """
 
 from __future__ import annotations
@@ -87,8 +91,53 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--engine", choices=ENGINES, default="process", help="local processes, or Dask")
     sweep.add_argument("--scheduler", help="address of a Dask scheduler (default: a local cluster)")
     sweep.add_argument("--overwrite", action="store_true", help="replace the runs of another sweep in --out")
+    _add_drive_parsers(sub)
     sub.add_parser("list", help="list the shipped scenarios, families and sweeps")
     return parser
+
+
+def _add_drive_parsers(sub) -> None:
+    drive = sub.add_parser(
+        "drive", help="run a scenario's controller behind a Franka Panda's LCM driver (or the simulated one)"
+    )
+    drive.add_argument("scenario", help="a shipped scenario of a 7-joint Panda (panda_wipe)")
+    bus = drive.add_mutually_exclusive_group(required=True)
+    bus.add_argument("--lcm", metavar="URL", help="the LCM URL the robot's driver talks on")
+    bus.add_argument(
+        "--simulated-driver",
+        action="store_true",
+        help="run the simulated driver in this process, both sides over memq://",
+    )
+    drive.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
+    drive.add_argument(
+        "--out", type=Path, help="output folder (default: runs/drive-SCENARIO, never overwritten)"
+    )
+    drive.add_argument("--duration", type=_duration, help="time to drive [s], overrides the scenario")
+    drive.add_argument(
+        "--overwrite", action="store_true", help="replace the files an earlier nsdrake run wrote in --out"
+    )
+    drive.add_argument(
+        "--realtime-rate",
+        type=_rate,
+        default=1.0,
+        help="with --simulated-driver: the driver's pace against the wall clock "
+        "(1: real time; 0: as fast as possible)",
+    )
+    sim = sub.add_parser("sim-driver", help="run the simulated driver alone on an LCM bus, at real time")
+    sim.add_argument("scenario", help="a shipped scenario of a 7-joint Panda (panda_wipe)")
+    sim.add_argument("--lcm", metavar="URL", required=True, help="the LCM URL the controller talks on")
+    sim.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
+    sim.add_argument("--duration", type=_duration, help="time to serve after the first command [s]")
+
+
+def _rate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--realtime-rate must be a number, got '{text}'") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"--realtime-rate must be >= 0, got '{text}'")
+    return value
 
 
 def _jobs(text: str) -> int:
@@ -179,6 +228,58 @@ def _compare(args) -> int:
     return 0
 
 
+def _lcm(url: str):
+    """The LCM bus at ``url``; one line (ScenarioError) if it cannot be opened."""
+    from pydrake.lcm import DrakeLcm
+
+    try:
+        return DrakeLcm(url)
+    except RuntimeError as e:
+        raise ScenarioError(f"--lcm {url}: cannot open the LCM bus: {' '.join(str(e).split())}") from None
+
+
+def _drive(args) -> int:
+    from nsdrake.driver.run import prepare, write_drive_folder
+    from nsdrake.driver.timing import timing_line
+
+    scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    lcm = _lcm(args.lcm) if args.lcm else None
+    drive = prepare(scenario, lcm, realtime_rate=args.realtime_rate)  # every input error before the folder
+    out = claim_output_folder(args.out, f"drive-{args.scenario}", overwrite=args.overwrite)
+    where = "the simulated driver over memq://" if lcm is None else f"the driver at {args.lcm}"
+    print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
+    run = drive.run(progress=_Progress(args.scenario))
+    result = write_drive_folder(run, out)
+    for m in result.metrics:
+        mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
+        bound = f"  (bound: {m.bound})" if m.bound else ""
+        print(f"  {m.name:38s} {m.value:12.6g} {m.unit:9s}{mark}{bound}")
+    print(f"nsdrake: {timing_line(run.timing)}")
+    if run.failure:
+        print(f"nsdrake: error: {args.scenario}: drive: {run.failure}", file=sys.stderr)
+    files = ", ".join(sorted(p.name for p in out.iterdir()))
+    print(f"nsdrake: wrote {out}/: {files}")
+    return 0 if result.passed else 1
+
+
+def _sim_driver(args) -> int:
+    from nsdrake.driver.run import serve_simulated_driver
+
+    scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    lcm = _lcm(args.lcm)
+    print(f"nsdrake: simulated driver for {args.scenario} on {args.lcm}; serving (Ctrl-C ends)", flush=True)
+    try:
+        served = serve_simulated_driver(scenario, lcm, progress=_Progress(args.scenario))
+    except KeyboardInterrupt:
+        print("nsdrake: simulated driver stopped", file=sys.stderr)
+        return 1
+    print(
+        f"nsdrake: simulated driver: {served.steps} periods, {served.commands} commands, "
+        f"{served.late} periods without their command in time"
+    )
+    return 0
+
+
 def claim_output_folder(out: Path | None, default_name: str, *, overwrite: bool) -> Path:
     """``--out``, claimed (see nsdrake/output.py), or without it the first free runs/NAME[-k]."""
     if out is None:
@@ -215,6 +316,10 @@ def main(argv: list[str] | None = None) -> int:
             return _compare(args)
         if args.command == "sweep":
             return sweep_command(args)
+        if args.command == "drive":
+            return _drive(args)
+        if args.command == "sim-driver":
+            return _sim_driver(args)
         return _run(args)
     except (ScenarioError, OutputFolderError) as e:
         print(f"nsdrake: error: {e}", file=sys.stderr)

@@ -29,6 +29,7 @@ from nsdrake.control.config import (
 )
 from nsdrake.control.dynamics import AXIS_NAMES, ROTATION_AXIS_NAMES, parse_task_axes
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
+from nsdrake.experiment.driver_config import DriverConfig, driver_problems
 from nsdrake.realism.config import RealismConfig, realism_problems
 from nsdrake.station.config import (
     CONTACT_APPROXIMATIONS,
@@ -170,6 +171,8 @@ class Scenario:
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     # Effects of the real robot, each off by default (nsdrake/realism.py: the realism ladder).
     realism: RealismConfig = field(default_factory=RealismConfig)
+    # How nsdrake drive meets a Franka Panda's LCM driver (nsdrake/experiment/driver_config.py).
+    driver: DriverConfig = field(default_factory=DriverConfig)
     # Where the scenario was read from (set by the loader; not a YAML field).
     source: str = field(default="", metadata={"yaml": False})
     # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
@@ -627,6 +630,8 @@ def validate(s: Scenario) -> None:
     check_positive(src, "divergence.max_torque", s.divergence.max_torque)
     for where, problem in realism_problems(s.realism, s.control_period):
         _fail(src, f"realism.{where}", problem)
+    for where, problem in driver_problems(s.driver):
+        _fail(src, f"driver.{where}", problem)
     names = set()
     for i, ob in enumerate(s.obstacles):
         where = f"obstacles[{i}]"

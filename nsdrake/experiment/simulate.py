@@ -123,11 +123,17 @@ def run(
     return collect_traces(built, context), built
 
 
-def collect_traces(built: ControlledStation, root_context) -> Traces:
-    """The loggers' records as named columns (see README for the column list)."""
+def collect_traces(built: ControlledStation, root_context, logs: dict | None = None) -> Traces:
+    """The loggers' records as named columns (see README for the column list).
+
+    ``logs``: the records by logger name (each with ``sample_times()`` and ``data()``),
+    when the loggers do not live in ``root_context``'s diagram (``nsdrake drive``: the
+    controller side's); ``root_context`` is then a context of the diagram that holds
+    ``built.station``, for its geometry."""
     arm = built.station.arm_model
     n = arm.n
-    logs = {name: logger.FindLog(root_context) for name, logger in built.loggers.items()}
+    if logs is None:
+        logs = {name: logger.FindLog(root_context) for name, logger in built.loggers.items()}
     t = logs["state"].sample_times()
     columns: dict[str, np.ndarray] = {"t": t}
 
