@@ -230,12 +230,12 @@ def _compare(args) -> int:
 
 def _lcm(url: str):
     """The LCM bus at ``url``; one line (ScenarioError) if it cannot be opened."""
-    from pydrake.lcm import DrakeLcm
+    from nsdrake.driver.bus import BusError, open_bus
 
     try:
-        return DrakeLcm(url)
-    except RuntimeError as e:
-        raise ScenarioError(f"--lcm {url}: cannot open the LCM bus: {' '.join(str(e).split())}") from None
+        return open_bus(url)
+    except BusError as e:
+        raise ScenarioError(f"--lcm: {e}") from None
 
 
 def _drive(args) -> int:

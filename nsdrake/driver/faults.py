@@ -18,7 +18,7 @@ def status_problem(status: lcmt_panda_status, num_joints: int) -> str | None:
             return f"{field} has {values.size} values, the arm has {num_joints} joints"
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
-            return f"{field}[{bad[0]}] is {values[bad[0]]!r}"
+            return f"{field}[{bad[0]}] is {float(values[bad[0]])!r}"
     return None
 
 

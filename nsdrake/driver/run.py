@@ -97,10 +97,12 @@ def prepare(
     robot's real time; 0: as fast as possible) and adding g to the command when
     ``robot_adds_gravity`` (the controller side follows ``scenario.driver.robot_adds_gravity``)."""
     driver = None
-    if lcm is None:
-        lcm = DrakeLcm("memq://")
+    simulated = lcm is None
+    lcm = DrakeLcm("memq://") if simulated else lcm
+    loop = ControllerLoop(build_drive_diagram(scenario, lcm), lcm)  # the scenario's problems first
+    if simulated:
         driver = SimulatedDriver(scenario, lcm, adds_gravity=robot_adds_gravity, realtime_rate=realtime_rate)
-    return Drive(ControllerLoop(build_drive_diagram(scenario, lcm), lcm), driver)
+    return Drive(loop, driver)
 
 
 def run_simulated(scenario: Scenario, *, pause_gc: bool = True, progress=None, **options) -> DriveRun:
