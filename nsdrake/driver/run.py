@@ -145,7 +145,8 @@ def drive_traces(run: DriveRun) -> Traces:
       message, or the estimate from the external joint torques);
     - without it (a real arm), ``f_…`` the wrench the controller used, and
       ``forbidden_contacts`` NaN (nothing observes them);
-    - ``cmd1…`` the torques sent [N m] (τ − g(q) when the robot adds g).
+    - ``cmd1…`` the torques sent [N m] (τ − g(q) when the robot adds g), and with the
+      simulated driver ``tau_applied1…`` the torque its plant received [N m].
     """
     drive = run.loop.drive
     logs = {name: logger.FindLog(run.loop.context) for name, logger in drive.loggers.items()}
@@ -154,7 +155,7 @@ def drive_traces(run: DriveRun) -> Traces:
     if run.driver is not None:
         truth = run.driver.logs()
         rows = np.searchsorted(truth["wrench"].sample_times(), times)
-        for name in ("wrench", "forbidden_contacts"):
+        for name in ("wrench", "forbidden_contacts", "applied"):
             logs[name] = _Log(times, truth[name].data()[:, rows])
     else:
         logs["forbidden_contacts"] = _Log(times, np.full((1, times.size), np.nan))
@@ -168,6 +169,9 @@ def drive_traces(run: DriveRun) -> Traces:
         columns["f_n_measured"] = drive.station.normal @ force
     for i, row in enumerate(logs["command"].data()):
         columns[f"cmd{i + 1}"] = row
+    if run.driver is not None:
+        for i, row in enumerate(logs["applied"].data()):
+            columns[f"tau_applied{i + 1}"] = row
     return Traces(columns)
 
 

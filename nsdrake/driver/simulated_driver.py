@@ -49,7 +49,9 @@ class SimulatedDriverDiagram:
     diagram: Diagram
     station: Station
     command_subscriber: LcmSubscriberSystem
-    loggers: dict[str, VectorLogSink]  # "wrench" (the sensor's), "forbidden_contacts", "state" (the links')
+    # "wrench" (the sensor's), "forbidden_contacts", "state" (the links'), "applied" (the torque the
+    # plant receives: the command, plus g when the robot adds it)
+    loggers: dict[str, VectorLogSink]
 
 
 def build_simulated_driver(
@@ -104,6 +106,7 @@ def build_simulated_driver(
             "wrench": station.ports.wrench,
             "forbidden_contacts": station.monitor.get_output_port(),
             "state": station.ports.link_state,
+            "applied": applied,
         },
         period,
     )

@@ -78,10 +78,11 @@ def gravity_run(controller_excludes_g: bool, robot_adds_g: bool, duration: float
     ids=["panda", "driver removes g", "g twice", "g never"],
 )
 def test_the_robot_receives_the_law_s_torque_only_with_the_setting_right(controller_excludes_g, robot_adds_g):
-    """The torque the simulated robot applies (the status's joint_torque) against the law's
-    τ, over 50 ms: equal when the setting matches the robot, off by exactly +g(q) (g sent
-    twice) or −g(q) (never applied) when it does not. g(q) from the station plant's own
-    gravity forces at the status's q, not from the systems under test."""
+    """The torque the simulated plant receives against the law's τ, over 50 ms: equal when
+    the setting matches the robot, off by exactly +g(q) (g sent twice) or −g(q) (never
+    applied) when it does not. g(q) from the station plant's own gravity forces at the
+    logged q, not from the systems under test; the command sent is τ − g(q) exactly when
+    the controller excludes g."""
     driven = gravity_run(controller_excludes_g, robot_adds_g, duration=0.05)
     traces = drive_traces(driven)
     plant = driven.driver.built.station.plant
@@ -93,7 +94,10 @@ def test_the_robot_receives_the_law_s_torque_only_with_the_setting_right(control
     for k in range(len(traces)):
         plant.SetPositions(context, q[k])
         g[k] = -plant.CalcGravityGeneralizedForces(context)
-    applied = cmd + (g if robot_adds_g else 0.0)
+    applied = traces.block("tau_applied")
+    np.testing.assert_allclose(
+        cmd, tau - (g if controller_excludes_g else 0.0), atol=1e-9 * np.max(np.abs(g))
+    )
     expected_error = {(True, True): 0.0, (False, False): 0.0, (False, True): 1.0, (True, False): -1.0}
     sign = expected_error[(controller_excludes_g, robot_adds_g)]
     np.testing.assert_allclose(applied - tau, sign * g, atol=1e-9 * np.max(np.abs(g)))

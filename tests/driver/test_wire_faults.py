@@ -144,13 +144,16 @@ def test_first_status_within_the_start_tolerance_is_taken(scenario):
     assert robot.received() == 1
 
 
-def test_silence_once_running_stops_the_controller(scenario):
-    loop, robot = start_loop(scenario)
+@pytest.mark.parametrize("periods", [None, 20.0], ids=["default", "20 periods"])
+def test_silence_once_running_stops_the_controller(scenario, periods):
+    """The default wait is 3 periods (3 ms); 20 periods waits 20 ms, not 10 times more."""
+    loop, robot = start_loop(scenario, **({} if periods is None else {"status_timeout_periods": periods}))
     fault = run_until_fault(loop, robot, lambda r: None)
     assert "no lcmt_panda_status on PANDA_STATUS for" in fault.problem
-    assert "(driver.status_timeout_periods 3 periods)" in fault.problem
+    expected = 3.0 if periods is None else periods
+    assert f"(driver.status_timeout_periods {expected:g} periods)" in fault.problem
     waited_ms = float(fault.problem.split(" for ")[1].split(" ms")[0])
-    assert 3.0 <= waited_ms < 50.0
+    assert expected <= waited_ms < expected + 40.0
 
 
 @pytest.mark.parametrize(
