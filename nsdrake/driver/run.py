@@ -146,7 +146,8 @@ def drive_traces(run: DriveRun) -> Traces:
     - without it (a real arm), ``f_…`` the wrench the controller used, and
       ``forbidden_contacts`` NaN (nothing observes them);
     - ``cmd1…`` the torques sent [N m] (τ − g(q) when the robot adds g), and with the
-      simulated driver ``tau_applied1…`` the torque its plant received [N m].
+      simulated driver ``tau_applied1…`` the torque its plant applied from that row's time
+      to the next row's [N m] (as the realism rungs' column; NaN on the last row).
     """
     drive = run.loop.drive
     logs = {name: logger.FindLog(run.loop.context) for name, logger in drive.loggers.items()}
@@ -169,8 +170,9 @@ def drive_traces(run: DriveRun) -> Traces:
         columns["f_n_measured"] = drive.station.normal @ force
     for i, row in enumerate(logs["command"].data()):
         columns[f"cmd{i + 1}"] = row
-    if run.driver is not None:
-        for i, row in enumerate(logs["applied"].data()):
+    if run.driver is not None:  # applied over [t, t + T): the plant reports it at t + T
+        applied = np.column_stack([logs["applied"].data()[:, 1:], np.full((arm.n, 1), np.nan)])
+        for i, row in enumerate(applied):
             columns[f"tau_applied{i + 1}"] = row
     return Traces(columns)
 

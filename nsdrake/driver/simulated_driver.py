@@ -34,7 +34,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
-from pydrake.systems.primitives import Adder, Demultiplexer, Gain, VectorLogSink
+from pydrake.systems.primitives import Adder, Demultiplexer, Gain, MatrixGain, VectorLogSink
 
 from nsdrake.driver.panda import NUM_JOINTS
 from nsdrake.driver.wrench import ForceTorqueSender
@@ -49,8 +49,8 @@ class SimulatedDriverDiagram:
     diagram: Diagram
     station: Station
     command_subscriber: LcmSubscriberSystem
-    # "wrench" (the sensor's), "forbidden_contacts", "state" (the links'), "applied" (the torque the
-    # plant receives: the command, plus g when the robot adds it)
+    # "wrench" (the sensor's), "forbidden_contacts", "state" (the links'), "applied" (the joint
+    # torque the plant applied over the period that ends at the sample; zero at t = 0)
     loggers: dict[str, VectorLogSink]
 
 
@@ -106,7 +106,7 @@ def build_simulated_driver(
             "wrench": station.ports.wrench,
             "forbidden_contacts": station.monitor.get_output_port(),
             "state": station.ports.link_state,
-            "applied": applied,
+            "applied": _net_joint_torque(builder, plant),
         },
         period,
     )
@@ -115,6 +115,13 @@ def build_simulated_driver(
     return SimulatedDriverDiagram(
         diagram=diagram, station=station, command_subscriber=subscriber, loggers=loggers
     )
+
+
+def _net_joint_torque(builder, plant):
+    """The joint torque B u the plant applied over its last step (its sampled net actuation)."""
+    joint_torque = builder.AddNamedSystem("net_joint_torque", MatrixGain(plant.MakeActuationMatrix()))
+    builder.Connect(plant.get_net_actuation_output_port(), joint_torque.get_input_port())
+    return joint_torque.get_output_port()
 
 
 def _publish(builder, name, port, channel, lcm_type, lcm, period):

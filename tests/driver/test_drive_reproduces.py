@@ -94,7 +94,9 @@ def test_the_robot_receives_the_law_s_torque_only_with_the_setting_right(control
     for k in range(len(traces)):
         plant.SetPositions(context, q[k])
         g[k] = -plant.CalcGravityGeneralizedForces(context)
-    applied = traces.block("tau_applied")
+    applied = traces.block("tau_applied")[:-1]  # over [t_k, t_k+1); the last is not yet applied
+    tau, g = tau[:-1], g[:-1]
+    cmd = cmd[:-1]
     np.testing.assert_allclose(
         cmd, tau - (g if controller_excludes_g else 0.0), atol=1e-9 * np.max(np.abs(g))
     )
