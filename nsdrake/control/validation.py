@@ -464,20 +464,26 @@ def check_task_span(model, seed: int = 0) -> None:
     )
 
 
-def validate_controller(*, config, model, normal, wrench_point) -> np.ndarray:
+def validate_controller(*, config, model, normal, wrench_point) -> np.ndarray | None:
     """Every check of :class:`nsdrake.NullSpaceImpedanceController`'s arguments, in one
     call, before any system is built: the configuration's fields, its sampled loops at
     its period, ``normal`` and ``wrench_point``, then what needs the model. Returns the
     unit normal: ``normal`` is a direction, normalised here (any finite non-zero length
-    is taken as that direction). Raises :class:`ControllerConfigError`."""
+    is taken as that direction); None (no force axis: a free-space position or pose
+    task) stays None. Raises :class:`ControllerConfigError`."""
     validate_config(config, "config")
     for where, problem in stability_problems(config, rotational=model.arm.m_r > 0):
         raise ControllerConfigError(f"config.{where}", problem)
     m_t = model.arm.m_t
     axes = list(model.arm.task_axes[:m_t])
-    problem = vector_problem(normal, m_t, f"{m_t} numbers, a direction on the task axes {axes}")
-    if problem is None and not np.linalg.norm(np.asarray(normal, dtype=float)) > 0:
-        problem = f"must be a non-zero direction on the task axes {axes}, got {show(normal)}"
+    problem = None
+    if normal is not None:
+        problem = vector_problem(normal, m_t, f"{m_t} numbers, a direction on the task axes {axes}, or None")
+    if problem is None and normal is not None and not np.linalg.norm(np.asarray(normal, dtype=float)) > 0:
+        problem = (
+            f"must be a non-zero direction on the task axes {axes} (or None: no force axis), "
+            f"got {show(normal)}"
+        )
     if problem:
         raise ControllerConfigError("normal", problem)
     if wrench_point is not None:
@@ -485,5 +491,7 @@ def validate_controller(*, config, model, normal, wrench_point) -> np.ndarray:
         if problem:
             raise ControllerConfigError("wrench_point", problem)
     check_against_model(config, model)
+    if normal is None:
+        return None
     unit = np.asarray(normal, dtype=float)
     return unit / np.linalg.norm(unit)
