@@ -192,7 +192,8 @@ class ControllerPlan:
         parts = [
             gains.K_p, gains.K_v, gains.normal,
             [gains.K_f, wrench_point is not None, imp.gravity_compensation],
-            [1.0 / imp.max_task_inertia, self.inverse.inertia_weighted, self.inverse.damping],
+            [1.0 / imp.max_task_inertia, self.inverse.inertia_weighted, self.inverse.damping,
+             1.0 / imp.max_task_rotational_inertia],
             np.zeros(3) if wrench_point is None else wrench_point,
             config.nominal_force * gains.normal, lower, upper,
             [self.coriolis, d.criteria.joint_limits.influence, has_limits, self.obstacle_mode,

@@ -158,7 +158,9 @@ def _complete_terms(T, P, ix):
     T.dJ_dq[:] = _jacobian_partials(T.J_spatial[:3], T.J_spatial[3:], ix.own, ix.other, ix.rows, ix.rot_rows)
     Jdot, Jdot_v, xdot, H_inv_Jt = derived_terms(T.H_inv, T.J, T.dJ_dq, T.v)
     T.Jdot[:], T.Jdot_v[:], T.xdot[:], T.H_inv_Jt[:] = Jdot, Jdot_v, xdot, H_inv_Jt
-    T.Lambda[:] = task_inertia(T.J @ T.H_inv_Jt, P.inertia_floor)
+    T.Lambda[:] = task_inertia(
+        T.J @ T.H_inv_Jt, P.inertia_floor, P.rotational_inertia_floor, ix.rows.shape[0]
+    )
     J_pinv, N, A_inv = inverse_at_state(P.inertia_weighted, P.damping, T.H_inv_Jt, T.Lambda, T.J)
     T.J_pinv[:], T.N[:], T.A_inv[:] = J_pinv, N, A_inv
     for r in range(ix.rows.shape[0]):

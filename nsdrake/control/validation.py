@@ -178,7 +178,10 @@ def config_problems(config) -> Iterator[tuple[str, str]]:
 
 
 def _impedance_problems(imp) -> Iterator[tuple[str, str]]:
-    names = (*_POSITIVE_GAINS, "K_p_normal", "gravity_compensation", "max_task_inertia")
+    names = (
+        *_POSITIVE_GAINS, "K_p_normal", "gravity_compensation",
+        "max_task_inertia", "max_task_rotational_inertia",
+    )  # fmt: skip
     problems = list(_fields(imp, "impedance", names))
     if problems:
         yield from problems
@@ -186,9 +189,10 @@ def _impedance_problems(imp) -> Iterator[tuple[str, str]]:
     checks = [(name, positive_problem(getattr(imp, name))) for name in _POSITIVE_GAINS]
     checks.append(("K_p_normal", non_negative_problem(imp.K_p_normal)))
     checks.append(("gravity_compensation", switch_problem(imp.gravity_compensation)))
-    cap = imp.max_task_inertia
-    if not is_number(cap) or math.isnan(cap) or cap <= 0:
-        checks.append(("max_task_inertia", f"must be > 0 (inf: no cap), got {show(cap)}"))
+    for name in ("max_task_inertia", "max_task_rotational_inertia"):
+        cap = getattr(imp, name)
+        if not is_number(cap) or math.isnan(cap) or cap <= 0:
+            checks.append((name, f"must be > 0 (inf: no cap), got {show(cap)}"))
     yield from ((f"impedance.{name}", p) for name, p in checks if p)
 
 
