@@ -57,6 +57,17 @@ class NullSpaceConfig:
     coriolis_compensation: bool = True
     # Feed forward q̈_dⁿ, the backward difference of q̇_dⁿ over one control period [-].
     acceleration_feedforward: bool = True
+    # The null-space law (nsdrake.control.null_space_laws): paper (Eq. 21, the velocity law
+    # above), kinematic_posture_pd ((I − Jᵀ(Jᵀ)⁺)(K_ns(q_d − q) − 2√K_ns q̇)) or
+    # dynamically_consistent_posture_pd ((I − Jᵀ J̄ᵀ) H (K_ns(q_d − q) − D_ns q̇)); the posture
+    # laws take q_d from desired_null_space.posture and ignore q̇_dⁿ [-].
+    law: str = "paper"
+    # K_ns of the posture laws: [N m/rad] for kinematic_posture_pd (a joint stiffness),
+    # [1/s²] for dynamically_consistent_posture_pd (multiplied by H); 0 with the paper's law.
+    posture_stiffness: float = 0.0
+    # D_ns of dynamically_consistent_posture_pd [1/s]; 0 otherwise (the kinematic law's
+    # damping is 2√K_ns, its form).
+    posture_damping: float = 0.0
 
 
 @dataclass
@@ -146,13 +157,35 @@ class SweepConfig:
 
 
 @dataclass
+class PostureConfig:
+    """A desired posture q_d: the posture laws' target, and for the paper's law (source:
+    posture) the criterion p = ½ (q − q_d)ᵀ W (q − q_d) through Eq. 30
+    (nsdrake/control/criteria/posture.py)."""
+
+    # q_d keyed by joint name; every joint of the arm when used [rad].
+    q_d: dict[str, float] = field(default_factory=dict)
+    # W = diag(w) keyed by joint name, missing joints 1 [-].
+    weight: dict[str, float] = field(default_factory=dict)
+    # Step gain K of Eq. 30 (source: posture); <= 0, a negative gain minimises p [1/s].
+    gain: float = 0.0
+    # An offset Δq added to q_d from offset_time, keyed by joint name (missing joints 0) [rad].
+    offset: dict[str, float] = field(default_factory=dict)
+    # Time the offset starts [s].
+    offset_time: float = 0.0
+    # The offset rises with a smoothstep over this time; 0 is a step [s].
+    offset_ramp_time: float = 0.0
+
+
+@dataclass
 class DesiredNullSpaceConfig:
     """The desired null-space velocity q̇_dⁿ by gradient projection (Eqs. 28–30), prioritised."""
 
-    # Where q̇_dⁿ comes from: criteria (Fig. 1's priority selector) or sweep (a prescribed
-    # self-motion, for the experiments of nsdrake compare) [-].
+    # Where q̇_dⁿ comes from: criteria (Fig. 1's priority selector), sweep (a prescribed
+    # self-motion, for the experiments of nsdrake compare) or posture (Eq. 30 on the
+    # posture criterion of `posture`) [-].
     source: str = "criteria"
     sweep: SweepConfig = field(default_factory=SweepConfig)
+    posture: PostureConfig = field(default_factory=PostureConfig)
     # Rotate each gradient by H⁻¹ before projecting (Eq. 30); false gives Eq. 28's form [-].
     rotate_gradient: bool = True
     criteria: CriteriaConfig = field(default_factory=CriteriaConfig)

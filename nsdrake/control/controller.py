@@ -55,8 +55,9 @@ def without_null_space_task(config: ControllerConfig) -> ControllerConfig:
         manipulability=dataclasses.replace(c.manipulability, gain=0.0),
     )
     sweep = dataclasses.replace(d.sweep, amplitude=0.0)
+    posture = dataclasses.replace(d.posture, gain=0.0)
     return dataclasses.replace(
-        config, desired_null_space=dataclasses.replace(d, criteria=criteria, sweep=sweep)
+        config, desired_null_space=dataclasses.replace(d, criteria=criteria, sweep=sweep, posture=posture)
     )
 
 
@@ -301,8 +302,10 @@ def _add_named(builder, plan: ControllerPlan) -> tuple[dict, dict]:
         builder, "selection_parts", selector.GetOutputPort("selection"), selector.output_parts()
     )
     qdot = selection["desired_null_space_velocity"]
-    if plan.config.desired_null_space.source == "sweep":
-        sweep = builder.AddNamedSystem("self_motion_sweep", SelfMotionSweep(plan=plan))
+    source = plan.config.desired_null_space.source
+    if source in ("sweep", "posture"):  # a prescribed q̇_dⁿ: the sweep's or the posture criterion's
+        name = "self_motion_sweep" if source == "sweep" else "posture_objective"
+        sweep = builder.AddNamedSystem(name, SelfMotionSweep(plan=plan))
         builder.Connect(terms_port, sweep.GetInputPort("robot_terms"))
         qdot = sweep.get_output_port()
     source = builder.AddNamedSystem("null_space_velocity_source", NullSpaceVelocitySource(plan.n))

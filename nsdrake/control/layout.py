@@ -37,6 +37,7 @@ OBSTACLE_WIDTH = (
     16  # per obstacle: kind (0 box, 1 sphere), R_WO (9, row-major), p_WO (3), half sizes or radius (3)
 )
 MODES = 5  # nsdrake.control.priority.Mode
+POSTURE_SCALARS = 7  # the null-space law's code, K_ns, D_ns and the posture objective's scalars
 
 TermsView = namedtuple(
     "TermsView",
@@ -63,6 +64,9 @@ PlanView = namedtuple(
         # null space (Eq. 21) and actuator limits
         "K_n", "period", "task_velocity_compensation", "coriolis_compensation", "feedforward",
         "tau_max", "rate_max",
+        # the null-space law (nsdrake.control.null_space_laws) and the posture objective
+        "law", "posture_stiffness", "posture_damping", "posture_source", "posture_gain",
+        "posture_offset_time", "posture_ramp_time", "q_d", "posture_offset", "posture_weight",
     ),
 )  # fmt: skip
 
@@ -144,7 +148,7 @@ def plan_size(dims) -> int:
     # in the order of plan_views
     return (
         m * m + m * m + m + 7 + 3 + m + n + n + 5 + k * LINK_WIDTH + k * n + o * OBSTACLE_WIDTH
-        + CRITERIA + 6 + 4 + n + n + 4 + 5 + n + n
+        + CRITERIA + 6 + 4 + n + n + 4 + 5 + n + n + POSTURE_SCALARS + 3 * n
     )  # fmt: skip
 
 
@@ -177,6 +181,11 @@ def plan_views(buf, dims) -> PlanView:
     ns, o = _take(buf, o, 5)  # K_n, period, task velocity, Coriolis, feedforward
     tau_max, o = _take(buf, o, n)
     rate_max, o = _take(buf, o, n)
+    # law, K_ns, D_ns, posture source, K of Eq. 30, offset time, offset ramp time
+    law, o = _take(buf, o, POSTURE_SCALARS)
+    q_d, o = _take(buf, o, n)
+    posture_offset, o = _take(buf, o, n)
+    posture_weight, o = _take(buf, o, n)
     return PlanView(
         K_p.reshape((m, m)), K_v.reshape((m, m)), normal, s[0], p_WSo, s[1] != 0.0, s[2] != 0.0,
         s[3], s[6], s[4] != 0.0, s[5], c[0] != 0.0,
@@ -187,6 +196,8 @@ def plan_views(buf, dims) -> PlanView:
         e[3] != 0.0, direction, sweep_wave,
         ns[0], ns[1], ns[2] != 0.0, ns[3] != 0.0, ns[4] != 0.0,
         tau_max, rate_max,
+        int(law[0]), law[1], law[2], law[3] != 0.0, law[4], law[5], law[6],
+        q_d, posture_offset, posture_weight,
     )  # fmt: skip
 
 

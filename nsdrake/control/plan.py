@@ -32,6 +32,7 @@ from nsdrake.control.layout import (
     tick_views,
 )
 from nsdrake.control.model import ControllerModel, ModelScratch
+from nsdrake.control.null_space_laws import LAWS
 from nsdrake.control.priority import Criterion, SelectorLimits, ordering_table
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 from nsdrake.control.smoothing import activation
@@ -80,6 +81,21 @@ def speed_limits(config: ControllerConfig, model: ControllerModel) -> np.ndarray
             for j, limit in zip(model.joint_names, model_limits, strict=True)
         ]
     )
+
+
+def posture_constants(config: ControllerConfig, joints: Sequence[str]) -> list:
+    """The plan's null-space law and posture objective (:func:`nsdrake.control.layout.plan_views`):
+    [law code, K_ns, D_ns, posture source, K of Eq. 30, offset time, ramp time], then q_d,
+    the offset and the weight per joint (velocity order; q_d 0 where none is given, which
+    only a controller that does not use it may have)."""
+    ns, d = config.null_space, config.desired_null_space
+    p = d.posture
+    return [
+        [LAWS[ns.law], ns.posture_stiffness, ns.posture_damping, d.source == "posture", p.gain,
+         p.offset_time, p.offset_ramp_time],
+        [p.q_d.get(j, 0.0) for j in joints], [p.offset.get(j, 0.0) for j in joints],
+        [p.weight.get(j, 1.0) for j in joints],
+    ]  # fmt: skip
 
 
 def selector_limits(config: ControllerConfig) -> SelectorLimits:
@@ -206,6 +222,7 @@ class ControllerPlan:
             [ns.K_n, config.period, ns.task_velocity_compensation, ns.coriolis_compensation,
              ns.acceleration_feedforward],
             torque_limits(config, model), self.rate_limits,
+            *posture_constants(config, model.joint_names),
         ]  # fmt: skip
         plan = np.concatenate([np.asarray(p, dtype=float).ravel() for p in parts])
         assert plan.shape[0] == plan_size.py_func(self.dims)

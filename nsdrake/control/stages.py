@@ -17,7 +17,8 @@ the math inside each stage is the math of its own module, called, never restated
    prescribed sweep's (:mod:`self_motion`);
 4. **task torque** (``TASK``): τ − τ₀ of Eqs. 6–8 (:mod:`impedance`);
 5. **null-space torque** (``NULL_SPACE``): τ₀ of Eq. 21 (:mod:`null_space`), q̈_dⁿ the
-   backward difference from the stored previous q̇_dⁿ;
+   backward difference from the stored previous q̇_dⁿ; or, with ``null_space.law`` a
+   posture law, that law's τ₀ (:mod:`null_space_laws`);
 6. **actuator limits** (``LIMITS``): τ = τ_task + s τ₀ within the torque and rate windows
    (:mod:`actuator_limits`), from the stored previous τ.
 
@@ -69,11 +70,20 @@ from nsdrake.control.criteria.distance import segments_box, segments_sphere
 from nsdrake.control.criteria.joint_limits import joint_limits_criterion
 from nsdrake.control.criteria.joint_torque import joint_torque_criterion
 from nsdrake.control.criteria.manipulability import manipulability
+from nsdrake.control.criteria.posture import posture_criterion
 from nsdrake.control.dynamics import _cross, _jacobian_partials, derived_terms, task_inertia
+from nsdrake.control.gradient_projection import gradient_step
 from nsdrake.control.impedance import _position_task_torque, pose_task_torque, wrench_at_tool
 from nsdrake.control.layout import index_views, plan_views, terms_views, tick_views
 from nsdrake.control.model import symmetric_and_inverse
 from nsdrake.control.null_space import _null_space_law
+from nsdrake.control.null_space_laws import (
+    KINEMATIC_POSTURE_PD,
+    PAPER,
+    dynamically_consistent_posture_torque,
+    kinematic_posture_torque,
+    posture_target,
+)
 from nsdrake.control.orientation import quaternion_to_rotation
 from nsdrake.control.priority import (
     INITIAL_SWITCH_STATE,
@@ -202,7 +212,9 @@ def run_stages(
     if stages & SELECTION:
         _selection(T, P, ix, criteria, switch, t, out.selection)
     if stages & (SWEEP | DESIRED):
-        if sweep is None:
+        if P.posture_source:
+            out.qdot[:] = _posture_velocity(T, P, t)
+        elif sweep is None:
             out.qdot[:] = out.selection[:n]
         else:
             w = P.sweep_wave
@@ -213,7 +225,10 @@ def run_stages(
         else:
             _pose_task(T, P, ix, commands, out.task)
     if stages & NULL_SPACE:
-        _null_space(T, P, out.qdot, previous_qdot, out.null_space)
+        if P.law == PAPER:
+            _null_space(T, P, out.qdot, previous_qdot, out.null_space)
+        else:
+            _posture_law(T, P, t, out.null_space)
     if stages & LIMITS:
         _actuator_limits(P, out.task, out.null_space[:n], previous_tau, out.limited)
     if stages & COPY:
@@ -447,6 +462,33 @@ def _null_space(T, P, qdot_ns, previous, out):
         P.inertia_weighted,
     )  # fmt: skip
     out[:n], out[n : 2 * n], out[2 * n] = tau0, e_n, nu
+
+
+@njit(cache=True, inline="always")
+def _posture_law(T, P, t, out):
+    """Stage 5 with a posture law (:mod:`nsdrake.control.null_space_laws`): out = [τ₀ (n);
+    nan (n); nan], eⁿ and ν being the paper's (Eqs. 14, 23), undefined for these laws."""
+    n = T.q.shape[0]
+    q_d = posture_target(P.q_d, P.posture_offset, t, P.posture_offset_time, P.posture_ramp_time)
+    if P.law == KINEMATIC_POSTURE_PD:
+        out[:n] = kinematic_posture_torque(T.J, T.q, T.v, q_d, P.posture_stiffness)
+    else:
+        out[:n] = dynamically_consistent_posture_torque(
+            T.H, T.H_inv, T.J, T.q, T.v, q_d, P.posture_stiffness, P.posture_damping
+        )
+    out[n:] = np.nan
+
+
+@njit(cache=True, inline="always")
+def _posture_velocity(T, P, t):
+    """Stage 3 with the posture criterion (source: posture): q̇_dⁿ = K N W⁻¹ Φ (Eq. 30),
+    Φ = W_p (q − q_d(t)) (:mod:`nsdrake.control.criteria.posture`), W⁻¹ the inverse's metric
+    (H⁻¹ for J̄), used as given (no joint-speed scaling, as the sweep's)."""
+    n = T.q.shape[0]
+    q_d = posture_target(P.q_d, P.posture_offset, t, P.posture_offset_time, P.posture_ramp_time)
+    _, Phi = posture_criterion(T.q, q_d, P.posture_weight)
+    W_inv = T.H_inv if P.inertia_weighted else np.eye(n)
+    return gradient_step(T.N, W_inv, Phi, P.posture_gain, P.rotate)
 
 
 @njit(cache=True, inline="always")

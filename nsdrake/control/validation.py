@@ -33,7 +33,8 @@ import numpy as np
 from nsdrake.control.dynamics import AXIS_NAMES, ROTATION_AXIS_NAMES, parse_task_axes
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
-NULL_SPACE_SOURCES = ("criteria", "sweep")
+NULL_SPACE_SOURCES = ("criteria", "sweep", "posture")
+NULL_SPACE_LAWS = ("paper", "kinematic_posture_pd", "dynamically_consistent_posture_pd")
 SHOW_LENGTH = 80  # [characters] longest echo of a user's value in an error message
 # [m/s²] the largest gravity a model may have: 100 g (Earth's 9.81, Jupiter's 24.8; an arm
 # in a centrifuge test at most some tens of g). Beyond it the model terms are dominated by
@@ -207,12 +208,34 @@ def _null_space_problems(ns) -> Iterator[tuple[str, str]]:
         ("damping", non_negative_problem(ns.damping)),
         *((name, switch_problem(getattr(ns, name))) for name in _SWITCHES),
     ]
+    checks += _law_problems(ns)
     if not any(p for _, p in checks[1:3]):
         try:
             GeneralizedInverse(PseudoInverseKind(ns.pseudo_inverse), ns.damping)
         except ValueError as e:
             checks.append(("damping", one_line(e)))
     yield from ((f"null_space.{name}", p) for name, p in checks if p)
+
+
+def _law_problems(ns) -> list[tuple[str, str | None]]:
+    """The null-space law and its posture gains: K_ns > 0 for a posture law, D_ns > 0 for
+    the dynamically consistent one, both 0 where the law does not use them."""
+    missing = [n for n in ("law", "posture_stiffness", "posture_damping") if not hasattr(ns, n)]
+    if missing:
+        return [(missing[0], "missing")]
+    law = choice_problem(ns.law, NULL_SPACE_LAWS)
+    if law:
+        return [("law", law)]
+    uses = {"paper": (), "kinematic_posture_pd": ("posture_stiffness",),
+            "dynamically_consistent_posture_pd": ("posture_stiffness", "posture_damping")}[ns.law]  # fmt: skip
+    out = []
+    for name in ("posture_stiffness", "posture_damping"):
+        value = getattr(ns, name)
+        if name in uses:
+            out.append((name, positive_problem(value)))
+        elif not is_number(value) or value != 0:
+            out.append((name, f"must be 0: the law {ns.law} does not use it, got {show(value)}"))
+    return out
 
 
 def desired_null_space_problems(d) -> Iterator[tuple[str, str]]:
@@ -222,6 +245,7 @@ def desired_null_space_problems(d) -> Iterator[tuple[str, str]]:
     names = (
         "source",
         "sweep",
+        "posture",
         "rotate_gradient",
         "criteria",
         "selector",
@@ -240,6 +264,7 @@ def desired_null_space_problems(d) -> Iterator[tuple[str, str]]:
         if problem:
             yield f"{where}.{name}", problem
     yield from _sweep_problems(d.sweep, d.source == "sweep")
+    yield from _posture_problems(d.posture)
     yield from _criteria_problems(d.criteria, d.selector)
     yield from table_problems(f"{where}.joint_speed_limits", d.joint_speed_limits, positive_problem)
 
@@ -259,6 +284,28 @@ def _sweep_problems(sweep, used: bool) -> Iterator[tuple[str, str]]:
             yield f"{where}.{name}", problem
     if used and not direction and not any(sweep.direction.values()):
         yield f"{where}.direction", "a sweep needs a non-zero direction"
+
+
+def _posture_problems(posture) -> Iterator[tuple[str, str]]:
+    where = "desired_null_space.posture"
+    names = ("q_d", "weight", "gain", "offset", "offset_time", "offset_ramp_time")
+    problems = list(_fields(posture, where, names))
+    if problems:
+        yield from problems
+        return
+    yield from table_problems(f"{where}.q_d", posture.q_d, finite_problem)
+    yield from table_problems(f"{where}.offset", posture.offset, finite_problem)
+    yield from table_problems(f"{where}.weight", posture.weight, positive_problem)
+    gain = finite_problem(posture.gain)
+    if gain is None and posture.gain > 0:
+        gain = f"must be <= 0 (a negative gain minimises the distance to q_d), got {show(posture.gain)}"
+    for name, problem in (
+        ("gain", gain),
+        ("offset_time", non_negative_problem(posture.offset_time)),
+        ("offset_ramp_time", non_negative_problem(posture.offset_ramp_time)),
+    ):
+        if problem:
+            yield f"{where}.{name}", problem
 
 
 def _criteria_problems(crit, sel) -> Iterator[tuple[str, str]]:
@@ -414,6 +461,9 @@ def check_against_model(config, model, name: str = "config") -> None:
     for where, table in (
         ("desired_null_space.joint_speed_limits", d.joint_speed_limits),
         ("desired_null_space.sweep.direction", d.sweep.direction),
+        ("desired_null_space.posture.q_d", d.posture.q_d),
+        ("desired_null_space.posture.weight", d.posture.weight),
+        ("desired_null_space.posture.offset", d.posture.offset),
         ("actuator_limits.torque", config.actuator_limits.torque),
         ("actuator_limits.torque_rate", config.actuator_limits.torque_rate),
     ):
@@ -428,6 +478,13 @@ def check_against_model(config, model, name: str = "config") -> None:
             f"{name}.desired_null_space.criteria.obstacle.gain",
             "the controller model has no link collision geometry or no obstacles to keep away from "
             "(set the gain to 0, or build the model with obstacles)",
+        )
+    uses_posture = config.null_space.law != "paper" or d.source == "posture"
+    missing = [j for j in model.joint_names if j not in d.posture.q_d]
+    if uses_posture and missing:
+        raise ControllerConfigError(
+            f"{name}.desired_null_space.posture.q_d",
+            f"the posture objective needs every joint; missing {', '.join(missing)}",
         )
     problem = arm_problem(model.n, model.m, model.arm.task_axes)
     if problem:

@@ -45,6 +45,7 @@ class NullSpaceController(StageSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(plan.config.period, 0.0, self._store)
         deps = {self.input_port_ticket(p.get_index()) for p in (self._terms, self._qdot_ns_d)}
         deps.add(self.discrete_state_ticket(self._previous))
+        deps.add(self.time_ticket())  # a posture law's q_d(t) (nsdrake.control.null_space_laws)
         self.DeclareVectorOutputPort("null_space", 2 * n + 1, self._calc, prerequisites_of_calc=deps)
 
     def output_parts(self) -> dict[str, int]:
