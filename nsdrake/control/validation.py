@@ -226,8 +226,11 @@ def _law_problems(ns) -> list[tuple[str, str | None]]:
     law = choice_problem(ns.law, NULL_SPACE_LAWS)
     if law:
         return [("law", law)]
-    uses = {"paper": (), "kinematic_posture_pd": ("posture_stiffness",),
-            "dynamically_consistent_posture_pd": ("posture_stiffness", "posture_damping")}[ns.law]  # fmt: skip
+    uses = {
+        "paper": (),
+        "kinematic_posture_pd": ("posture_stiffness",),
+        "dynamically_consistent_posture_pd": ("posture_stiffness", "posture_damping"),
+    }[ns.law]
     out = []
     for name in ("posture_stiffness", "posture_damping"):
         value = getattr(ns, name)

@@ -48,6 +48,7 @@ from nsdrake.control.controller import (
 from nsdrake.control.dynamics import ArmModel
 from nsdrake.control.model import ControllerModel
 from nsdrake.control.orientation import rotation_to_quaternion
+from nsdrake.experiment.push import add_push, unknown_body_problem
 from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
 from nsdrake.experiment.reference_system import SurfaceReference
 from nsdrake.experiment.scenario import Scenario, ScenarioError, controller_fields
@@ -338,6 +339,10 @@ def build_diagram(
     if scenario.realism.any:
         plug_realism(builder, station, scenario.realism, scenario.control_period)
     reference = add_reference(builder, scenario, station)
+    problem = unknown_body_problem(station.plant, scenario.push)
+    if problem:
+        raise ScenarioError(f"{scenario.source or 'scenario'}: push.body: {problem}")
+    add_push(builder, station.plant, scenario.push)
     structure = controller_structure(scenario, auto_structure)
     controller = build_controller(
         scenario, station, station.sensor.p_WSo, null_space_task=null_space_task, structure=structure
@@ -349,6 +354,9 @@ def build_diagram(
         R_d = desired_tool_orientation(station, scenario.reference.orientation)
         add_orientation_reference(builder, controller, R_d)
     loggers = add_loggers(builder, station, controller, reference, scenario.control_period)
+    if scenario.report.null_space_torque:
+        loggers.update(log_signals(builder, {"tau0": controller.GetOutputPort("null_space_torque")},
+                                   scenario.control_period))  # fmt: skip
     if scenario.realism.any:
         loggers.update(add_realism_loggers(builder, station, scenario.control_period))
     visualizers = None

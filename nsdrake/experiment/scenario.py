@@ -42,6 +42,7 @@ from nsdrake.control.validation import (
     task_axes_problem,
 )
 from nsdrake.experiment.driver_config import DriverConfig, driver_problems
+from nsdrake.experiment.push import PushConfig, push_problems
 from nsdrake.realism.config import SHORTEST_STEP, RealismConfig, realism_problems, substeps
 from nsdrake.station.config import (
     CONTACT_APPROXIMATIONS,
@@ -152,6 +153,9 @@ class ReportConfig:
     # Replay camera position and target in the world; empty: nsdrake's default view [m].
     camera_position: list[float] = field(default_factory=list)
     camera_target: list[float] = field(default_factory=list)
+    # Log the null-space torque s τ₀ the controller applies (after the actuator limits) as
+    # trace columns tau0_1 … tau0_n [-].
+    null_space_torque: bool = False
     # With the priority check: the modes the run must visit (1 obstacle avoidance,
     # 2 joint torque, 3 manipulability, 4 joint limits) [-].
     required_modes: list[int] = field(default_factory=list)
@@ -182,6 +186,8 @@ class Scenario:
     obstacles: list[ObstacleConfig] = field(default_factory=list)
     report: ReportConfig = field(default_factory=ReportConfig)
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
+    # An external force pulse on a link (nsdrake/experiment/push.py); off by default.
+    push: PushConfig = field(default_factory=PushConfig)
     # Effects of the real robot, each off by default (nsdrake/realism.py: the realism ladder).
     realism: RealismConfig = field(default_factory=RealismConfig)
     # How the controller's stages run (NullSpaceImpedanceController's ``fused``): systems,
@@ -523,6 +529,7 @@ def scenario_problems(s: Scenario) -> Iterator[tuple[str, str]]:
         yield f"driver.{where}", problem
     yield from _step_problems(s)
     yield from _obstacle_problems(s)
+    yield from push_problems(s.push)
 
 
 def _checked(where: str, problem: str | None) -> Iterator[tuple[str, str]]:
@@ -692,6 +699,9 @@ def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:
         "arm.initial_velocities": s.arm.initial_velocities,
         "desired_null_space.joint_speed_limits": s.desired_null_space.joint_speed_limits,
         "desired_null_space.sweep.direction": s.desired_null_space.sweep.direction,
+        "desired_null_space.posture.q_d": s.desired_null_space.posture.q_d,
+        "desired_null_space.posture.weight": s.desired_null_space.posture.weight,
+        "desired_null_space.posture.offset": s.desired_null_space.posture.offset,
         "actuator_limits.torque": s.actuator_limits.torque,
         "actuator_limits.torque_rate": s.actuator_limits.torque_rate,
     }

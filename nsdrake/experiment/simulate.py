@@ -200,6 +200,8 @@ def collect_traces(built: ControlledStation, root_context, logs: dict | None = N
     columns["speed_scale"] = logs["speed_scale"].data()[0]
     columns["forbidden_contacts"] = logs["forbidden_contacts"].data()[0]
     columns["in_contact"] = logs["in_contact"].data()[0]
+    if "tau0" in logs:  # report.null_space_torque
+        add("tau0_", logs["tau0"].data(), joints)
     columns["tau0_scale"] = logs["saturation"].data()[0]
     columns["saturated_joints"] = logs["saturation"].data()[1]
     if built.desired_orientation is not None:

@@ -67,6 +67,7 @@ MIN_WINDOW_ROWS = 8  # [control periods] the fewest the realism measure's window
 class Variant:
     name: str
     overrides: dict
+    scenario: str = ""  # its own base scenario; "": the family's
 
 
 @dataclass(frozen=True)
@@ -101,16 +102,7 @@ def load_family(name: str) -> Family:
         )
     variants = []
     for i, v in enumerate(data.get("variants") or []):
-        if (
-            not isinstance(v, dict)
-            or not isinstance(v.get("name"), str)
-            or not isinstance(v.get("overrides", {}), dict)
-        ):
-            raise ScenarioError(f"{path}: variants[{i}]: needs a name and a mapping of overrides")
-        problem = check_shape(v.get("overrides", {}), Scenario, "")
-        if problem:
-            raise ScenarioError(f"{path}: variants[{i}].overrides.{problem}")
-        variants.append(Variant(v["name"], v.get("overrides", {})))
+        variants.append(_variant(path, i, v))
     if not variants:
         raise ScenarioError(f"{path}: variants: a family needs at least one variant")
     names = [v.name for v in variants]
@@ -126,14 +118,41 @@ def load_family(name: str) -> Family:
     )
 
 
+def _variant(path: Path, i: int, v) -> Variant:
+    """variants[i] of the family file at ``path``: a name, a mapping of overrides and
+    optionally its own base scenario (a shipped one), checked."""
+    from nsdrake.experiment.scenario import shipped_scenarios
+
+    if (
+        not isinstance(v, dict)
+        or not isinstance(v.get("name"), str)
+        or not isinstance(v.get("overrides", {}), dict)
+    ):
+        raise ScenarioError(f"{path}: variants[{i}]: needs a name and a mapping of overrides")
+    unknown = set(v) - {"name", "overrides", "scenario"}
+    if unknown:
+        raise ScenarioError(f"{path}: variants[{i}].{_name(sorted(unknown, key=str)[0])}: unknown field")
+    scenario = v.get("scenario", "")
+    if scenario and scenario not in shipped_scenarios():
+        raise ScenarioError(
+            f"{path}: variants[{i}].scenario: unknown scenario {_show(scenario)}; "
+            f"the shipped scenarios are {', '.join(shipped_scenarios())}"
+        )
+    problem = check_shape(v.get("overrides", {}), Scenario, "")
+    if problem:
+        raise ScenarioError(f"{path}: variants[{i}].overrides.{problem}")
+    return Variant(v["name"], v.get("overrides", {}), str(scenario))
+
+
 def variant_scenario(family: Family, index: int, config: Path | None, duration: float | None) -> Scenario:
-    """The base scenario, then ``config``, then the variant's overrides; validated."""
+    """The base scenario (the variant's own, else the family's), then ``config``, then the
+    variant's overrides; validated."""
     from pydrake.common.yaml import yaml_load_typed
 
     from nsdrake.experiment.scenario import validate
 
-    base = load_scenario(family.scenario, config=config, duration=duration)
     variant = family.variants[index]
+    base = load_scenario(variant.scenario or family.scenario, config=config, duration=duration)
     try:
         scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(variant.overrides), defaults=base)
     except Exception as e:
@@ -397,6 +416,13 @@ def _gradient_step_figures(traces: Traces, ctx: RunFacts) -> dict:
     return row
 
 
+def measure_null_space_laws(traces: Traces, ctx: RunFacts) -> dict:
+    """Issue 19: one null-space law on one task (:mod:`nsdrake.studies.null_space_laws`)."""
+    from nsdrake.studies.null_space_laws import law_figures
+
+    return law_figures(traces, ctx)
+
+
 MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
     "contact_force_into_null_space": measure_contact_force_into_null_space,
     "null_space_motion_into_task": measure_null_space_motion_into_task,
@@ -404,6 +430,7 @@ MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
     "fig3": measure_fig3,
     "realism": measure_realism,
     "gradient_projection": measure_gradient_projection,
+    "null_space_laws": measure_null_space_laws,
 }
 
 
@@ -462,6 +489,10 @@ def _run_variant(task: _Task) -> tuple[str, object]:
         e.traces.write_csv(task.folder / "traces.csv")
         return "interrupted", e.t
     task.folder.mkdir(parents=True, exist_ok=True)
+    if task.family.measure == "null_space_laws":  # its per-row figures, kept with the traces
+        from nsdrake.studies.null_space_laws import law_columns
+
+        traces = law_columns(traces, scenario, built.station.arm_model)
     traces.write_csv(task.folder / "traces.csv")
     traces = Traces.read_csv(task.folder / "traces.csv")
     row = MEASURES[task.family.measure](traces, RunFacts(scenario=scenario, station=built.station))
@@ -705,7 +736,7 @@ def run_family(
 
 
 # The files a comparison writes beside its variants' traces (declared before any is written).
-COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png")
+COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png", "laws.png")
 
 
 def _run_family(family, out, folders, config, duration, jobs, isolate, progress, timeout) -> FamilyResult:
@@ -738,6 +769,11 @@ def _run_family(family, out, folders, config, duration, jobs, isolate, progress,
         )
         if family.measure == "realism" and len(ran) == len(folders):
             plot_force_panels(out / "force.png", family, [Traces.read_csv(f / "traces.csv") for f in folders])
+        if family.measure == "null_space_laws":
+            from nsdrake.studies.null_space_laws import plot_laws
+
+            ran_rows = [row for row in table if "error" not in row]
+            plot_laws(out / "laws.png", family, ran_rows, [Traces.read_csv(f / "traces.csv") for _, f in ran])
     return FamilyResult(family=family, rows=table, out=out)
 
 

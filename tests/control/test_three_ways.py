@@ -183,3 +183,26 @@ def test_drake_terms_three_ways():
 
     named = assert_three_ways_agree(scenario, controller)
     assert named["controller"].model.dynamics == "drake"
+
+
+FIG3_POSTURE = "{q_d: {joint1: 0.401, joint2: 0.972, joint3: 1.012, joint4: 0.614}, offset: {joint1: 0.3}, offset_time: 0.1, offset_ramp_time: 0.1"  # noqa: E501
+
+
+@pytest.mark.parametrize(
+    "law",
+    [
+        f"desired_null_space: {{source: posture, posture: {FIG3_POSTURE}, gain: -0.1224}}}}",
+        "null_space: {law: kinematic_posture_pd, posture_stiffness: 0.3}\n"
+        f"desired_null_space: {{posture: {FIG3_POSTURE}}}}}",
+        "null_space: {law: dynamically_consistent_posture_pd, posture_stiffness: 2500.0, "
+        "posture_damping: 100.0}\n"
+        f"desired_null_space: {{posture: {FIG3_POSTURE}}}}}",
+    ],
+    ids=["paper with the posture criterion", "kinematic posture PD", "dynamically consistent posture PD"],
+)
+def test_null_space_laws_three_ways(tmp_path, law):
+    """fig3's first 0.3 s with each null-space law of issue 19 and a posture q_d(t) that
+    moves from 0.1 s (nsdrake.control.null_space_laws): the posture laws' stage and the
+    posture criterion's q̇_dⁿ run the same in all three ways (ν and eⁿ nan for the PD laws)."""
+    named = assert_three_ways_agree(fig3_with(tmp_path, law, duration=0.3))
+    assert np.max(np.abs(named["generalized_force"])) > 0.0
