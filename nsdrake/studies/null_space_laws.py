@@ -221,7 +221,7 @@ def push_figures(traces: Traces, push, pos_err: np.ndarray) -> dict:
 
 def plot_laws(path, family, rows: list[dict], traces: list[Traces]) -> None:
     """Per task (a column; a variant is named "TASK / LAW"), one line per law: the normal
-    force, the task disturbance ‖J H⁻¹ τ₀‖ (translational) and the posture error."""
+    force's error, the task disturbance ‖J H⁻¹ τ₀‖ (translational) and the posture error."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -235,13 +235,14 @@ def plot_laws(path, family, rows: list[dict], traces: list[Traces]) -> None:
         task, _, law = row["variant"].partition(" / ")
         column = axes[:, tasks.index(task)]
         t = tr["t"]
-        column[0].plot(t, tr["f_n"], lw=0.8, label=law)
+        column[0].plot(t, tr["f_n"] - tr["f_d"], lw=0.8, label=law)
         column[1].semilogy(t, np.maximum(tr["task_disturbance"], 1e-12), lw=0.8)
         column[2].plot(t, tr["posture_error"], lw=0.8)
     for j, task in enumerate(tasks):
         axes[0, j].set_title(task, fontsize=9)
+        axes[0, j].set_yscale("symlog", linthresh=0.01)  # 10 mN to the hundreds a failed run reaches
         axes[2, j].set_xlabel("time [s]")
-    axes[0, 0].set_ylabel("normal force [N]")
+    axes[0, 0].set_ylabel(r"force error $f_n - f_d$ [N]")
     axes[1, 0].set_ylabel(r"$\|J H^{-1} \tau_0\|$ [m/s²]")
     axes[2, 0].set_ylabel(r"posture error $\|(I - J^+J)(q - q_d)\|$ [rad]")
     axes[0, 0].legend(fontsize=7, loc="best")
