@@ -33,7 +33,7 @@ from pydrake.manipulation import PandaCommandSender, PandaControlMode, PandaStat
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder, TriggerType
 from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
-from pydrake.systems.primitives import Adder, Demultiplexer, Gain, Multiplexer, VectorLogSink
+from pydrake.systems.primitives import Adder, Gain, Multiplexer, VectorLogSink
 
 from nsdrake.control.controller import NullSpaceImpedanceController
 from nsdrake.driver.panda import NUM_JOINTS, PandaLimitError, panda_actuator_limits
@@ -160,7 +160,9 @@ def _add_wrench_source(builder, scenario, lcm, receiver, controller):
     """The measured wrench's port and, for the sensor, its subscriber (else None)."""
     d = scenario.driver
     if d.force_source == "sensor":
-        subscriber = LcmSubscriberSystem.Make(d.force_torque_channel, lcmt_force_torque, lcm)
+        subscriber = LcmSubscriberSystem.Make(
+            d.force_torque_channel, lcmt_force_torque, lcm, use_cpp_serializer=True
+        )
         builder.AddNamedSystem("force_torque_subscriber", subscriber)
         ft = builder.AddNamedSystem("force_torque_receiver", ForceTorqueReceiver())
         builder.Connect(subscriber.get_output_port(), ft.get_input_port())
@@ -178,11 +180,10 @@ def _add_measurement_hold(builder, receiver, wrench, period):
     builder.Connect(receiver.get_position_measured_output_port(), measurements.get_input_port(0))
     builder.Connect(receiver.get_velocity_measured_output_port(), measurements.get_input_port(1))
     builder.Connect(wrench, measurements.get_input_port(2))
-    hold = builder.AddNamedSystem("measurement_hold", MeasurementHold(size=2 * n + 6, period=period))
+    hold = MeasurementHold(parts={"state": 2 * n, "wrench": 6}, period=period)
+    builder.AddNamedSystem("measurement_hold", hold)
     builder.Connect(measurements.get_output_port(), hold.get_input_port())
-    parts = builder.AddNamedSystem("held_parts", Demultiplexer([2 * n, 6]))
-    builder.Connect(hold.get_output_port(), parts.get_input_port())
-    return hold, parts.get_output_port(0), parts.get_output_port(1)
+    return hold, hold.GetOutputPort("state"), hold.GetOutputPort("wrench")
 
 
 def _add_command_torque(builder, controller, state, robot_adds_gravity: bool):

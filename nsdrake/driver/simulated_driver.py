@@ -132,8 +132,9 @@ def _net_joint_torque(builder, plant):
 
 def _publish(builder, name, port, channel, lcm_type, lcm, period):
     """``port`` published on ``channel`` once per ``period``."""
-    cpp = lcm_type is not lcmt_force_torque  # Drake's C++ Panda systems need its C++ message types
-    publisher = LcmPublisherSystem.Make(channel, lcm_type, lcm, publish_period=period, use_cpp_serializer=cpp)
+    publisher = LcmPublisherSystem.Make(
+        channel, lcm_type, lcm, publish_period=period, use_cpp_serializer=True
+    )
     builder.AddNamedSystem(name, publisher)
     builder.Connect(port, publisher.get_input_port())
 

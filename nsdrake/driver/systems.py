@@ -18,9 +18,16 @@ class MeasurementHold(LeafSystem):
         input_ports:
         - sample
         output_ports:
-        - held
+        - state
+        - wrench
 
-    ``held`` is the discrete state; a periodic unrestricted update at every control
+    ``sample`` is the parts one after the other; each output is one part of the held
+    sample (``parts``: name and size, in order; the controller side's are ``state`` [q; q̇]
+    and ``wrench``), and depends on the held value alone: not on time, so that what the
+    controller computes from the state stays cached while its clock advances (a Drake
+    ``Demultiplexer`` after the hold made every tick compute the model terms twice).
+
+    The held value is the discrete state; a periodic unrestricted update at every control
     instant t_k copies ``sample`` into it. Why: in the direct simulation Drake steps the
     plant in an unrestricted update at t_k, alongside the controller's own unrestricted
     stores (the null-space controller's previous q̇_dⁿ, the previous torque of the rate
@@ -32,16 +39,27 @@ class MeasurementHold(LeafSystem):
     (Drake's ``ZeroOrderHold`` samples in a discrete update, after the stores.)
     """
 
-    def __init__(self, *, size: int, period: float):
+    def __init__(self, *, parts: dict[str, int], period: float):
         super().__init__()
+        size = sum(parts.values())
         self._input = self.DeclareVectorInputPort("sample", size)
         self._state = self.DeclareDiscreteState(BasicVector(np.zeros(size)))
-        self.DeclareStateOutputPort("held", self._state)
+        held = {self.discrete_state_ticket(self._state)}
+        start = 0
+        for name, part_size in parts.items():
+            self.DeclareVectorOutputPort(name, part_size, self._part_calc(start, part_size), held)
+            start += part_size
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._sample)
 
     def set_held(self, context, value: np.ndarray) -> None:
         """Sets the held value (the first status, before the run starts)."""
         context.SetDiscreteState(self._state, np.asarray(value, dtype=float))
+
+    def _part_calc(self, start: int, size: int):
+        def calc(context, output):
+            output.SetFromVector(context.get_discrete_state(self._state).value()[start : start + size])
+
+        return calc
 
     def _sample(self, context, state):
         state.get_mutable_discrete_state(self._state).SetFromVector(self._input.Eval(context))
@@ -65,6 +83,8 @@ class CommandStamp(LeafSystem):
     the clock it stamps each status with. The command therefore carries the ``utime`` of
     the status it answers, which also lets a driver pair each command with its status.
     Both messages are Drake's C++ types (read and written through Drake's serializers).
+    The stamp is ``utime`` asserted in ``lcmt_panda_command``'s and ``lcmt_panda_status``'s
+    first field (tests/driver/test_wire_faults.py checks every command's).
     """
 
     def __init__(self):
@@ -86,10 +106,9 @@ class CommandStamp(LeafSystem):
         )
 
     def _calc(self, context, output):
-        command = lcmt_panda_command.decode(
-            self._command_serializer.Serialize(self._command.EvalAbstract(context))
-        )
-        status_bytes = self._status_serializer.Serialize(self._status.EvalAbstract(context))
-        status = lcmt_panda_status.decode(status_bytes)
-        command.utime = status.utime
-        self._command_serializer.Deserialize(command.encode(), output)
+        # Each encoding is LCM's 8-byte type fingerprint, then the message's first field,
+        # ``utime`` (int64, big-endian) in both types: the status's 8 bytes replace the
+        # command's, with no Python decode and encode of either message.
+        command = self._command_serializer.Serialize(self._command.EvalAbstract(context))
+        status = self._status_serializer.Serialize(self._status.EvalAbstract(context))
+        self._command_serializer.Deserialize(command[:8] + status[8:16] + command[16:], output)

@@ -8,11 +8,11 @@ import dataclasses
 import numpy as np
 import pytest
 from drake import lcmt_force_torque
-from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import MultibodyForces
+from pydrake.systems.lcm import _Serializer_
 
 from nsdrake.control.model import ControllerModel
 from nsdrake.driver.run import drive_traces, run_simulated
@@ -80,12 +80,14 @@ def test_force_torque_messages_round_trip():
     np.testing.assert_array_equal(wrench_of(lcmt_force_torque.decode(message.encode())), W)
     sender, receiver = ForceTorqueSender(), ForceTorqueReceiver()
     sc, rc = sender.CreateDefaultContext(), receiver.CreateDefaultContext()
-    receiver.get_input_port().FixValue(
-        rc, AbstractValue.Make(lcmt_force_torque())
-    )  # the subscriber's default
+    serializer = _Serializer_[lcmt_force_torque]()  # Drake's C++ message, as the LCM systems hold it
+    receiver.get_input_port().FixValue(rc, serializer.CreateDefaultValue())  # the subscriber's default
     np.testing.assert_array_equal(receiver.GetOutputPort("wrench").Eval(rc), np.zeros(6))  # before a message
     sender.GetInputPort("wrench").FixValue(sc, W)
-    receiver.get_input_port().FixValue(rc, AbstractValue.Make(sender.get_output_port().Eval(sc)))
+    sc.SetTime(1.234)
+    sent = sender.get_output_port().EvalAbstract(sc)
+    assert lcmt_force_torque.decode(serializer.Serialize(sent)).timestamp == 1234  # the context's time [ms]
+    receiver.get_input_port().FixValue(rc, sent)
     np.testing.assert_array_equal(receiver.GetOutputPort("wrench").Eval(rc), W)
 
 
