@@ -6,13 +6,18 @@ from __future__ import annotations
 import numpy as np
 from drake import lcmt_panda_status
 
+STATUS_FIELDS = ("joint_position", "joint_velocity", "joint_torque_external")
+
 
 def status_problem(status: lcmt_panda_status, num_joints: int) -> str | None:
     """A status the controller cannot use: the wrong joint count, or a position,
     velocity or external torque that is not finite."""
     if status.num_joints != num_joints:
         return f"it has {status.num_joints} joints, the arm has {num_joints}"
-    for field in ("joint_position", "joint_velocity", "joint_torque_external"):
+    fields = [getattr(status, field) for field in STATUS_FIELDS]
+    if all(len(values) == num_joints for values in fields) and np.isfinite(fields).all():
+        return None  # the usual case, in one array operation (this runs inside every tick)
+    for field in STATUS_FIELDS:
         values = np.asarray(getattr(status, field), dtype=float)
         if values.shape != (num_joints,):
             return f"{field} has {values.size} values, the arm has {num_joints} joints"
@@ -40,10 +45,10 @@ def jump_problem(
 ) -> str | None:
     """A joint that moved more than ``max_step`` per period over the ``periods`` since
     the previous status: a jump no real arm makes (the worst joint named)."""
-    step = np.abs(np.asarray(q) - np.asarray(q_previous))
-    worst = int(np.argmax(step))
-    if step[worst] <= max_step * periods:
+    step = np.abs(np.subtract(q, q_previous))
+    if step.max() <= max_step * periods:
         return None
+    worst = int(np.argmax(step))
     return (
         f"{joint_names[worst]} moved {step[worst]:.4g} rad in {periods} period(s) "
         f"(driver.max_joint_step {max_step:g} rad per period)"

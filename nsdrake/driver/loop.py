@@ -181,8 +181,9 @@ class ControllerLoop:
             raise self._fault(
                 f"status refused: its utime {status.utime} µs did not advance from {self._last.utime} µs"
             )
-        q, q_last = np.asarray(status.joint_position), np.asarray(self._last.joint_position)
-        problem = jump_problem(q, q_last, self.config.max_joint_step, steps, self._names)
+        problem = jump_problem(
+            status.joint_position, self._last.joint_position, self.config.max_joint_step, steps, self._names
+        )
         if problem:
             raise self._fault(f"status refused: {problem}")
         if self.drive.force_torque_subscriber is not None:
