@@ -11,7 +11,9 @@ into ``--out`` (default ``bench/out/drive-soak``; with ``--gc both`` also
 
 ``--gc``: ``off`` is nsdrake's setting (the collector frozen and disabled during the loop);
 ``on`` leaves it running and counts its collections and their longest pause; ``both``
-soaks twice, on first. The process's resident memory growth is reported for each.
+soaks twice, on first. The process's resident memory growth is reported for each, and the
+machine's 1-minute load average before and after (wall-clock ticks on a loaded machine are
+preempted: read the figures with it).
 
 ``--profile`` instead says where the tick's time goes: the median of each stage over 3000
 unpaced ticks (take and check the status; advance the diagram, which runs the controller's
@@ -24,6 +26,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import json
+import os
 import pstats
 import resource
 import sys
@@ -48,10 +51,11 @@ def rss_mb() -> float:
 def soak(duration: float, pause_gc: bool) -> dict:
     scenario = load_scenario("panda_wipe", duration=duration)
     drive = prepare(scenario, realtime_rate=1.0)
-    before = rss_mb()
+    before, load_before = rss_mb(), os.getloadavg()[0]
     run = drive.run(pause_gc=pause_gc)
     timing = dict(run.timing)
     timing.update(
+        load_average_1min=[load_before, os.getloadavg()[0]],  # the machine's, before and after
         scenario="panda_wipe",
         duration_s=duration,
         realtime_rate=1.0,
@@ -153,6 +157,7 @@ def main():
                 "gc_longest_pause_us",
                 "rss_growth_mb",
                 "statuses_skipped",
+                "load_average_1min",
                 "failure",
             )
         }
