@@ -105,7 +105,8 @@ def worst_relative(a: np.ndarray, b: np.ndarray) -> float:
     """max over ticks of max|a_k − b_k| / max|b_k| (columns are ticks); equal entries, ∞ (no
     obstacle: d_min) and nan (ν of a posture law) included, differ by 0."""
     same = (a == b) | (np.isnan(a) & np.isnan(b))  # nan: ν and eⁿ where a law has none
-    difference = np.where(same, 0.0, np.abs(a - b))
+    with np.errstate(invalid="ignore"):  # ∞ − ∞ where both are ∞: equal, counted 0
+        difference = np.where(same, 0.0, np.abs(a - b))
     scale = np.maximum(np.max(np.abs(np.where(np.isfinite(b), b, 0.0)), axis=0), 1e-300)
     return float(np.max(np.max(difference, axis=0) / scale))
 
