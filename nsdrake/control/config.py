@@ -166,7 +166,8 @@ class PostureConfig:
     q_d: dict[str, float] = field(default_factory=dict)
     # W = diag(w) keyed by joint name, missing joints 1 [-].
     weight: dict[str, float] = field(default_factory=dict)
-    # Step gain K of Eq. 30 (source: posture); <= 0, a negative gain minimises p [1/s].
+    # Step gain K of Eq. 30 (source: posture); <= 0, a negative gain minimises p
+    # [kg m²/s with J̄, whose step rotates Φ by H⁻¹; 1/s with the other inverses].
     gain: float = 0.0
     # An offset Δq added to q_d from offset_time, keyed by joint name (missing joints 0) [rad].
     offset: dict[str, float] = field(default_factory=dict)
