@@ -30,6 +30,7 @@ from nsdrake.experiment.output import (
     release_unused,
 )
 from nsdrake.experiment.scenario import ScenarioError, load_scenario, shipped_scenarios
+from nsdrake.reporting.progress import Progress
 from nsdrake.reporting.run_folder import check_scenario, run_to_folder
 from nsdrake.station.visualization import start_meshcat
 from nsdrake.studies.compare import (
@@ -148,36 +149,6 @@ def _seconds(text: str) -> float:
     return value
 
 
-class _Progress:
-    """A progress bar on a terminal; silent when stderr is not one (CI logs)."""
-
-    def __init__(self, label: str):
-        self.enabled = sys.stderr.isatty()
-        self.label = label
-        self.start = time.perf_counter()
-        self.partial = False  # a bar is drawn and its line not ended
-
-    def end_line(self) -> None:
-        """Ends a bar left half-drawn (the run stopped), so that a message starts a line."""
-        if self.partial:
-            sys.stderr.write("\n")
-            self.partial = False
-
-    def __call__(self, fraction: float):
-        if not self.enabled:
-            return
-        width = 30
-        done = int(round(width * fraction))
-        elapsed = time.perf_counter() - self.start
-        sys.stderr.write(
-            f"\r{self.label} [{'#' * done}{'.' * (width - done)}] {fraction:4.0%} {elapsed:5.1f} s"
-        )
-        self.partial = fraction < 1.0
-        if fraction >= 1.0:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 def _run(args) -> int:
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     check_scenario(scenario)  # model files, joint names: fail before anything is written
@@ -188,13 +159,11 @@ def _run(args) -> int:
             print(f"nsdrake: error: cannot start Meshcat: {' '.join(str(e).split())}", file=sys.stderr)
             return 2
         print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
-        progress = _Progress(args.scenario)
-        try:
+        runs = 2 if scenario.report.compare_without_null_space_task else 1  # and its comparison run
+        with Progress(args.scenario, simulated=runs * scenario.duration) as progress:
             result = run_to_folder(
                 scenario, out, progress=progress, replay=not args.no_replay, meshcat=meshcat
             )
-        finally:
-            progress.end_line()
     if result.interrupted:
         print(f"nsdrake: {result.failure}; the run so far is in {out}/, marked interrupted", file=sys.stderr)
         return INTERRUPTED
@@ -220,18 +189,17 @@ def _compare(args) -> int:
         variant_scenario(family, i, args.config, args.duration)
     with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
         print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
-        progress = _Progress(args.family)
-        result = run_family(
-            family,
-            out,
-            config=args.config,
-            duration=args.duration,
-            jobs=args.jobs,
-            isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
-            progress=progress,
-            variant_timeout=args.variant_timeout,
-        )
-        progress.end_line()
+        with Progress(args.family, total=len(family.variants), unit="variants done") as progress:
+            result = run_family(
+                family,
+                out,
+                config=args.config,
+                duration=args.duration,
+                jobs=args.jobs,
+                isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
+                progress=progress,
+                variant_timeout=args.variant_timeout,
+            )
     if result.interrupted:
         print(
             f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "

@@ -38,6 +38,7 @@ from nsdrake.experiment.output import (
     remove_listed,
     take_over,
 )
+from nsdrake.reporting.progress import Progress
 from nsdrake.studies.sweep_spec import (
     BASELINE_METRIC,
     MAX_RUNS,
@@ -304,25 +305,18 @@ def plot_sweep(path: Path, spec: SweepSpec, records: dict[int, dict]) -> None:
 # --- running ----------------------------------------------------------------------------
 
 
-class SweepProgress:
-    """``\\r[#####.....] 12/40`` on a terminal; silent when the stream is not one (CI logs)."""
+class SweepProgress(Progress):
+    """``\\r[#####.....] 12/40`` on a terminal; in a log, one line every ten seconds or so
+    (:mod:`nsdrake.reporting.progress`). Called with the runs done and failed."""
 
-    def __init__(self, total: int, stream=None, width: int = 30):
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = self.stream.isatty()
-        self.total, self.width = total, width
-        self.partial = False  # a bar is drawn and its line not ended
+    def __init__(self, total: int, stream=None, width: int = 30, *, label: str = "sweep", **kwargs):
+        super().__init__(
+            label, total=total, unit="runs done", stream=stream, width=width, bar_label="",
+            bar_counts=True, **kwargs,
+        )  # fmt: skip
 
     def __call__(self, done: int, failed: int = 0):
-        if not self.enabled:
-            return
-        k = int(self.width * done / max(self.total, 1))
-        tail = f" ({failed} failed)" if failed else ""
-        self.stream.write(f"\r[{'#' * k}{'.' * (self.width - k)}] {done}/{self.total}{tail}")
-        self.partial = done < self.total
-        if done >= self.total:
-            self.stream.write("\n")
-        self.stream.flush()
+        self.update(done, failed)
 
 
 @dataclass
@@ -404,22 +398,21 @@ def sweep_command(args) -> int:
         release_unused(out, created)
         raise
     print(f"nsdrake: sweeping {spec.name}: {len(runs)} runs on {_engine_words(args)} into {out}/")
-    progress = SweepProgress(len(runs))
+    progress = SweepProgress(len(runs), label=f"sweep {spec.name}")
     try:
-        outcome = run_sweep(
-            spec,
-            runs,
-            out,
-            engine=args.engine,
-            jobs=args.jobs,
-            scheduler=args.scheduler,
-            progress=progress,
-            prepared=True,
-        )
+        with progress:
+            outcome = run_sweep(
+                spec,
+                runs,
+                out,
+                engine=args.engine,
+                jobs=args.jobs,
+                scheduler=args.scheduler,
+                progress=progress,
+                prepared=True,
+            )
     except KeyboardInterrupt:
         kept = sum(1 for r in runs if finished(out, r, spec) is not None)
-        if progress.partial:
-            progress.stream.write("\n")
         print(f"nsdrake: interrupted; {kept} of {len(runs)} runs are kept in {out}/; resume with: "
               f"nsdrake sweep {args.spec} --out {out}", file=sys.stderr)  # fmt: skip
         return 130

@@ -452,8 +452,9 @@ def test_a_failing_run_and_a_dying_worker_are_rows_and_the_exit_status_is_1(tmp_
 
 
 def test_the_progress_bar_is_drawn_on_a_terminal_only():
-    """Catches progress text written into CI logs (not a terminal), and a bar that
-    does not count runs."""
+    """Catches a bar (carriage returns) written into CI logs (not a terminal: there, a line
+    every ten seconds or so, tests/reporting/test_progress.py), and a bar that does not
+    count runs."""
 
     class Terminal(io.StringIO):
         def isatty(self):
