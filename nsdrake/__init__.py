@@ -14,14 +14,27 @@ from nsdrake.control import (
     NullSpaceImpedanceController,
     Obstacle,
 )
+from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
+from nsdrake.experiment.reference_system import SurfaceReference
 from nsdrake.station.control_hold import ControlHold
+from nsdrake.station.force_sensor import ForceSensor
 
+# The controller (nsdrake.control) and, for a contact set-up of your own, the pieces the
+# shipped scenarios use: a wrench sensor from a weld's reaction force (ForceSensor), the
+# surface reference that freezes the normal where contact is detected (SurfaceReference)
+# and its trajectories (SlideAndPress, CircleOnSurface), and the hold for a plant that
+# steps faster than the controller (ControlHold). README: "Use the controller in your
+# own diagram".
 __all__ = [
+    "CircleOnSurface",
     "ControlHold",
     "ControllerConfig",
     "ControllerConfigError",
     "ControllerModel",
     "ControllerStep",
     "NullSpaceImpedanceController",
+    "ForceSensor",
     "Obstacle",
+    "SlideAndPress",
+    "SurfaceReference",
 ]

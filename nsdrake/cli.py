@@ -6,11 +6,14 @@
                            [--variant-timeout SECONDS]
     nsdrake sweep SPEC [--out DIR] [--jobs N] [--engine process|dask] [--scheduler ADDRESS] [--overwrite]
                        [--max-runs N]
+    nsdrake drive SCENARIO (--lcm URL | --simulated-driver) [--config FILE.yaml] [--out DIR]
+                           [--duration SECONDS] [--overwrite] [--realtime-rate RATE]
+    nsdrake sim-driver SCENARIO --lcm URL [--config FILE.yaml] [--duration SECONDS]
     nsdrake list
 
 Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
-status 2, before any simulation starts; a failed run exits 1, Ctrl-C 130 (keeping
-what was computed, marked interrupted).
+status 2, before any simulation starts; a run that fails (a bound missed, a divergence,
+a fault on the wire) exits 1, Ctrl-C 130 (keeping what was computed, marked interrupted).
 """
 
 from __future__ import annotations
@@ -115,8 +118,53 @@ def build_parser() -> argparse.ArgumentParser:
         default=MAX_RUNS,
         help=f"refuse a sweep of more runs than this (default {MAX_RUNS})",
     )
+    _add_drive_parsers(sub)
     sub.add_parser("list", help="list the shipped scenarios, families and sweeps")
     return parser
+
+
+def _add_drive_parsers(sub) -> None:
+    drive = sub.add_parser(
+        "drive", help="run a scenario's controller behind a Franka Panda's LCM driver (or the simulated one)"
+    )
+    drive.add_argument("scenario", help="a shipped scenario of a 7-joint Panda (panda_wipe)")
+    bus = drive.add_mutually_exclusive_group(required=True)
+    bus.add_argument("--lcm", metavar="URL", help="the LCM URL the robot's driver talks on")
+    bus.add_argument(
+        "--simulated-driver",
+        action="store_true",
+        help="run the simulated driver in this process, both sides over memq://",
+    )
+    drive.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
+    drive.add_argument(
+        "--out", type=Path, help="output folder (default: runs/drive-SCENARIO, never overwritten)"
+    )
+    drive.add_argument("--duration", type=_duration, help="time to drive [s], overrides the scenario")
+    drive.add_argument(
+        "--overwrite", action="store_true", help="replace the files an earlier nsdrake run wrote in --out"
+    )
+    drive.add_argument(
+        "--realtime-rate",
+        type=_rate,
+        default=1.0,
+        help="with --simulated-driver: the driver's pace against the wall clock "
+        "(1: real time; 0: as fast as possible)",
+    )
+    sim = sub.add_parser("sim-driver", help="run the simulated driver alone on an LCM bus, at real time")
+    sim.add_argument("scenario", help="a shipped scenario of a 7-joint Panda (panda_wipe)")
+    sim.add_argument("--lcm", metavar="URL", required=True, help="the LCM URL the controller talks on")
+    sim.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
+    sim.add_argument("--duration", type=_duration, help="time to serve after the first command [s]")
+
+
+def _rate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--realtime-rate must be a number, got '{text}'") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"--realtime-rate must be >= 0, got '{text}'")
+    return value
 
 
 def _jobs_like(option: str):
@@ -159,11 +207,14 @@ def _run(args) -> int:
             print(f"nsdrake: error: cannot start Meshcat: {' '.join(str(e).split())}", file=sys.stderr)
             return 2
         print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
-        runs = 2 if scenario.report.compare_without_null_space_task else 1  # and its comparison run
-        with Progress(args.scenario, simulated=runs * scenario.duration) as progress:
+        runs = 2 if scenario.report.compare_without_null_space_task else 1
+        progress = Progress(args.scenario, 1.0, simulated=runs * scenario.duration)
+        try:
             result = run_to_folder(
                 scenario, out, progress=progress, replay=not args.no_replay, meshcat=meshcat
             )
+        finally:
+            progress.end_line()
     if result.interrupted:
         print(f"nsdrake: {result.failure}; the run so far is in {out}/, marked interrupted", file=sys.stderr)
         return INTERRUPTED
@@ -189,17 +240,18 @@ def _compare(args) -> int:
         variant_scenario(family, i, args.config, args.duration)
     with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
         print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
-        with Progress(args.family, total=len(family.variants), unit="variants done") as progress:
-            result = run_family(
-                family,
-                out,
-                config=args.config,
-                duration=args.duration,
-                jobs=args.jobs,
-                isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
-                progress=progress,
-                variant_timeout=args.variant_timeout,
-            )
+        progress = Progress(args.family, 1.0)
+        result = run_family(
+            family,
+            out,
+            config=args.config,
+            duration=args.duration,
+            jobs=args.jobs,
+            isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
+            progress=progress,
+            variant_timeout=args.variant_timeout,
+        )
+        progress.end_line()
     if result.interrupted:
         print(
             f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "
@@ -218,6 +270,63 @@ def _compare(args) -> int:
     if result.failures:
         print(f"nsdrake: {len(result.failures)} of {len(family.variants)} variants failed", file=sys.stderr)
         return 1
+    return 0
+
+
+def _lcm(url: str):
+    """The LCM bus at ``url``; one line (ScenarioError) if it cannot be opened."""
+    from nsdrake.driver.bus import BusError, open_bus
+
+    try:
+        return open_bus(url)
+    except BusError as e:
+        raise ScenarioError(f"--lcm: {e}") from None
+
+
+def _drive(args) -> int:
+    from nsdrake.driver.run import prepare, write_drive_folder
+    from nsdrake.driver.timing import timing_line
+
+    scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    lcm = _lcm(args.lcm) if args.lcm else None
+    drive = prepare(scenario, lcm, realtime_rate=args.realtime_rate)  # every input error before the folder
+    with _claimed(args.out, f"drive-{args.scenario}", args.overwrite) as out:
+        where = "the simulated driver over memq://" if lcm is None else f"the driver at {args.lcm}"
+        print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
+        progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
+        try:
+            run = drive.run(progress=progress)
+        finally:
+            progress.end_line()
+        result = write_drive_folder(run, out)
+    for m in result.metrics:
+        mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
+        bound = f"  (bound: {m.bound})" if m.bound else ""
+        print(f"  {m.name:38s} {m.value:12.6g} {m.unit:9s}{mark}{bound}")
+    print(f"nsdrake: {timing_line(run.timing)}")
+    if run.failure:
+        print(f"nsdrake: error: {args.scenario}: drive: {run.failure}", file=sys.stderr)
+    files = ", ".join(sorted(p.name for p in out.iterdir()))
+    print(f"nsdrake: wrote {out}/: {files}")
+    return 0 if result.passed else 1
+
+
+def _sim_driver(args) -> int:
+    from nsdrake.driver.run import serve_simulated_driver
+
+    scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    lcm = _lcm(args.lcm)
+    print(f"nsdrake: simulated driver for {args.scenario} on {args.lcm}; serving (Ctrl-C ends)", flush=True)
+    try:
+        progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
+        served = serve_simulated_driver(scenario, lcm, progress=progress)
+    except KeyboardInterrupt:
+        print("nsdrake: simulated driver stopped", file=sys.stderr)
+        return 1
+    print(
+        f"nsdrake: simulated driver: {served.steps} periods, {served.commands} commands, "
+        f"{served.late} periods without their command in time"
+    )
     return 0
 
 
@@ -277,6 +386,10 @@ def main(argv: list[str] | None = None) -> int:
             return _compare(args)
         if args.command == "sweep":
             return sweep_command(args)
+        if args.command == "drive":
+            return _drive(args)
+        if args.command == "sim-driver":
+            return _sim_driver(args)
         return _run(args)
     except (ScenarioError, OutputFolderError) as e:
         print(f"nsdrake: error: {e}", file=sys.stderr)

@@ -158,3 +158,15 @@ def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("fig3_short")
     result = run_to_folder(load_scenario("fig3", duration=SHORT_RUN_DURATION), out)
     return out, result
+
+
+def without_notices(err: str) -> str:
+    """stderr without what a command prints besides its messages: the one-time compile
+    notice of nsdrake's kernels (a fresh install compiles them in whichever process runs
+    first) and progress lines (one every LOG_INTERVAL of wall time when not on a terminal)."""
+    import re
+
+    from nsdrake.control.kernels import NOTICE
+
+    err = err.replace(NOTICE + "\n", "")
+    return re.sub(r"(?m)^[^:\n]+: (\d+%|\d+/\d+ \w+)( \(\d+ failed\))?, [^\n]*\d+ s[^\n]*\n", "", err)

@@ -15,7 +15,6 @@ import pytest
 from nsdrake.cli import main
 from nsdrake.experiment.output import OutputFolderError, default_output_folder, prepare_output_folder
 from nsdrake.experiment.traces import Traces
-from nsdrake.reporting.progress import INTERVAL_VARIABLE, Progress
 
 REQUIRED_COLUMNS = (
     "t x y x_d y_d f_x f_y f_d q1 q2 q3 q4 v1 v2 v3 v4 tau1 tau2 tau3 tau4 "
@@ -55,34 +54,6 @@ def test_meshcat_flag_prints_a_localhost_url(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert re.search(r"Meshcat is at http://localhost:\d+", printed), printed
     assert (out / "replay.html").is_file()
-
-
-@pytest.mark.parametrize("tty", [False, True])
-def test_progress_bar_only_on_a_terminal(monkeypatch, capsys, tty):
-    """Catches a bar (carriage returns) written into a log, and a bar that does not end its
-    line; in a log, the few lines of nsdrake.reporting.progress instead."""
-    monkeypatch.setattr(sys.stderr, "isatty", lambda: tty, raising=False)
-    progress = Progress("fig3", simulated=10.0)
-    for k in range(5):
-        progress(k / 4)
-    err = capsys.readouterr().err
-    if tty:
-        assert err.count("\r") == 5 and "100%" in err and err.endswith("\n")
-    else:
-        assert "\r" not in err and "[" not in err
-
-
-def test_a_run_in_a_log_says_it_is_alive(monkeypatch, capsys, tmp_path):
-    """Not on a terminal (as here), nsdrake run prints a short line now and then: simulated
-    time, real-time factor. Catches the run saying nothing in a CI log (the interval is
-    shortened to make every report due; tests/reporting/test_progress.py checks the rate)."""
-    monkeypatch.setenv(INTERVAL_VARIABLE, "1e-9")
-    assert main(["run", "fig3", "--duration", "0.2", "--out", str(tmp_path / "run")]) in (0, 1)
-    lines = [x for x in capsys.readouterr().err.splitlines() if x.startswith("nsdrake: fig3: ")]
-    assert len(lines) >= 100, lines[:3]  # two simulations, about a hundred reports each
-    line = r"nsdrake: fig3: ([\d.]+) of 0.4 s simulated \((\d+)%\), ([\d.e-]+)x real time, \d+ s"
-    last = re.fullmatch(line, lines[-1])
-    assert last and float(last[1]) < 0.4 and float(last[3]) > 0, lines[-1]
 
 
 def test_written_scenario_reloads_to_the_same_run(tmp_path):
@@ -366,13 +337,3 @@ def test_a_command_that_fails_before_writing_leaves_no_claimed_folder(tmp_path, 
     (tmp_path / "mine").mkdir()
     assert main(["run", "fig3", "--duration", "0.1", "--out", "mine"]) == 2
     assert (tmp_path / "mine").is_dir() and list((tmp_path / "mine").iterdir()) == []
-
-
-def test_a_comparison_in_a_log_counts_its_variants(monkeypatch, capsys, tmp_path):
-    """nsdrake compare's lines in a log (the interval shortened): variants done of all."""
-    monkeypatch.setenv(INTERVAL_VARIABLE, "1e-9")
-    out = tmp_path / "lyap"
-    assert main(["compare", "lyapunov", "--duration", "0.1", "--out", str(out), "--jobs", "1"]) == 0
-    lines = [x for x in capsys.readouterr().err.splitlines() if x.startswith("nsdrake: lyapunov: ")]
-    counts = [int(re.fullmatch(r"nsdrake: lyapunov: (\d) of 3 variants done, \d+ s", x)[1]) for x in lines]
-    assert counts == sorted(counts) and {1, 2} <= set(counts), lines  # the heartbeat may add 0s

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import without_notices
 
 from nsdrake.cli import main
 from nsdrake.experiment.traces import Traces
@@ -147,7 +148,7 @@ def test_ctrl_c_during_a_comparison_keeps_each_variants_traces(tmp_path, to):
     finally:
         process.kill()
     assert process.returncode == 130
-    assert err == (
+    assert without_notices(err) == (
         f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "
         "(unfinished rows marked interrupted)\n"
     )

@@ -13,7 +13,7 @@ import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "nsdrake"
-LAYERS = ("control", "station", "realism", "experiment", "reporting", "studies")
+LAYERS = ("control", "station", "realism", "experiment", "reporting", "driver", "studies")
 TOP = len(LAYERS)  # cli, __init__, __main__
 
 

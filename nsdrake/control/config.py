@@ -31,11 +31,14 @@ class ImpedanceConfig:
     K_v_rotation: float = 40.0
     # Add the gravity torques g of Eq. 7 (needed in the vertical plane) [-].
     gravity_compensation: bool = True
-    # Largest task inertia Λ the law may use: near a singular pose Λ = (J H⁻¹ Jᵀ)⁻¹ grows
-    # without bound, and above this cap it is damped (nsdrake.control.dynamics.task_inertia);
-    # below it the law is exactly the paper's. inf turns the treatment off
-    # [kg, kg m² for rotational rows].
+    # Largest translational task inertia Λ the law may use: near a singular pose
+    # Λ = (J H⁻¹ Jᵀ)⁻¹ grows without bound, and above this cap it is damped
+    # (nsdrake.control.dynamics.task_inertia, judged in a dimensionless form with the
+    # rotational cap below); below it the law is exactly the paper's. inf turns the
+    # treatment off for the translational rows [kg].
     max_task_inertia: float = 50.0
+    # The same for the rotational rows of a pose task [kg m²].
+    max_task_rotational_inertia: float = 50.0
 
 
 @dataclass

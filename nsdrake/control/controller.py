@@ -21,9 +21,11 @@ from nsdrake.control.systems import (
     FusedController,
     ImpedanceController,
     NullSpaceController,
+    NullSpaceVelocitySource,
     PrioritySelector,
     RobotTermsSystem,
     SelfMotionSweep,
+    ZeroIfUnconnected,
 )
 from nsdrake.control.validation import (  # noqa: F401 (ControllerConfigError, check_task_span: re-exported)
     ControllerConfigError,
@@ -102,8 +104,11 @@ class NullSpaceImpedanceController(Diagram):
         - desired_orientation (with rotational task axes)
         - desired_angular_velocity (with rotational task axes)
         - desired_angular_acceleration (with rotational task axes)
+        - desired_null_space_velocity (optional)
         output_ports:
         - generalized_force
+        - null_space_torque
+        - task_torque
         - null_space_velocity_error
         - lyapunov
         - desired_null_space_velocity
@@ -127,9 +132,17 @@ class NullSpaceImpedanceController(Diagram):
     translational ones): ``desired_orientation`` R_d as a unit quaternion [w, x, y, z]
     (4), ``desired_angular_velocity`` ω_d and ``desired_angular_acceleration`` ω̇_d
     (3 each, world frame) [rad/s, rad/s²]; the law uses their task rows.
+    ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s] is optional: connected (or fixed),
+    it is the q̇_dⁿ of Eq. 21 and wins over the configured source (the criteria through
+    Fig. 1's selector, or the sweep), used as given (no joint-speed scaling, no blend);
+    unconnected, the configured source's. With ``normal=None`` (no force axis),
+    ``measured_wrench`` and ``desired_force`` are optional too: unconnected, they read zero.
 
     Outputs: ``generalized_force`` τ (n) [N m], velocity order (map it to the
-    plant's actuation with Bᵀ); ``null_space_velocity_error`` eⁿ (n) [rad/s];
+    plant's actuation with Bᵀ); ``null_space_torque`` s τ₀ (n) [N m], Eq. 21's τ₀ as it
+    is in τ, after the actuator limits (J H⁻¹ τ₀ = 0: it does not move the task);
+    ``task_torque`` τ − τ₀ of Eq. 7 (n) [N m], before the limits;
+    ``null_space_velocity_error`` eⁿ (n) [rad/s];
     ``lyapunov`` ν (1) [J]; ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s];
     ``mode`` (1): 0 none, 1 obstacle avoidance, 2 joint torque, 3 manipulability, 4
     joint limits on level 2; ``speed_scale`` (1) the joint-speed limits' factor on q̇_dⁿ;
@@ -151,7 +164,10 @@ class NullSpaceImpedanceController(Diagram):
         task_axes: world axes of x, e.g. ("x", "y"), ("x", "y", "z") or the full pose
             ("x", "y", "z", "rx", "ry", "rz") (URDF/plant input only).
         normal: (m_t,) direction on the translational task axes in which the tool
-            pushes: any finite non-zero vector, normalised here.
+            pushes: any finite non-zero vector, normalised here. None (the default): no
+            force axis, a free-space position or pose task; every translational axis
+            then takes ``config.impedance``'s K_p_tangent and K_v_tangent (the defaults,
+            400 and 40, are critically damped: K_v = 2 √K_p).
         config: gains, inverse, switches, criteria, selector and speed limits.
         wrench_point: p_WSo (3,), the point the measured moment is about [m];
             None: the tool point itself.
@@ -184,17 +200,18 @@ class NullSpaceImpedanceController(Diagram):
     fresh context q̇_dⁿ blends in from zero over ``selector.blend_time``, and the first
     period has no q̈_dⁿ feed-forward and no torque-rate limit. The constructor raises
     ControllerConfigError (a ValueError) for a configuration the model cannot do, and
-    ValueError, FileNotFoundError or Drake's RuntimeError for a model it cannot read; it
-    does not judge the gains' stability. README, "Use the controller in your own
-    diagram": the measurements, and the wiring for a plant with more joints than the arm.
+    ValueError, FileNotFoundError or Drake's RuntimeError for a model it cannot read,
+    and refuses gains whose sampled loops are unstable at the period. README, "Use the
+    controller in your own diagram": the measurements, and the wiring for a plant with
+    more joints than the arm.
     """
 
     def __init__(
         self,
         *,
         controller_model: ControllerModel | MultibodyPlant | str | Path,
-        normal: Sequence[float],
         config: ControllerConfig,
+        normal: Sequence[float] | None = None,
         tool_frame: str = "tool",
         task_axes: Sequence[str] = ("x", "y"),
         wrench_point: Sequence[float] | None = None,
@@ -213,8 +230,9 @@ class NullSpaceImpedanceController(Diagram):
         )
         builder = DiagramBuilder()
         inputs, outputs = (_add_fused if fused else _add_named)(builder, self.plan)
-        for name in INPUTS[: len(inputs)]:
-            builder.ExportInput(inputs[name], name)
+        for name in INPUTS:
+            if name in inputs:
+                builder.ExportInput(inputs[name], name)
         for name in OUTPUTS:
             builder.ExportOutput(outputs[name], name)
         builder.BuildInto(self)
@@ -225,9 +243,11 @@ class NullSpaceImpedanceController(Diagram):
 INPUTS = (
     "estimated_state", "measured_wrench", "desired_position", "desired_velocity", "desired_acceleration",
     "desired_force", "desired_orientation", "desired_angular_velocity", "desired_angular_acceleration",
+    "desired_null_space_velocity",
 )  # fmt: skip
 OUTPUTS = (
-    "generalized_force", "saturation", "null_space_velocity_error", "lyapunov", "desired_null_space_velocity",
+    "generalized_force", "saturation", "null_space_torque", "task_torque", "null_space_velocity_error",
+    "lyapunov", "desired_null_space_velocity",
     "mode", "speed_scale", "manipulability", "joint_torque_criterion", "joint_limits_criterion",
     "joint_limit_margin", "d_min", "obstacle_potential", "task_position",
 )  # fmt: skip
@@ -285,6 +305,9 @@ def _add_named(builder, plan: ControllerPlan) -> tuple[dict, dict]:
         sweep = builder.AddNamedSystem("self_motion_sweep", SelfMotionSweep(plan=plan))
         builder.Connect(terms_port, sweep.GetInputPort("robot_terms"))
         qdot = sweep.get_output_port()
+    source = builder.AddNamedSystem("null_space_velocity_source", NullSpaceVelocitySource(plan.n))
+    builder.Connect(qdot, source.GetInputPort("configured"))
+    qdot = source.get_output_port()
     builder.Connect(qdot, null_space.GetInputPort("desired_null_space_velocity"))
     ns = _split(
         builder, "null_space_parts", null_space.GetOutputPort("null_space"), null_space.output_parts()
@@ -296,10 +319,13 @@ def _add_named(builder, plan: ControllerPlan) -> tuple[dict, dict]:
     inputs = {"estimated_state": terms.GetInputPort("estimated_state")}
     impedance_inputs = ("measured_wrench", "x_d", "xdot_d", "xddot_d", "f_d", "R_d", "omega_d", "omegadot_d")
     for name, port in zip(INPUTS[1:], impedance_inputs[: 8 if plan.m_r else 5], strict=False):
-        inputs[name] = impedance.GetInputPort(port)
+        inputs[name] = _optional(builder, plan, name, impedance.GetInputPort(port))
+    inputs["desired_null_space_velocity"] = source.GetInputPort("desired_null_space_velocity")
     outputs = {
         "generalized_force": limited["generalized_force"],
         "saturation": limited["saturation"],
+        "null_space_torque": limits.GetOutputPort("limited_null_space_torque"),
+        "task_torque": impedance.get_output_port(),
         "null_space_velocity_error": ns["null_space_velocity_error"],
         "lyapunov": ns["lyapunov"],
         "desired_null_space_velocity": qdot,
@@ -321,6 +347,22 @@ def _add_fused(builder, plan: ControllerPlan) -> tuple[dict, dict]:
     parts = _split(builder, "tick_parts", fused.GetOutputPort("tick"), tick_parts(plan.n, m_t))
     inputs = {"estimated_state": fused.GetInputPort("estimated_state")}
     for k, name in enumerate(INPUTS[1 : 1 + len(sizes)]):
-        inputs[name] = commands.get_input_port(k)
+        inputs[name] = _optional(builder, plan, name, commands.get_input_port(k))
+    inputs["desired_null_space_velocity"] = fused.GetInputPort("desired_null_space_velocity")
     outputs = {name: parts[name] for name in OUTPUTS if name in parts}
+    outputs["null_space_torque"] = fused.GetOutputPort("limited_null_space_torque")  # s τ₀, not τ₀
     return inputs, outputs | {name: parts[part] for name, part in CRITERION_OUTPUTS.items()}
+
+
+# The inputs a task without a force axis may leave unconnected (they then read zero).
+FREE_SPACE_OPTIONAL = {"measured_wrench": 6, "desired_force": 1}
+
+
+def _optional(builder, plan: ControllerPlan, name: str, port):
+    """``port``, or with no force axis for the optional inputs, the input of a
+    ZeroIfUnconnected in front of it."""
+    if plan.has_force_axis or name not in FREE_SPACE_OPTIONAL:
+        return port
+    zero = builder.AddNamedSystem(f"{name}_or_zero", ZeroIfUnconnected(FREE_SPACE_OPTIONAL[name]))
+    builder.Connect(zero.get_output_port(), port)
+    return zero.get_input_port()

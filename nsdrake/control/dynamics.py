@@ -147,24 +147,37 @@ def derived_terms(H_inv, J, dJ_dq, v):
 
 
 @njit(cache=True)
-def task_inertia(A: np.ndarray, floor: float) -> np.ndarray:
-    """Λ = (A + δ² I)⁻¹ for A = J H⁻¹ Jᵀ, with δ² = λ₀ (1 − λ_min/λ₀)² while the smallest
-    eigenvalue λ_min of A is below λ₀ = ``floor`` (= 1 / the largest task inertia
-    allowed), else δ = 0.
+def task_inertia(A: np.ndarray, floor: float, rotational_floor: float = -1.0, m_t: int = -1) -> np.ndarray:
+    """Λ = (A + δ² F)⁻¹ for A = J H⁻¹ Jᵀ, each part of the task capped in its own unit:
+    F = diag(f), f = ``floor`` = 1 / the largest translational task inertia allowed [1/kg]
+    on the first ``m_t`` rows and ``rotational_floor`` = 1 / the largest rotational one
+    [1/(kg m²)] on the others (-1: the same as ``floor``; ``m_t`` -1: every row
+    translational). The cap is judged on the dimensionless Ã = F^{-1/2} A F^{-1/2}, whose
+    eigenvalues are 1 where a direction's inertia is exactly at its part's cap: while the
+    smallest λ̃_min < 1, δ² = (1 − λ̃_min)², else δ = 0. With one part (or equal floors)
+    this is δ² = λ₀ (1 − λ_min/λ₀)² with λ₀ = ``floor``, as before the parts had caps of
+    their own; a cap of inf (f = 0) for one part is taken as 1e12 times the other's.
 
-    Away from singular poses (λ_min ≥ λ₀) this is the exact Λ of Section 3.1, and
-    the law is the paper's. As J loses rank, λ_min → 0 and the exact Λ, and with it
+    Away from singular poses (λ̃_min ≥ 1) this is the exact Λ of Section 3.1, and the
+    law is the paper's. As J loses rank, λ_min → 0 and the exact Λ, and with it
     J̄ = H⁻¹ Jᵀ Λ and the torque Jᵀ Λ ẍ_c, grow without bound; the damping keeps every
-    eigenvalue of Λ at most 1/min(λ + λ₀(1 − λ/λ₀)²) = 4/(3 λ₀) (at λ = λ₀/2), and
-    δ² and its derivative vanish at λ_min = λ₀, so Λ stays continuous and smooth
-    through the switch. The price, only there: J̄ is no longer an exact right
-    inverse (J J̄ = I − δ² Λ), so τ₀ may leak into the task, as with the damped
-    least-squares inverse. (m, m).
+    eigenvalue of F^{1/2} Λ F^{1/2} at most 4/3, and δ² and its derivative vanish at
+    λ̃_min = 1, so Λ stays continuous and smooth through the switch. The price, only
+    there: J̄ is no longer an exact right inverse (J J̄ = I − δ² Λ F), so τ₀ may leak into
+    the task, as with the damped least-squares inverse. (m, m).
     """
-    if floor > 0.0:
-        lam_min = np.linalg.eigvalsh(A)[0]
-        if lam_min < floor:
-            A = A + floor * (1.0 - lam_min / floor) ** 2 * np.eye(A.shape[0])
+    m = A.shape[0]
+    t = m if m_t < 0 else m_t
+    f = np.empty(m)
+    f[:t] = floor
+    f[t:] = floor if rotational_floor < 0.0 else rotational_floor
+    top = f.max()
+    if top > 0.0:
+        f = np.maximum(f, 1e-12 * top)
+        s = 1.0 / np.sqrt(f)
+        lam_min = np.linalg.eigvalsh(A * np.outer(s, s))[0]
+        if lam_min < 1.0:
+            A = A + (1.0 - lam_min) ** 2 * np.diag(f)
     return np.ascontiguousarray(np.linalg.inv(A))
 
 

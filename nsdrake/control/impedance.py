@@ -90,9 +90,12 @@ class ImpedanceGains:
     ) -> ImpedanceGains:
         """Gains diagonal in the frame of a surface with unit normal ``normal`` (on the
         translational axes), and, for ``rotational_axes`` rotational rows after them,
-        the scalar rotational gains k_p,r I and k_v,r I [1/s², 1/s]."""
+        the scalar rotational gains k_p,r I and k_v,r I [1/s², 1/s]. A zero ``normal`` is
+        no force axis (a free-space task): every translational axis takes the tangent
+        gains, and the force term n K_f (f_d − nᵀF) vanishes with n."""
         n = np.asarray(normal, dtype=float)
-        n = n / np.linalg.norm(n)
+        if np.linalg.norm(n) > 0:
+            n = n / np.linalg.norm(n)
         P_n = np.outer(n, n)
         P_t = np.eye(n.shape[0]) - P_n
         K_p = K_p_tangent * P_t + K_p_normal * P_n

@@ -51,8 +51,9 @@ PlanView = namedtuple(
     (
         # task torque (Eqs. 6–8)
         "K_p", "K_v", "normal", "K_f", "p_WSo", "has_p_WSo", "gravity",
-        # model terms: Λ's cap 1/Λ_max, the inverse (Eq. 13 or not, λ), C wanted
-        "inertia_floor", "inertia_weighted", "damping", "coriolis",
+        # model terms: Λ's caps 1/Λ_max (translational rows [1/kg], rotational [1/(kg m²)]),
+        # the inverse (Eq. 13 or not, λ), C wanted
+        "inertia_floor", "rotational_inertia_floor", "inertia_weighted", "damping", "coriolis",
         # criteria
         "F_d", "lower", "upper", "limits_influence", "has_limits",
         "obstacle_mode", "obstacle_influence", "links", "link_support", "obstacles",
@@ -142,7 +143,7 @@ def plan_size(dims) -> int:
     n, m, k, o = dims[N_], dims[M_], dims[K_], dims[O_]
     # in the order of plan_views
     return (
-        m * m + m * m + m + 6 + 3 + m + n + n + 5 + k * LINK_WIDTH + k * n + o * OBSTACLE_WIDTH
+        m * m + m * m + m + 7 + 3 + m + n + n + 5 + k * LINK_WIDTH + k * n + o * OBSTACLE_WIDTH
         + CRITERIA + 6 + 4 + n + n + 4 + 5 + n + n
     )  # fmt: skip
 
@@ -156,7 +157,9 @@ def plan_views(buf, dims) -> PlanView:
     K_p, o = _take(buf, 0, m * m)
     K_v, o = _take(buf, o, m * m)
     normal, o = _take(buf, o, m)
-    s, o = _take(buf, o, 6)  # K_f, has_p_WSo, gravity, inertia_floor, inertia_weighted, damping
+    s, o = _take(
+        buf, o, 7
+    )  # K_f, has_p_WSo, gravity, inertia_floor, inertia_weighted, damping, rotational floor
     p_WSo, o = _take(buf, o, 3)
     F_d, o = _take(buf, o, m)
     lower, o = _take(buf, o, n)
@@ -176,7 +179,7 @@ def plan_views(buf, dims) -> PlanView:
     rate_max, o = _take(buf, o, n)
     return PlanView(
         K_p.reshape((m, m)), K_v.reshape((m, m)), normal, s[0], p_WSo, s[1] != 0.0, s[2] != 0.0,
-        s[3], s[4] != 0.0, s[5], c[0] != 0.0,
+        s[3], s[6], s[4] != 0.0, s[5], c[0] != 0.0,
         F_d, lower, upper, c[1], c[2] != 0.0,
         int(c[3]), c[4], links.reshape((k, LINK_WIDTH)), link_support.reshape((k, n)),
         obstacles.reshape((n_obs, OBSTACLE_WIDTH)),

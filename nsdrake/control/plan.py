@@ -111,7 +111,8 @@ class ControllerPlan:
 
     Attributes:
         model: the :class:`ControllerModel`; config: the :class:`ControllerConfig`.
-        normal: (m_t,) unit direction in which the tool pushes, on the translational axes.
+        normal: (m_t,) unit direction in which the tool pushes, on the translational axes;
+            zeros when the task has no force axis (``has_force_axis`` False).
         dims, plan, index: the flat arrays of :mod:`nsdrake.control.layout`.
         n, m, m_t, m_r: joints, task axes (translational, rotational).
     """
@@ -121,13 +122,15 @@ class ControllerPlan:
         *,
         model: ControllerModel,
         config: ControllerConfig,
-        normal: np.ndarray,
+        normal: np.ndarray | None,
         wrench_point: Sequence[float] | None,
     ):
         self.model, self.config = model, config
         arm = model.arm
         self.n, self.m, self.m_t, self.m_r = arm.n, arm.m, arm.m_t, arm.m_r
-        self.normal = np.asarray(normal, dtype=float)
+        # No force axis (normal None): n = 0 on the translational axes (ImpedanceGains).
+        self.has_force_axis = normal is not None
+        self.normal = np.zeros(self.m_t) if normal is None else np.asarray(normal, dtype=float)
         self.inverse = generalized_inverse(config)
         pin = model.pinocchio
         self._distances = _obstacle_distances(model)
@@ -189,7 +192,8 @@ class ControllerPlan:
         parts = [
             gains.K_p, gains.K_v, gains.normal,
             [gains.K_f, wrench_point is not None, imp.gravity_compensation],
-            [1.0 / imp.max_task_inertia, self.inverse.inertia_weighted, self.inverse.damping],
+            [1.0 / imp.max_task_inertia, self.inverse.inertia_weighted, self.inverse.damping,
+             1.0 / imp.max_task_rotational_inertia],
             np.zeros(3) if wrench_point is None else wrench_point,
             config.nominal_force * gains.normal, lower, upper,
             [self.coriolis, d.criteria.joint_limits.influence, has_limits, self.obstacle_mode,

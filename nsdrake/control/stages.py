@@ -158,7 +158,9 @@ def _complete_terms(T, P, ix):
     T.dJ_dq[:] = _jacobian_partials(T.J_spatial[:3], T.J_spatial[3:], ix.own, ix.other, ix.rows, ix.rot_rows)
     Jdot, Jdot_v, xdot, H_inv_Jt = derived_terms(T.H_inv, T.J, T.dJ_dq, T.v)
     T.Jdot[:], T.Jdot_v[:], T.xdot[:], T.H_inv_Jt[:] = Jdot, Jdot_v, xdot, H_inv_Jt
-    T.Lambda[:] = task_inertia(T.J @ T.H_inv_Jt, P.inertia_floor)
+    T.Lambda[:] = task_inertia(
+        T.J @ T.H_inv_Jt, P.inertia_floor, P.rotational_inertia_floor, ix.rows.shape[0]
+    )
     J_pinv, N, A_inv = inverse_at_state(P.inertia_weighted, P.damping, T.H_inv_Jt, T.Lambda, T.J)
     T.J_pinv[:], T.N[:], T.A_inv[:] = J_pinv, N, A_inv
     for r in range(ix.rows.shape[0]):
@@ -227,21 +229,19 @@ def run_stages(
 
 @njit(cache=True, inline="always")
 def _criteria_rows(T, P, ix, criteria, limits, obstacles) -> bool:
-    """Stage 2: the four rows of ``criteria`` in Criterion's order. Returns True, having
-    packed only the empty obstacle row, when that row needs Drake's queries."""
+    """Stage 2: the four rows of ``criteria`` in Criterion's order, the obstacle row last.
+    Returns True, with that row packed empty, when it needs Drake's queries (the caller
+    fills it; the other rows are complete)."""
     n = T.q.shape[0]
-    pack_criterion(criteria[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
-    if obstacles is None:
-        if P.obstacle_mode == OBSTACLES_QUERIED:
-            return True
-    elif _obstacle_row(T, P, ix, criteria[0]):
-        return True
     _torque_and_manipulability_rows(T, P, criteria)
     if limits is None:
         pack_criterion(criteria[3], np.zeros(n), 0.0, np.inf, 0.0)
     else:
         _joint_limits_row(T, P, criteria[3])
-    return False
+    pack_criterion(criteria[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
+    if obstacles is None:
+        return P.obstacle_mode == OBSTACLES_QUERIED
+    return _obstacle_row(T, P, ix, criteria[0])
 
 
 @njit(cache=True, inline="always")
@@ -254,8 +254,10 @@ def pack_criterion(row, Phi, p, s, a):
 
 @njit(cache=True, inline="always")
 def _torque_and_manipulability_rows(T, P, out):
-    """Stage 2's joint-torque (Eqs. 32–33, F_d the nominal force along n) and manipulability
-    rows of ``out`` (4, n + 3), in Criterion's order."""
+    """Stage 2's joint-torque (Eqs. 32–33) and manipulability rows of ``out`` (4, n + 3), in
+    Criterion's order. F_d is the nominal force along n (``config.nominal_force``), a
+    constant: a criterion that followed the desired force input would rise with every
+    force ramp whatever the posture does (README, "Choices the paper leaves open")."""
     p, Phi = joint_torque_criterion(T.J, T.dJ_dq, P.F_d)
     pack_criterion(out[1], Phi, p, p, 1.0)
     w, Phi = manipulability(T.J, T.dJ_dq)

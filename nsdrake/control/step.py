@@ -32,7 +32,15 @@ from pydrake.multibody.plant import MultibodyPlant
 from nsdrake.control.config import ControllerConfig
 from nsdrake.control.model import ControllerModel
 from nsdrake.control.plan import ControllerPlan, StageBuffers
-from nsdrake.control.stages import COMMIT, PLAIN_STEP, initial_state, state_parts
+from nsdrake.control.stages import (
+    COMMIT,
+    CRITERIA,
+    DESIRED,
+    PLAIN_STEP,
+    SELECTION,
+    initial_state,
+    state_parts,
+)
 from nsdrake.control.validation import validate_controller
 
 
@@ -40,8 +48,9 @@ class StepResult:
     """One tick's outputs, as views into the step's buffers (valid until the next call).
     The names and units are those of the controller's output ports:
 
-    - ``tau`` τ (n) [N m], ``saturation`` [s, clipped joints], ``null_space_torque`` τ₀ (n) [N m],
-      ``task_torque`` τ − τ₀ (n) [N m] (before the actuator limits);
+    - ``tau`` τ (n) [N m], ``saturation`` [s, clipped joints], ``null_space_torque`` s τ₀ (n)
+      [N m] (Eq. 21's τ₀ as it is in τ, after the actuator limits, as the controller's
+      port), ``task_torque`` τ − τ₀ (n) [N m] (before the actuator limits);
     - ``null_space_velocity_error`` eⁿ (n) [rad/s], ``lyapunov`` ν (1) [J],
       ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], ``mode`` (1), ``speed_scale`` (1);
     - ``criteria`` (4, n + 3): one [Φ; p; s; a] row per criterion (obstacle, joint torque,
@@ -52,7 +61,8 @@ class StepResult:
     def __init__(self, buffers: StageBuffers, n: int):
         part = buffers.part
         self.tau, self.saturation = part("limited")[:n], part("limited")[n:]
-        self.null_space_torque = part("null_space")[:n]
+        self._tau0 = part("null_space")[:n]
+        self.null_space_torque = np.zeros(n)  # s τ₀, rewritten by each call (:meth:`update`)
         self.null_space_velocity_error = part("null_space")[n : 2 * n]
         self.lyapunov = part("null_space")[2 * n :]
         self.mode, self.speed_scale = part("selection")[n : n + 1], part("selection")[n + 1 :]
@@ -60,6 +70,10 @@ class StepResult:
         self.task_torque = part("task")
         self.criteria = part("criteria")
         self.task_position = part("x")
+
+    def update(self) -> None:
+        """The derived outputs after a tick: s τ₀."""
+        np.multiply(self.saturation[0], self._tau0, out=self.null_space_torque)
 
 
 class ControllerStep:
@@ -77,8 +91,8 @@ class ControllerStep:
         self,
         *,
         controller_model: ControllerModel | MultibodyPlant | str | Path,
-        normal: Sequence[float],
         config: ControllerConfig,
+        normal: Sequence[float] | None = None,
         tool_frame: str = "tool",
         task_axes: Sequence[str] = ("x", "y"),
         wrench_point: Sequence[float] | None = None,
@@ -120,41 +134,51 @@ class ControllerStep:
         t: float,
         q: np.ndarray,
         v: np.ndarray,
-        wrench: np.ndarray,
+        wrench: np.ndarray | None,
         x_d: np.ndarray,
         xdot_d: np.ndarray,
         xddot_d: np.ndarray,
-        f_d: float,
+        f_d: float | None,
         R_d: np.ndarray | None = None,
         omega_d: np.ndarray | None = None,
         omegadot_d: np.ndarray | None = None,
+        *,
+        desired_null_space_velocity: np.ndarray | None = None,
     ) -> StepResult:
         """τ and the diagnostics at time t [s] for the measured q [rad], q̇ [rad/s] (model's
         velocity order), the measured wrench [M; f] (6) [N m, N] (as the ``measured_wrench``
         port), the desired x_d, ẋ_d, ẍ_d (m_t each) [m, m/s, m/s²] and f_d [N]; with
         rotational task axes the desired orientation R_d as a quaternion [w, x, y, z] and
-        ω_d, ω̇_d (3 each) [rad/s, rad/s²] (kept from the previous call when None).
+        ω_d, ω̇_d (3 each) [rad/s, rad/s²] (kept from the previous call when None). Without a
+        force axis (``normal`` None) ``wrench`` and ``f_d`` may be None (zero), as the
+        controller's optional ports. ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], when
+        given, replaces the configured source's, as the controller's input of that name.
         Returns :attr:`result`, rewritten in place."""
-        b, m_t = self._buffers, self._m_t
+        b, m_t, plan = self._buffers, self._m_t, self.plan
+        if (wrench is None or f_d is None) and plan.has_force_axis:
+            raise ValueError("wrench and f_d are needed: the task has a force axis (normal)")
         c = b.commands
-        c[:6], c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = (
-            wrench,
-            x_d,
-            xdot_d,
-            xddot_d,
-        )
-        c[6 + 3 * m_t] = f_d
+        c[:6] = 0.0 if wrench is None else wrench
+        c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
+        c[6 + 3 * m_t] = 0.0 if f_d is None else f_d
         if R_d is not None:
             c[7 + 3 * m_t : 11 + 3 * m_t] = R_d
         if omega_d is not None:
             c[11 + 3 * m_t : 14 + 3 * m_t] = omega_d
         if omegadot_d is not None:
             c[14 + 3 * m_t : 17 + 3 * m_t] = omegadot_d
-        plan = self.plan
         plan.terms(b.scratch, np.asarray(q, dtype=float), np.asarray(v, dtype=float), self._terms)
-        if self._t_previous is None:  # the first tick: no discrete update pending
-            plan.run(PLAIN_STEP & ~COMMIT, t, 0.0, self._terms, b)
-        else:
-            plan.run(PLAIN_STEP, t, self._t_previous, self._terms, b)
+        stages = (
+            PLAIN_STEP if self._t_previous is not None else PLAIN_STEP & ~COMMIT
+        )  # first tick: none pending
+        t_previous = 0.0 if self._t_previous is None else self._t_previous
+        if desired_null_space_velocity is None:
+            plan.run(stages, t, t_previous, self._terms, b)
+        else:  # the selector still runs (mode, scale), its q̇_dⁿ replaced before it is used
+            first = stages & (CRITERIA | COMMIT | SELECTION | DESIRED)
+            plan.run(first, t, t_previous, self._terms, b)
+            b.part("qdot")[:] = desired_null_space_velocity
+            plan.run(stages & ~first, t, t_previous, self._terms, b)
         self._t_previous = t
+        self.result.update()
         return self.result

@@ -178,7 +178,10 @@ def config_problems(config) -> Iterator[tuple[str, str]]:
 
 
 def _impedance_problems(imp) -> Iterator[tuple[str, str]]:
-    names = (*_POSITIVE_GAINS, "K_p_normal", "gravity_compensation", "max_task_inertia")
+    names = (
+        *_POSITIVE_GAINS, "K_p_normal", "gravity_compensation",
+        "max_task_inertia", "max_task_rotational_inertia",
+    )  # fmt: skip
     problems = list(_fields(imp, "impedance", names))
     if problems:
         yield from problems
@@ -186,9 +189,10 @@ def _impedance_problems(imp) -> Iterator[tuple[str, str]]:
     checks = [(name, positive_problem(getattr(imp, name))) for name in _POSITIVE_GAINS]
     checks.append(("K_p_normal", non_negative_problem(imp.K_p_normal)))
     checks.append(("gravity_compensation", switch_problem(imp.gravity_compensation)))
-    cap = imp.max_task_inertia
-    if not is_number(cap) or math.isnan(cap) or cap <= 0:
-        checks.append(("max_task_inertia", f"must be > 0 (inf: no cap), got {show(cap)}"))
+    for name in ("max_task_inertia", "max_task_rotational_inertia"):
+        cap = getattr(imp, name)
+        if not is_number(cap) or math.isnan(cap) or cap <= 0:
+            checks.append((name, f"must be > 0 (inf: no cap), got {show(cap)}"))
     yield from ((f"impedance.{name}", p) for name, p in checks if p)
 
 
@@ -464,20 +468,26 @@ def check_task_span(model, seed: int = 0) -> None:
     )
 
 
-def validate_controller(*, config, model, normal, wrench_point) -> np.ndarray:
+def validate_controller(*, config, model, normal, wrench_point) -> np.ndarray | None:
     """Every check of :class:`nsdrake.NullSpaceImpedanceController`'s arguments, in one
     call, before any system is built: the configuration's fields, its sampled loops at
     its period, ``normal`` and ``wrench_point``, then what needs the model. Returns the
     unit normal: ``normal`` is a direction, normalised here (any finite non-zero length
-    is taken as that direction). Raises :class:`ControllerConfigError`."""
+    is taken as that direction); None (no force axis: a free-space position or pose
+    task) stays None. Raises :class:`ControllerConfigError`."""
     validate_config(config, "config")
     for where, problem in stability_problems(config, rotational=model.arm.m_r > 0):
         raise ControllerConfigError(f"config.{where}", problem)
     m_t = model.arm.m_t
     axes = list(model.arm.task_axes[:m_t])
-    problem = vector_problem(normal, m_t, f"{m_t} numbers, a direction on the task axes {axes}")
-    if problem is None and not np.linalg.norm(np.asarray(normal, dtype=float)) > 0:
-        problem = f"must be a non-zero direction on the task axes {axes}, got {show(normal)}"
+    problem = None
+    if normal is not None:
+        problem = vector_problem(normal, m_t, f"{m_t} numbers, a direction on the task axes {axes}, or None")
+    if problem is None and normal is not None and not np.linalg.norm(np.asarray(normal, dtype=float)) > 0:
+        problem = (
+            f"must be a non-zero direction on the task axes {axes} (or None: no force axis), "
+            f"got {show(normal)}"
+        )
     if problem:
         raise ControllerConfigError("normal", problem)
     if wrench_point is not None:
@@ -485,5 +495,7 @@ def validate_controller(*, config, model, normal, wrench_point) -> np.ndarray:
         if problem:
             raise ControllerConfigError("wrench_point", problem)
     check_against_model(config, model)
+    if normal is None:
+        return None
     unit = np.asarray(normal, dtype=float)
     return unit / np.linalg.norm(unit)

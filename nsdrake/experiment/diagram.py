@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat
-from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.framework import Diagram, DiagramBuilder, OutputPort
 from pydrake.systems.primitives import (
     ConstantVectorSource,
     LogVectorOutput,
@@ -188,9 +188,12 @@ def sampled_reach(arm: ArmModel, samples: int) -> tuple[np.ndarray, float]:
     return centre, farthest
 
 
-def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station) -> SurfaceReference:
+def add_reference(
+    builder: DiagramBuilder, scenario: Scenario, station: Station, wrench: OutputPort | None = None
+) -> SurfaceReference:
     """The task reference the scenario's ``reference.path`` names, fed by the station's
-    measured wrench."""
+    measured wrench (or by ``wrench``: the controller side of ``nsdrake drive`` feeds it
+    the wrench it receives)."""
     r = scenario.reference
     common = {
         "task_rows": station.arm_model.rows,
@@ -232,7 +235,7 @@ def add_reference(builder: DiagramBuilder, scenario: Scenario, station: Station)
             reach=(1.0 - r.reach_margin) * reach,
         )
     reference = builder.AddNamedSystem("reference", SurfaceReference(reference=path, **common))
-    builder.Connect(station.ports.wrench, reference.GetInputPort("measured_wrench"))
+    builder.Connect(wrench or station.ports.wrench, reference.GetInputPort("measured_wrench"))
     return reference
 
 
@@ -262,11 +265,19 @@ def add_loggers(builder, station, controller, reference, period) -> dict[str, Ve
     """The traces' signals, logged once per control period: the measured wrench and the
     link state from the station's ports, the reference, the controller's outputs."""
     signals = {
-        "x_d": reference.GetOutputPort("x_d"),
         "wrench": station.ports.wrench,
-        "f_d": reference.GetOutputPort("f_d"),
         "state": station.ports.link_state,
         "forbidden_contacts": station.monitor.get_output_port(),
+    }
+    signals.update(controller_signals(controller, reference, joint_limits=has_joint_limits(station)))
+    return log_signals(builder, signals, period)
+
+
+def controller_signals(controller, reference, *, joint_limits: bool) -> dict[str, OutputPort]:
+    """The traces' signals that the reference and the controller give, by trace name."""
+    signals = {
+        "x_d": reference.GetOutputPort("x_d"),
+        "f_d": reference.GetOutputPort("f_d"),
         "in_contact": reference.GetOutputPort("in_contact"),
     }
     for name, port in {
@@ -283,8 +294,13 @@ def add_loggers(builder, station, controller, reference, period) -> dict[str, Ve
         "saturation": "saturation",
     }.items():
         signals[name] = controller.GetOutputPort(port)
-    if has_joint_limits(station):
+    if joint_limits:
         signals["p_joint_limits"] = controller.GetOutputPort("joint_limits_criterion")
+    return signals
+
+
+def log_signals(builder, signals: dict[str, OutputPort], period: float) -> dict[str, VectorLogSink]:
+    """A logger named log_<name> on each port, sampling once per ``period``."""
     loggers = {}
     for name, port in signals.items():
         logger = LogVectorOutput(port, builder, publish_period=period)

@@ -41,6 +41,7 @@ from nsdrake.control.validation import (
     positive_problem,
     task_axes_problem,
 )
+from nsdrake.experiment.driver_config import DriverConfig, driver_problems
 from nsdrake.realism.config import SHORTEST_STEP, RealismConfig, realism_problems, substeps
 from nsdrake.station.config import (
     CONTACT_APPROXIMATIONS,
@@ -188,6 +189,8 @@ class Scenario:
     # LeafSystem, the same traces for about a third of the controller's cost; auto, systems
     # for nsdrake run and fused for nsdrake compare and sweep [-].
     controller_structure: str = "auto"
+    # How nsdrake drive meets a Franka Panda's LCM driver (nsdrake/experiment/driver_config.py).
+    driver: DriverConfig = field(default_factory=DriverConfig)
     # Where the scenario was read from (set by the loader; not a YAML field).
     source: str = field(default="", metadata={"yaml": False})
     # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
@@ -516,6 +519,8 @@ def scenario_problems(s: Scenario) -> Iterator[tuple[str, str]]:
     yield from _checked("divergence.max_torque", positive_problem(s.divergence.max_torque))
     for where, problem in realism_problems(s.realism, s.control_period):
         yield f"realism.{where}", problem
+    for where, problem in driver_problems(s.driver):
+        yield f"driver.{where}", problem
     yield from _step_problems(s)
     yield from _obstacle_problems(s)
 

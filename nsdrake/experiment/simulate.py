@@ -158,15 +158,18 @@ def _advance(simulator: Simulator, built: ControlledStation, scenario: Scenario,
         raise DivergenceError(context.get_time(), reason, collect_traces(built, context), built) from None
 
 
-def collect_traces(built: ControlledStation, root_context) -> Traces:
-    """The loggers' records as named columns (see README for the column list)."""
+def collect_traces(built: ControlledStation, root_context, logs: dict | None = None) -> Traces:
+    """The loggers' records as named columns (see README for the column list).
+
+    ``logs``: the records by logger name (each with ``sample_times()`` and ``data()``),
+    when the loggers do not live in ``root_context``'s diagram (``nsdrake drive``: the
+    controller side's); ``root_context`` is then a context of the diagram that holds
+    ``built.station``, for its geometry."""
     arm = built.station.arm_model
     n = arm.n
-    found = {name: logger.FindLog(root_context) for name, logger in built.loggers.items()}
-    # A run stopped inside a step (Ctrl-C, an exception) may have logged a row in some
-    # loggers and not yet in the others: every column ends at the last complete row.
-    rows = min(log.num_samples() for log in found.values())
-    logs = {name: _Rows(log, rows) for name, log in found.items()}
+    logs = _complete_rows(
+        logs if logs is not None else {n: g.FindLog(root_context) for n, g in built.loggers.items()}
+    )
     t = logs["state"].sample_times()
     columns: dict[str, np.ndarray] = {"t": t}
 
@@ -213,6 +216,13 @@ def collect_traces(built: ControlledStation, root_context) -> Traces:
         columns["swivel"] = swivel_angles(built, state[:n], built.scenario.report.swivel_frames)
     add_realism_columns(built, logs, columns)
     return Traces(columns)
+
+
+def _complete_rows(found: dict) -> dict:
+    """The logs cut to their last complete row: a run stopped inside a step (Ctrl-C, an
+    exception) may have logged a row in some loggers and not yet in the others."""
+    rows = min(len(log.sample_times()) for log in found.values())
+    return {name: _Rows(log, rows) for name, log in found.items()}
 
 
 class _Rows:

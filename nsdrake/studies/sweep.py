@@ -305,20 +305,6 @@ def plot_sweep(path: Path, spec: SweepSpec, records: dict[int, dict]) -> None:
 # --- running ----------------------------------------------------------------------------
 
 
-class SweepProgress(Progress):
-    """``\\r[#####.....] 12/40`` on a terminal; in a log, one line every ten seconds or so
-    (:mod:`nsdrake.reporting.progress`). Called with the runs done and failed."""
-
-    def __init__(self, total: int, stream=None, width: int = 30, *, label: str = "sweep", **kwargs):
-        super().__init__(
-            label, total=total, unit="runs done", stream=stream, width=width, bar_label="",
-            bar_counts=True, **kwargs,
-        )  # fmt: skip
-
-    def __call__(self, done: int, failed: int = 0):
-        self.update(done, failed)
-
-
 @dataclass
 class SweepOutcome:
     out: Path
@@ -398,21 +384,21 @@ def sweep_command(args) -> int:
         release_unused(out, created)
         raise
     print(f"nsdrake: sweeping {spec.name}: {len(runs)} runs on {_engine_words(args)} into {out}/")
-    progress = SweepProgress(len(runs), label=f"sweep {spec.name}")
+    progress = Progress(spec.name, len(runs), unit="runs")
     try:
-        with progress:
-            outcome = run_sweep(
-                spec,
-                runs,
-                out,
-                engine=args.engine,
-                jobs=args.jobs,
-                scheduler=args.scheduler,
-                progress=progress,
-                prepared=True,
-            )
+        outcome = run_sweep(
+            spec,
+            runs,
+            out,
+            engine=args.engine,
+            jobs=args.jobs,
+            scheduler=args.scheduler,
+            progress=progress,
+            prepared=True,
+        )
     except KeyboardInterrupt:
         kept = sum(1 for r in runs if finished(out, r, spec) is not None)
+        progress.end_line()
         print(f"nsdrake: interrupted; {kept} of {len(runs)} runs are kept in {out}/; resume with: "
               f"nsdrake sweep {args.spec} --out {out}", file=sys.stderr)  # fmt: skip
         return 130

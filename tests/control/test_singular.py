@@ -92,3 +92,30 @@ def test_controller_torque_is_finite_and_bounded_at_the_stretched_arm(stretch):
     tau = controller.GetOutputPort("generalized_force").Eval(context)
     assert np.all(np.isfinite(tau))
     assert np.max(np.abs(tau)) < 1e3
+
+
+def test_the_cap_is_judged_in_each_parts_own_unit():
+    """A pose task's Λ has kg on its translational rows and kg m² on its rotational ones
+    (issue 18, item 7), so each part has its own cap and the cap is judged on the
+    dimensionless F^{-1/2} A F^{-1/2}. Then a change of length unit for the translation
+    (m to mm: J's translational rows ×1e3, A' = D A D with D = diag(1e3 I, I), Λ's
+    translational block and its cap ×1e-6, the floor 1/cap ×1e6) gives Λ' = D⁻¹ Λ D⁻¹
+    exactly, whether the cap binds or not. Catches one number compared with eigenvalues that mix the
+    parts: the old rule, inactive in metres, switches on in millimetres. Here the
+    rotational part (about 2 kg m²) is above its 1 kg m² cap and the translational part
+    (about 5 kg) far below its 50 kg."""
+    rng = np.random.default_rng(7)
+    coupling = 0.02 * rng.standard_normal((3, 3))
+    A = np.block([[np.diag([0.2, 0.25, 0.3]), coupling], [coupling.T, np.diag([0.5, 0.6, 0.7])]])
+    floor_t, floor_r = 1.0 / 50.0, 1.0 / 1.0
+    D = np.diag([1e3, 1e3, 1e3, 1.0, 1.0, 1.0])
+    Di = np.linalg.inv(D)
+    L = task_inertia(A, floor_t, floor_r, 3)
+    L_mm = task_inertia(D @ A @ D, 1e6 * floor_t, floor_r, 3)
+    np.testing.assert_allclose(L_mm, Di @ L @ Di, rtol=1e-9, atol=0)
+    assert np.abs(L - np.linalg.inv(A)).max() > 1e-3  # the rotational cap binds
+    # one number for both parts does not transform so
+    L_one = task_inertia(A, floor_t)
+    L_one_mm = task_inertia(D @ A @ D, 1e6 * floor_t)
+    np.testing.assert_allclose(L_one, np.linalg.inv(A), rtol=1e-12)  # inactive in metres
+    assert np.abs(L_one_mm - Di @ L_one @ Di).max() > 1e-3 * np.abs(L_one).max()  # active in mm

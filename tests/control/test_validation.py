@@ -216,7 +216,8 @@ def controller(model, **kwargs):
     [
         (
             {"normal": [0.0, 0.0]},
-            "normal: must be a non-zero direction on the task axes ['x', 'y'], got [0.0, 0.0]",
+            "normal: must be a non-zero direction on the task axes ['x', 'y'] (or None: no force axis), "
+            "got [0.0, 0.0]",
         ),
         ({"normal": [0.0, math.nan]}, "normal: must be finite, got [0.0, nan]"),
         ({"normal": [0.0, 1.0, 0.0]}, "normal: must be 2 numbers, a direction on the task axes ['x', 'y']"),

@@ -239,7 +239,8 @@ def test_long_values_are_cut_in_messages(tmp_path, text, start):
         fig3_with(tmp_path, text)
     message = str(info.value)
     assert start in message and "…" in message
-    assert len(message) < 500, len(message)
+    # The file's path (pytest's temporary folder, longer under xdist) is not the user's value.
+    assert len(message.removeprefix(str(tmp_path))) < 400, len(message)
 
 
 def test_oversized_file_is_refused(tmp_path):

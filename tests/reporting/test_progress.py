@@ -1,23 +1,13 @@
-"""Progress in a log (nsdrake.reporting.progress): a short line at a low rate, driven by a
-fake clock, so that no test depends on how fast the machine is."""
+"""Progress of long work (nsdrake/reporting/progress.py): a bar on a terminal, one line every
+LOG_INTERVAL seconds of wall time elsewhere, so that a CI log shows a run is alive."""
 
 from __future__ import annotations
 
 import io
-import threading
+import sys
 
-import pytest
-
-from nsdrake.reporting.progress import INTERVAL_VARIABLE, LOG_INTERVAL, Progress, log_interval
-from nsdrake.studies.sweep import SweepProgress
-
-
-class Clock:
-    def __init__(self):
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
+from nsdrake.cli import main
+from nsdrake.reporting.progress import LOG_INTERVAL, Progress
 
 
 class Terminal(io.StringIO):
@@ -25,79 +15,53 @@ class Terminal(io.StringIO):
         return True
 
 
-def test_a_run_prints_one_line_per_interval_with_simulated_time_and_real_time_factor():
-    """Catches a line per report (a flood: a run reports a hundred times), no line at all,
-    a heartbeat that repeats a line within the interval, a wrong real-time factor, and
-    lines after the work is done."""
-    clock, log = Clock(), io.StringIO()
-    progress = Progress("panda_wipe", simulated=56.0, stream=log, interval=10.0, clock=clock)
-    for k in range(1, 10):  # 1 s of wall time per report
-        clock.now += 1.0
-        progress(k / 100)
-    assert log.getvalue() == ""  # 9 s: nothing due yet
-    clock.now += 1.0
-    progress(0.10)  # 10 s: 5.6 s simulated
-    assert log.getvalue() == "nsdrake: panda_wipe: 5.6 of 56 s simulated (10%), 0.56x real time, 10 s\n"
-    clock.now += 5.0
-    progress.beat()  # the heartbeat, 5 s later: not due
-    assert log.getvalue().count("\n") == 1
-    clock.now += 5.0
-    progress.beat()  # 10 s after the last line, no new report: the same work, later
-    assert log.getvalue().splitlines()[-1] == (
-        "nsdrake: panda_wipe: 5.6 of 56 s simulated (10%), 0.28x real time, 20 s"
-    )
-    clock.now += 30.0
-    progress(1.0)
-    progress.beat()
-    assert log.getvalue().count("\n") == 2  # done: the command's own lines follow
+class Clock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
 
 
-def test_compare_and_sweep_lines_count_what_is_done():
-    clock, log = Clock(), io.StringIO()
-    compare = Progress("realism", total=9, unit="variants done", stream=log, interval=10.0, clock=clock)
-    clock.now += 12.0
-    compare(3 / 9)
-    sweep = SweepProgress(40, stream=log, label="sweep fig3_gains", interval=10.0, clock=clock)
-    clock.now += 12.0
-    sweep(12, failed=1)
-    assert log.getvalue().splitlines() == [
-        "nsdrake: realism: 3 of 9 variants done, 12 s",
-        "nsdrake: sweep fig3_gains: 12 of 40 runs done (1 failed), 12 s",
-    ]
+def test_a_log_gets_one_line_per_interval_with_simulated_time_and_real_time_factor():
+    """Catches a line per call (a wall of text in a CI log), no line at all, a line after
+    the work is done, and a simulated time or real-time factor computed from the wrong
+    quantity: 20 calls over 35 s of a fake clock give lines at 10, 20 and 30 s."""
+    log, clock = io.StringIO(), Clock()
+    progress = Progress("panda_wipe", 1.0, simulated=56.0, stream=log, clock=clock)
+    for k in range(1, 21):
+        clock.now = 100.0 + 35.0 * k / 20
+        progress(k / 20)
+    lines = log.getvalue().splitlines()
+    assert len(lines) == 3, lines
+    # the first line at k = 6 (10.5 s): 30% of 56 s simulated, 16.8 s, at 1.6x real time
+    assert lines[0] == "panda_wipe: 30%, 16.8 s simulated in 10 s (1.6x real time)"
+    assert all(line.startswith("panda_wipe: ") for line in lines)
 
 
-def test_a_terminal_gets_the_bar_and_no_lines():
-    """Catches log lines on a terminal (they would break the bar) and a bar whose line is
-    not ended when the work stops half-way."""
-    clock, tty = Clock(), Terminal()
-    progress = Progress("fig3", simulated=10.0, stream=tty, interval=10.0, clock=clock)
-    with progress:
-        clock.now += 60.0
-        progress(0.5)
-        progress.beat()
-    assert tty.getvalue() == "\rfig3 [###############...............]  50%  60.0 s\n"
+def test_a_terminal_gets_a_bar_and_no_log_line():
+    tty, clock = Terminal(), Clock()
+    progress = Progress("fig3", 1.0, stream=tty, clock=clock)
+    for k in range(5):
+        clock.now += LOG_INTERVAL
+        progress(k / 4)
+    text = tty.getvalue()
+    assert text.count("\r") == 5 and "100%" in text and text.endswith("\n")
+    assert "simulated" not in text
 
 
-def test_the_heartbeat_prints_while_nothing_reports():
-    """A compare variant or a sweep run can take minutes without a report: the heartbeat
-    thread prints the line anyway. (Waits for the thread, with a deadline far above its
-    interval; no timing is asserted.)"""
-    log, printed = io.StringIO(), threading.Event()
-
-    class Log(io.StringIO):
-        def write(self, text):
-            log.write(text)
-            printed.set()
-            return len(text)
-
-    with Progress("lyapunov", total=3, unit="variants done", stream=Log(), interval=0.01) as progress:
-        progress(1 / 3)
-        assert printed.wait(timeout=30.0)
-    assert log.getvalue().startswith("nsdrake: lyapunov: 1 of 3 variants done, ")
-    assert progress._thread is None  # stopped with the work
+def test_counted_work_says_what_it_counts_and_what_failed():
+    log, clock = io.StringIO(), Clock()
+    progress = Progress("gains", 40, unit="runs", stream=log, clock=clock)
+    clock.now += LOG_INTERVAL
+    progress(12, failed=2)
+    assert log.getvalue() == "gains: 12/40 runs (2 failed), 10 s\n"
 
 
-@pytest.mark.parametrize(("value", "expected"), [("30", 30.0), ("0", LOG_INTERVAL), ("soon", LOG_INTERVAL)])
-def test_the_interval_can_be_set_in_the_environment(monkeypatch, value, expected):
-    monkeypatch.setenv(INTERVAL_VARIABLE, value)
-    assert log_interval() == expected
+def test_nsdrake_run_in_a_pipe_prints_no_bar(tmp_path, capsys, monkeypatch):
+    """The command itself, stderr not a terminal and a run far shorter than LOG_INTERVAL:
+    no carriage return and no progress line in the log."""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False, raising=False)
+    assert main(["run", "fig3", "--duration", "0.1", "--no-replay", "--out", str(tmp_path / "r")]) in (0, 1)
+    err = capsys.readouterr().err
+    assert "\r" not in err and "simulated in" not in err

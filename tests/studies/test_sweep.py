@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from nsdrake.cli import main
-from nsdrake.studies.sweep import SweepProgress
+from nsdrake.reporting.progress import Progress
 from nsdrake.studies.sweep_spec import METRICS, expand, load_sweep
 from nsdrake.studies.sweep_worker import CRASH_ENV
 
@@ -452,9 +452,8 @@ def test_a_failing_run_and_a_dying_worker_are_rows_and_the_exit_status_is_1(tmp_
 
 
 def test_the_progress_bar_is_drawn_on_a_terminal_only():
-    """Catches a bar (carriage returns) written into CI logs (not a terminal: there, a line
-    every ten seconds or so, tests/reporting/test_progress.py), and a bar that does not
-    count runs."""
+    """Catches progress text written into CI logs (not a terminal), and a bar that
+    does not count runs."""
 
     class Terminal(io.StringIO):
         def isatty(self):
@@ -462,11 +461,11 @@ def test_the_progress_bar_is_drawn_on_a_terminal_only():
 
     tty, log = Terminal(), io.StringIO()
     for stream in (tty, log):
-        bar = SweepProgress(4, stream=stream, width=8)
+        bar = Progress("sweep", 4, unit="runs", stream=stream, width=8)
         bar(1)
         bar(4, failed=1)
     assert tty.getvalue() == "\r[##......] 1/4\r[########] 4/4 (1 failed)\n"
-    assert log.getvalue() == ""
+    assert log.getvalue() == ""  # no line before LOG_INTERVAL has passed
 
 
 def test_metric_names_are_those_nsdrake_run_computes(tmp_path):

@@ -7,6 +7,7 @@ from nsdrake.control.systems.criteria import CriteriaSystem
 from nsdrake.control.systems.fused import FusedController
 from nsdrake.control.systems.impedance_controller import ImpedanceController
 from nsdrake.control.systems.null_space_controller import NullSpaceController
+from nsdrake.control.systems.optional_inputs import NullSpaceVelocitySource, ZeroIfUnconnected
 from nsdrake.control.systems.priority_selector import PrioritySelector
 from nsdrake.control.systems.robot_terms import RobotTermsSystem
 from nsdrake.control.systems.self_motion import SelfMotionSweep
@@ -17,7 +18,9 @@ __all__ = [
     "FusedController",
     "ImpedanceController",
     "NullSpaceController",
+    "NullSpaceVelocitySource",
     "PrioritySelector",
     "RobotTermsSystem",
     "SelfMotionSweep",
+    "ZeroIfUnconnected",
 ]

@@ -22,11 +22,13 @@ class ActuatorLimitsSystem(StageSystem):
         - null_space_torque
         output_ports:
         - limited
+        - limited_null_space_torque
 
     ``task_torque`` is τ − τ₀ of Eq. 7, ``null_space_torque`` τ₀ of Eq. 21 (n each)
     [N m]; ``limited`` is [τ (n) [N m]; s; clipped]: the torque, the share s of τ₀
     kept (1: no limit binds) and the number of joints whose task torque had to be
-    clipped (the controller splits it into ``generalized_force`` and ``saturation``).
+    clipped (the controller splits it into ``generalized_force`` and ``saturation``);
+    ``limited_null_space_torque`` is s τ₀ (n) [N m], the null-space torque in τ.
     The discrete state holds the torque applied over the last period, stored in an
     unrestricted update alongside the plant's step (as the null-space controller's
     q̇_dⁿ), for the rate limit.
@@ -41,6 +43,9 @@ class ActuatorLimitsSystem(StageSystem):
         deps = {self.input_port_ticket(p.get_index()) for p in (self._task, self._tau0)}
         deps.add(self.discrete_state_ticket(self._previous))
         self._limited = self.DeclareVectorOutputPort("limited", n + 2, self._calc, prerequisites_of_calc=deps)
+        self.DeclareVectorOutputPort(
+            "limited_null_space_torque", n, self._calc_tau0, prerequisites_of_calc={self.all_sources_ticket()}
+        )
         if np.isfinite(plan.rate_limits).any():  # else nothing narrows the window
             self.DeclarePeriodicUnrestrictedUpdateEvent(plan.config.period, 0.0, self._store)
 
@@ -55,6 +60,9 @@ class ActuatorLimitsSystem(StageSystem):
         b.previous_tau[:] = context.get_discrete_state(self._previous).get_value()
         self.run(context, LIMITS, b)
         output.SetFromVector(b.part("limited"))
+
+    def _calc_tau0(self, context, output):
+        output.SetFromVector(self._limited.Eval(context)[self._n] * self._tau0.Eval(context))
 
     def _store(self, context, state):
         sample = state.get_mutable_discrete_state(self._previous).get_mutable_value()

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from nsdrake.control.layout import tick_parts
 from nsdrake.control.plan import ControllerPlan, StageBuffers
-from nsdrake.control.stages import COMMIT, STORE, TICK, commands_size, initial_state
+from nsdrake.control.stages import COMMIT, DESIRED, SELECTION, STORE, TICK, commands_size, initial_state
 from nsdrake.control.systems._values import declare_value_cache
 
 
@@ -35,15 +37,19 @@ class FusedController(LeafSystem):
         input_ports:
         - estimated_state
         - commands
+        - desired_null_space_velocity
         output_ports:
         - tick
+        - limited_null_space_torque
 
     ``estimated_state`` is [q; q̇] (2n); ``commands`` is [measured wrench (6); x_d, ẋ_d,
     ẍ_d (m_t each); f_d; with rotational task axes R_d (4), ω_d (3), ω̇_d (3)]
     (:func:`nsdrake.control.stages.commands_views`; the controller's Multiplexer packs it
     from its named input ports); ``tick`` is every stage's output
     (:func:`nsdrake.control.layout.tick_parts`; the controller's Demultiplexer splits it
-    into its named output ports).
+    into its named output ports). ``desired_null_space_velocity`` (n) [rad/s], when
+    connected, is the q̇_dⁿ the null-space stage uses instead of the configured source's;
+    ``limited_null_space_torque`` is s τ₀ (n) [N m], the null-space torque in τ.
 
     Events, as the named systems': every period an unrestricted update stores the q̇_dⁿ
     and τ of the output (the previous values of Eq. 21's q̈_dⁿ and of the rate limit),
@@ -60,6 +66,8 @@ class FusedController(LeafSystem):
         self._n = n
         self._state = self.DeclareVectorInputPort("estimated_state", 2 * n)
         self._commands = self.DeclareVectorInputPort("commands", commands_size(plan.m_t, plan.m_r))
+        self._external = self.DeclareVectorInputPort("desired_null_space_velocity", n)
+        self._offsets = _offsets(tick_parts(n, plan.m_t))
         self._front = declare_value_cache(
             self, "stages 1-2", lambda: FrontValue(plan), self._calc_front,
             {self.input_port_ticket(self._state.get_index())},
@@ -67,10 +75,14 @@ class FusedController(LeafSystem):
         self._discrete = self.DeclareDiscreteState(BasicVector(initial_state(n)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(plan.config.period, 0.0, self._store)
         self.DeclarePeriodicDiscreteUpdateEvent(plan.config.period, 0.0, self._commit)
-        deps = {self.input_port_ticket(p.get_index()) for p in (self._state, self._commands)}
+        inputs = (self._state, self._commands, self._external)
+        deps = {self.input_port_ticket(p.get_index()) for p in inputs}
         deps |= {self.all_state_ticket(), self.time_ticket()}
         self._tick = self.DeclareVectorOutputPort(
             "tick", plan.tick_length, self._calc, prerequisites_of_calc=deps
+        )
+        self.DeclareVectorOutputPort(
+            "limited_null_space_torque", n, self._calc_tau0, prerequisites_of_calc={self.all_sources_ticket()}
         )
         self._scratch_tick = plan.allocate_tick()  # COMMIT reads and writes no tick
 
@@ -89,7 +101,24 @@ class FusedController(LeafSystem):
 
     def _calc(self, context, output):
         state = context.get_discrete_state(self._discrete).CopyToVector()
-        self._run(context, TICK, 0.0, state, output.get_mutable_value())
+        tick = output.get_mutable_value()
+        if not self._external.HasValue(context):
+            self._run(context, TICK, 0.0, state, tick)
+            return
+        # q̇_dⁿ from outside: the selector still runs (its mode and scale are reported),
+        # then its q̇_dⁿ is replaced before the stages that use it.
+        self._run(context, SELECTION | DESIRED, 0.0, state, tick)
+        start, size = self._offsets["desired_null_space_velocity"]
+        tick[start : start + size] = self._external.Eval(context)
+        self._run(context, TICK & ~(SELECTION | DESIRED), 0.0, state, tick)
+
+    def _calc_tau0(self, context, output):
+        tick, (s, _), (t0, n) = (
+            self._tick.Eval(context),
+            self._offsets["saturation"],
+            self._offsets["null_space_torque"],
+        )
+        output.SetFromVector(tick[s] * tick[t0 : t0 + n])
 
     def _store(self, context, state):
         discrete = state.get_mutable_discrete_state(self._discrete).get_mutable_value()
@@ -98,3 +127,9 @@ class FusedController(LeafSystem):
     def _commit(self, context, discrete_state):
         discrete = discrete_state.get_mutable_vector(self._discrete).get_mutable_value()
         self._run(context, COMMIT, context.get_time(), discrete, self._scratch_tick)
+
+
+def _offsets(parts: dict[str, int]) -> dict[str, tuple[int, int]]:
+    """{part: (start, size)} of a packed port's parts, in order."""
+    starts = np.cumsum([0, *parts.values()])
+    return {name: (int(starts[k]), size) for k, (name, size) in enumerate(parts.items())}

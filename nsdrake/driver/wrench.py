@@ -1,0 +1,162 @@
+"""The measured contact wrench on the wire: a force-torque sensor's ``lcmt_force_torque``
+messages, or the estimate from the Panda's external joint torques.
+
+Conventions (the controller's ``measured_wrench``): W = [M; f], the wrench the tool
+exerts on the work piece, world axes [N m, N]; the moment is about a stated point.
+
+- **Sensor** messages carry f = (fx, fy, fz) and M = (tx, ty, tz) in that convention,
+  the moment about the sensor origin (the simulated station's table sensor publishes
+  exactly what it reads); ``timestamp`` in milliseconds, as the message defines it.
+- **External joint torques**: the status's ``joint_torque_external`` is read as
+  τ_ext = Jᵀ W_T, the joint torques with which the arm holds the wrench W_T it exerts
+  at the tool point T (for the simulated driver: minus the generalized contact forces
+  the plant applies to the arm). With J the (6 × n) spatial Jacobian of T in the
+  world, [angular; translational], the estimate is the least-squares solution of
+  Jᵀ W_T = τ_ext, W_T = (J Jᵀ)⁻¹ J τ_ext when J has full row rank (7 joints, 6 rows):
+  exact for a wrench applied at the tool alone; any load elsewhere on the arm, and the
+  robot's own estimation error, is attributed to the tool.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from drake import lcmt_force_torque
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.framework import LeafSystem
+from pydrake.systems.lcm import _Serializer_
+
+from nsdrake.control.model import ControllerModel
+from nsdrake.control.systems._values import declare_value_cache
+
+
+def wrench_from_external_torques(J_spatial: np.ndarray, tau_ext: np.ndarray) -> np.ndarray:
+    """W_T = [M_T; f], the least-squares solution of Jᵀ W_T = τ_ext (module docstring).
+    J_spatial (6, n) [angular; translational]; τ_ext (n,) [N m]. (6,) [N m, N]."""
+    return np.linalg.lstsq(J_spatial.T, tau_ext, rcond=None)[0]
+
+
+def force_torque_message(wrench: np.ndarray, time: float) -> lcmt_force_torque:
+    """An lcmt_force_torque carrying W = [M; f] (6,) [N m, N] at ``time`` [s]."""
+    message = lcmt_force_torque()
+    message.timestamp = round(time * 1e3)
+    message.tx, message.ty, message.tz, message.fx, message.fy, message.fz = (float(w) for w in wrench)
+    return message
+
+
+def wrench_of(message: lcmt_force_torque) -> np.ndarray:
+    """W = [M; f] (6,) [N m, N] from an lcmt_force_torque."""
+    return np.array([message.tx, message.ty, message.tz, message.fx, message.fy, message.fz])
+
+
+class ForceTorqueSender(LeafSystem):
+    """A wrench as lcmt_force_torque messages (the simulated driver's sensor).
+
+    .. pydrake_system::
+
+        name: ForceTorqueSender
+        input_ports:
+        - wrench
+        output_ports:
+        - lcmt_force_torque
+
+    ``wrench`` is [M; f] (6) [N m, N]; the message carries it with the context time
+    in milliseconds. The message is Drake's C++ type (an ``LcmPublisherSystem`` made with
+    ``use_cpp_serializer=True`` takes it), as :class:`ForceTorqueReceiver` says why.
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._serializer = _Serializer_[lcmt_force_torque]()
+        self._wrench = self.DeclareVectorInputPort("wrench", 6)
+        self.DeclareAbstractOutputPort(
+            "lcmt_force_torque",
+            alloc=self._serializer.CreateDefaultValue,
+            calc=self._calc,
+            prerequisites_of_calc={self.time_ticket(), self.input_port_ticket(self._wrench.get_index())},
+        )
+
+    def _calc(self, context, output):
+        message = force_torque_message(self._wrench.Eval(context), context.get_time())
+        self._serializer.Deserialize(message.encode(), output)
+
+
+class ForceTorqueReceiver(LeafSystem):
+    """The wrench of the latest lcmt_force_torque message (zero before the first).
+
+    .. pydrake_system::
+
+        name: ForceTorqueReceiver
+        input_ports:
+        - lcmt_force_torque
+        output_ports:
+        - wrench
+
+    ``wrench`` is [M; f] (6) [N m, N] as the message carries it. The message is Drake's
+    C++ type (an ``LcmSubscriberSystem`` made with ``use_cpp_serializer=True``), read here
+    through Drake's serializer (≈ 3 µs): a Python message held in a subscriber's state is
+    deep-copied by Python's ``copy`` each time Drake copies that state (≈ 12 µs a copy,
+    several a tick), a C++ one is copied in C++.
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._serializer = _Serializer_[lcmt_force_torque]()
+        self._message = self.DeclareAbstractInputPort(
+            "lcmt_force_torque", self._serializer.CreateDefaultValue()
+        )
+        self.DeclareVectorOutputPort(
+            "wrench",
+            6,
+            self._calc,
+            prerequisites_of_calc={self.input_port_ticket(self._message.get_index())},
+        )
+
+    def _calc(self, context, output):
+        data = self._serializer.Serialize(self._message.EvalAbstract(context))
+        output.SetFromVector(wrench_of(lcmt_force_torque.decode(data)))
+
+
+class ExternalWrenchEstimator(LeafSystem):
+    """The contact wrench at the tool estimated from external joint torques,
+    W_T = (J Jᵀ)⁻¹ J τ_ext (:func:`wrench_from_external_torques`), J from the controller's
+    own model at the measured joint positions.
+
+    .. pydrake_system::
+
+        name: ExternalWrenchEstimator
+        input_ports:
+        - position_measured
+        - torque_external
+        output_ports:
+        - wrench
+
+    ``position_measured`` q (n) [rad] and ``torque_external`` τ_ext (n) [N m], the
+    status's; ``wrench`` is [M_T; f] (6) [N m, N], world axes, moment about the tool
+    point (build the controller with ``wrench_point=None``).
+    """
+
+    def __init__(self, *, model: ControllerModel):
+        super().__init__()
+        n = model.n
+        self._model = model
+        self._q = self.DeclareVectorInputPort("position_measured", n)
+        self._tau = self.DeclareVectorInputPort("torque_external", n)
+        self._scratch = declare_value_cache(self, "scratch model context", model.create_scratch)
+        deps = {self.input_port_ticket(p.get_index()) for p in (self._q, self._tau)}
+        self.DeclareVectorOutputPort("wrench", 6, self._calc, prerequisites_of_calc=deps)
+
+    def _calc(self, context, output):
+        model = self._model
+        plant_context = model.plant_context(
+            self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
+        )
+        model.plant.SetPositions(plant_context, self._q.Eval(context))
+        J = model.plant.CalcJacobianSpatialVelocity(
+            plant_context,
+            JacobianWrtVariable.kV,
+            model.arm.tool_frame,
+            np.zeros(3),
+            model.plant.world_frame(),
+            model.plant.world_frame(),
+        )
+        output.SetFromVector(wrench_from_external_torques(J, self._tau.Eval(context)))

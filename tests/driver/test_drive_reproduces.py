@@ -1,0 +1,148 @@
+"""panda_wipe through the controller side and the simulated driver, in one process over
+memq://, against the direct simulation (issue 17: "Driving it must reproduce the direct
+simulation"), and the gravity setting in both directions."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from drake import lcmt_panda_status
+
+from nsdrake.driver.run import drive_traces, prepare, run_simulated
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.simulate import run
+from nsdrake.reporting.run_folder import compute_metrics
+
+COMPARED = ("force_error_rms", "position_error_rms", "orientation_error_rms", "d_post_min")
+
+
+def with_driver(scenario, **fields):
+    return dataclasses.replace(scenario, driver=dataclasses.replace(scenario.driver, **fields))
+
+
+def assert_same_traces(direct, driven, rtol: float):
+    """Every column of the direct run's traces, in the driven run's, to ``rtol`` of the
+    column's largest magnitude (driven traces have more columns: f_*_measured, cmd*)."""
+    assert len(direct) == len(driven)
+    for name in direct.names:
+        a, b = direct[name], driven[name]
+        scale = max(float(np.max(np.abs(a))), 1e-12)
+        assert np.max(np.abs(a - b)) <= rtol * scale, (name, float(np.max(np.abs(a - b))), scale)
+
+
+def test_a_short_drive_reproduces_the_direct_simulation():
+    """Through the approach, first contact (1.265 s) and the force ramp. Catches a status
+    taken in the wrong order (Drake's ZeroOrderHold instead of the measurement hold: the
+    selector and the reference see it a period late), a time base that drifts a period
+    (the clock as a sum of periods), g removed and added with different models, a wrench
+    about the wrong point, a command answering an older status."""
+    scenario = load_scenario("panda_wipe", duration=1.6)
+    direct, _ = run(scenario)
+    driven = run_simulated(scenario, realtime_rate=0.0)
+    assert driven.failure is None
+    traces = drive_traces(driven)
+    assert_same_traces(direct, traces, rtol=1e-9)
+    assert float(np.max(traces["f_n"])) > 5.0  # the comparison covers contact
+    assert np.array_equal(traces["f_n_measured"], traces["f_n"])  # the sensor's message is its reading
+
+
+@pytest.mark.slow
+def test_panda_wipe_through_the_driver_meets_its_bounds_like_the_direct_run():
+    """The whole 28 s: force error RMS, pose error RMS and the elbow's distance to the post
+    within 10% of the direct simulation's, every bound met."""
+    scenario = load_scenario("panda_wipe")
+    direct, built = run(scenario)
+    driven = run_simulated(scenario, realtime_rate=0.0)
+    assert driven.failure is None
+    traces = drive_traces(driven)
+    expected = {m.name: m for m in compute_metrics(scenario, built.station, direct, None)}
+    got = {m.name: m for m in compute_metrics(driven.scenario, driven.loop.drive.station, traces, None)}
+    failed = [m.name for m in got.values() if m.passed is False]
+    assert not failed, failed
+    for name in COMPARED:
+        assert got[name].value == pytest.approx(expected[name].value, rel=0.10), name
+    assert driven.timing["ticks"] == len(direct) == driven.loop.commands
+
+
+def gravity_run(controller_excludes_g: bool, robot_adds_g: bool, duration: float):
+    scenario = load_scenario("panda_wipe", duration=duration)
+    scenario = with_driver(scenario, robot_adds_gravity=controller_excludes_g)
+    return run_simulated(scenario, realtime_rate=0.0, robot_adds_gravity=robot_adds_g)
+
+
+@pytest.mark.parametrize(
+    ("controller_excludes_g", "robot_adds_g"),
+    [(True, True), (False, False), (False, True), (True, False)],
+    ids=["panda", "driver removes g", "g twice", "g never"],
+)
+def test_the_robot_receives_the_law_s_torque_only_with_the_setting_right(controller_excludes_g, robot_adds_g):
+    """The torque the simulated plant receives against the law's τ, over 50 ms: equal when
+    the setting matches the robot, off by exactly +g(q) (g sent twice) or −g(q) (never
+    applied) when it does not. g(q) from the station plant's own gravity forces at the
+    logged q, not from the systems under test; the command sent is τ − g(q) exactly when
+    the controller excludes g."""
+    driven = gravity_run(controller_excludes_g, robot_adds_g, duration=0.05)
+    traces = drive_traces(driven)
+    plant = driven.driver.built.station.plant
+    context = plant.CreateDefaultContext()
+    tau = traces.block("tau")
+    q = traces.block("q")
+    cmd = traces.block("cmd")
+    g = np.empty_like(tau)
+    for k in range(len(traces)):
+        plant.SetPositions(context, q[k])
+        g[k] = -plant.CalcGravityGeneralizedForces(context)
+    applied = traces.block("tau_applied")[:-1]  # over [t_k, t_k+1); the last is not yet applied
+    tau, g = tau[:-1], g[:-1]
+    cmd = cmd[:-1]
+    np.testing.assert_allclose(
+        cmd, tau - (g if controller_excludes_g else 0.0), atol=1e-9 * np.max(np.abs(g))
+    )
+    expected_error = {(True, True): 0.0, (False, False): 0.0, (False, True): 1.0, (True, False): -1.0}
+    sign = expected_error[(controller_excludes_g, robot_adds_g)]
+    np.testing.assert_allclose(applied - tau, sign * g, atol=1e-9 * np.max(np.abs(g)))
+    assert np.max(np.abs(g)) > 10.0  # the Panda's shoulder holds tens of N m: the test can tell
+
+
+def test_the_simulated_status_reports_the_command_and_the_torque_it_makes():
+    """The status of t_k carries the last command (joint_torque_desired, τ_cmd of t_{k−1})
+    and the torque the robot makes with it at q_k (joint_torque, τ_cmd + g(q_k)): catches a
+    driver that adds g to the plant but not to the status, or reports the wrong command."""
+    drive = prepare(load_scenario("panda_wipe", duration=0.01), realtime_rate=0.0)
+    statuses = []
+    drive.loop.lcm.Subscribe("PANDA_STATUS", lambda data: statuses.append(lcmt_panda_status.decode(data)))
+    result = drive.run()
+    assert result.failure is None
+    traces = drive_traces(result)
+    plant = drive.driver.built.station.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, traces.block("q")[-1])
+    g = -plant.CalcGravityGeneralizedForces(context)
+    last = statuses[-1]
+    np.testing.assert_array_equal(last.joint_torque_desired, traces.block("cmd")[-2])
+    np.testing.assert_allclose(last.joint_torque, traces.block("cmd")[-2] + g, rtol=0, atol=1e-12)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("controller_excludes_g", "robot_adds_g"), [(False, True), (True, False)], ids=["g twice", "g never"]
+)
+def test_gravity_wrong_either_way_fails_the_bounds(controller_excludes_g, robot_adds_g):
+    """Through first contact and 0.5 s of pressing: with g sent twice the arm rises, with g
+    never applied it sags, and panda_wipe's bounds fail."""
+    driven = gravity_run(controller_excludes_g, robot_adds_g, duration=2.5)
+    traces = drive_traces(driven)
+    metrics = compute_metrics(driven.scenario, driven.loop.drive.station, traces, None)
+    assert [m.name for m in metrics if m.passed is False]
+
+
+@pytest.mark.slow
+def test_gravity_right_the_other_way_meets_the_bounds():
+    """A driver that removes its own g (--remove_gravity_compensation) with a command that
+    includes g: the robot gets the law's torque, and the bounds of a 2.5 s run hold."""
+    driven = gravity_run(False, False, duration=2.5)
+    traces = drive_traces(driven)
+    metrics = compute_metrics(driven.scenario, driven.loop.drive.station, traces, None)
+    assert not [m.name for m in metrics if m.passed is False]

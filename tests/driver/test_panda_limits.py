@@ -1,0 +1,75 @@
+"""The Panda's published torque and torque-rate limits in the controller's actuator limits."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from pydrake.lcm import DrakeLcm
+
+from nsdrake.control.actuator_limits import limited_torque
+from nsdrake.control.config import ActuatorLimitsConfig
+from nsdrake.control.controller import torque_limits
+from nsdrake.driver.controller_side import build_drive_diagram
+from nsdrake.driver.panda import PandaLimitError, panda_actuator_limits
+from nsdrake.experiment.scenario import ScenarioError, load_scenario
+
+NAMES = tuple(f"panda_joint{k}" for k in range(1, 8))
+
+
+def test_published_limits_fill_what_the_scenario_leaves_out():
+    limits = panda_actuator_limits(ActuatorLimitsConfig(torque={"panda_joint2": 50.0}), NAMES)
+    assert [limits.torque[n] for n in NAMES] == [87.0, 50.0, 87.0, 87.0, 12.0, 12.0, 12.0]
+    assert [limits.torque_rate[n] for n in NAMES] == [1000.0] * 7
+
+
+@pytest.mark.parametrize(
+    ("kind", "joint", "value", "words"),
+    [
+        (
+            "torque",
+            "panda_joint5",
+            13.0,
+            "actuator_limits.torque.panda_joint5: 13 N m is above the Panda's published "
+            "limit 12 N m for joint 5",
+        ),
+        ("torque_rate", "panda_joint1", 1500.0, "actuator_limits.torque_rate.panda_joint1: 1500 N m/s"),
+    ],
+)
+def test_limits_above_the_published_ones_are_refused(kind, joint, value, words):
+    with pytest.raises(PandaLimitError) as info:
+        panda_actuator_limits(ActuatorLimitsConfig(**{kind: {joint: value}}), NAMES)
+    assert words in str(info.value)
+
+
+def test_an_arm_that_is_not_a_panda_is_refused():
+    with pytest.raises(PandaLimitError, match="the Panda driver speaks 7 joints; the scenario's arm has 4"):
+        panda_actuator_limits(ActuatorLimitsConfig(), NAMES[:4])
+    with pytest.raises(ScenarioError, match="speaks 7 joints"):
+        build_drive_diagram(load_scenario("fig3"), DrakeLcm("memq://"))
+
+
+def test_the_drive_controller_applies_the_published_limits():
+    """The controller the drive builds: its torque limits are the Panda's, and its rate
+    limit keeps a torque step within 1000 N m/s × 1 ms (catches limits not passed on to
+    the controller, e.g. a scenario without torque_rate)."""
+    scenario = load_scenario("panda_wipe")
+    scenario = dataclasses.replace(scenario, actuator_limits=ActuatorLimitsConfig())  # none given
+    drive = build_drive_diagram(scenario, DrakeLcm("memq://"))
+    controller = drive.controller
+    np.testing.assert_array_equal(
+        torque_limits(controller.config, controller.model), [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0]
+    )
+    rates = np.array([controller.config.actuator_limits.torque_rate[n] for n in NAMES])
+    np.testing.assert_array_equal(rates, 1000.0)
+    out = limited_torque(
+        np.full(7, 200.0),
+        np.zeros(7),
+        torque_limits(controller.config, controller.model),
+        rates,
+        1e-3,
+        np.zeros(7),
+        True,
+    )
+    np.testing.assert_allclose(out[:7], 1.0)  # from rest: one period of 1000 N m/s
