@@ -11,12 +11,15 @@ into ``--out`` (default ``bench/out/drive-soak``; with ``--gc both`` also
 
 ``--gc``: ``off`` is nsdrake's setting (the collector frozen and disabled during the loop);
 ``on`` leaves it running and counts its collections and their longest pause; ``both``
-soaks twice, on first. The process's resident memory growth is reported for each.
+soaks twice, on first. The process's resident memory growth is reported for each, and the
+machine's 1-minute load average before and after (wall-clock ticks on a loaded machine are
+preempted: read the figures with it).
 
 ``--profile`` instead says where the tick's time goes: the median of each stage over 3000
 unpaced ticks (take and check the status; advance the diagram, which runs the controller's
 periodic updates and evaluates every output for the loggers; publish the command), and
-each controller system's share of the tick under cProfile.
+the share of the tick spent in the controller's code and in the reference's systems under
+cProfile on CPU time (a ratio: the profiler inflates Python more than Drake's C++).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import json
+import os
 import pstats
 import resource
 import sys
@@ -48,10 +52,11 @@ def rss_mb() -> float:
 def soak(duration: float, pause_gc: bool) -> dict:
     scenario = load_scenario("panda_wipe", duration=duration)
     drive = prepare(scenario, realtime_rate=1.0)
-    before = rss_mb()
+    before, load_before = rss_mb(), os.getloadavg()[0]
     run = drive.run(pause_gc=pause_gc)
     timing = dict(run.timing)
     timing.update(
+        load_average_1min=[load_before, os.getloadavg()[0]],  # the machine's, before and after
         scenario="panda_wipe",
         duration_s=duration,
         realtime_rate=1.0,
@@ -83,8 +88,8 @@ def staged_tick(loop, stages: dict) -> None:
 
 def where_the_time_goes(ticks: int = 3000) -> dict:
     """Median per-tick time [µs] of each stage of the tick over ``ticks`` unpaced ticks, and
-    the share of the controller's own systems (the same run under cProfile: their
-    cumulative time over the profiled tick's, a ratio, as the profiler inflates both)."""
+    the share of the controller's code and of the reference's systems (the same run under
+    cProfile: their cumulative time over the profiled ticks', a ratio)."""
     scenario = load_scenario("panda_wipe", duration=ticks * 1e-3)
     drive = prepare(scenario, realtime_rate=0.0)
     stages = {"take and check the status": [], "advance": [], "publish": []}
@@ -96,25 +101,28 @@ def where_the_time_goes(ticks: int = 3000) -> dict:
             driver.step()
             staged_tick(loop, stages)
     medians = {name: float(np.median(values)) * 1e6 for name, values in stages.items()}
-    profiler = cProfile.Profile()
+    profiler = cProfile.Profile(time.process_time)  # CPU time: a loaded machine preempts the wall clock
     drive = prepare(load_scenario("panda_wipe", duration=1.0), realtime_rate=0.0)
     profiler.enable()
     drive.run()
     profiler.disable()
     stats = pstats.Stats(profiler)
-    stats.calc_callees()
-    cumulative = {}
-    for (filename, _, function), (_, _, _, cum, _) in stats.stats.items():
-        if "/nsdrake/control/systems/" in filename and function in (
-            "_calc",
-            "_update",
-            "_store",
-            "_calc_terms",
-        ):
-            cumulative[f"{Path(filename).stem}.{function}"] = cum
-    total = sum(v[3] for k, v in stats.stats.items() if k[2] in ("tick", "start") and "loop.py" in k[0])
-    shares = {name: cum / total for name, cum in sorted(cumulative.items(), key=lambda x: -x[1])}
-    return {"ticks": ticks, "stage_median_us": medians, "controller_system_share_of_tick": shares}
+    total = sum(v[3] for k, v in stats.stats.items() if k[2] == "tick" and "loop.py" in k[0])
+    shares = {
+        "controller (nsdrake/control)": entered_from_outside(stats, "/nsdrake/control/") / total,
+        "reference systems": entered_from_outside(stats, "/nsdrake/experiment/reference") / total,
+    }
+    return {"ticks": ticks, "stage_median_us": medians, "share_of_tick_under_cprofile": shares}
+
+
+def entered_from_outside(stats: pstats.Stats, folder: str) -> float:
+    """Cumulative time [s] of the calls into the code under ``folder`` from code outside it
+    (Drake's calls into a system's callbacks, the loop's), each call counted once."""
+    seconds = 0.0
+    for (filename, _, _), (_, _, _, _, callers) in stats.stats.items():
+        if folder in filename:
+            seconds += sum(ct for caller, (_, _, _, ct) in callers.items() if folder not in caller[0])
+    return seconds
 
 
 def main():
@@ -153,6 +161,7 @@ def main():
                 "gc_longest_pause_us",
                 "rss_growth_mb",
                 "statuses_skipped",
+                "load_average_1min",
                 "failure",
             )
         }

@@ -69,7 +69,7 @@ class ControllerLoop:
     ``start()`` waits for the first status and answers it; each ``tick()`` answers the
     next; ``run(duration)`` does both until the controller's clock reaches ``duration``.
     ``times`` holds each tick's compute time from the status's arrival to the command's
-    publish [s]; ``commands`` counts the commands sent.
+    publish [s], wall clock and the thread's CPU time; ``commands`` counts the commands sent.
     """
 
     def __init__(self, drive: DriveDiagram, lcm: DrakeLcmInterface, *, capacity: int = 0):
@@ -85,7 +85,8 @@ class ControllerLoop:
         self.skipped = 0  # statuses that arrived while the controller was busy, superseded by a newer one
         self.times = TickTimes(capacity or int(round(scenario.duration / self.period)) + 2)
         self._names = drive.station.arm_model.joint_names
-        self._inbox: list[tuple[float, bytes]] = []  # (arrival time, message) since the last tick
+        self._inbox: list[tuple[float, float, bytes]] = []  # (arrival, CPU clock, message) since last tick
+        self._arrival_cpu = 0.0  # the thread's CPU clock when the status being answered arrived
         self._force_torque_messages = 0
         self._statuses_since_force_torque = 0
         self._last: lcmt_panda_status | None = None
@@ -106,7 +107,7 @@ class ControllerLoop:
         return self.context.get_time()
 
     def _on_status(self, data: bytes) -> None:
-        self._inbox.append((time.perf_counter(), data))
+        self._inbox.append((time.perf_counter(), time.thread_time(), data))
 
     def _on_force_torque(self, data: bytes) -> None:
         self._force_torque_messages += 1
@@ -201,7 +202,7 @@ class ControllerLoop:
 
     def _newest_status(self) -> tuple[float, lcmt_panda_status]:
         """The newest status received (older ones counted as skipped) and its arrival time."""
-        arrival, data = self._inbox[-1]
+        arrival, self._arrival_cpu, data = self._inbox[-1]
         self.skipped += len(self._inbox) - 1
         self._inbox.clear()
         return arrival, lcmt_panda_status.decode(data)
@@ -230,4 +231,4 @@ class ControllerLoop:
     def _command(self, arrival: float) -> None:
         self.drive.command_publisher.ForcedPublish(self._publisher_context)
         self.commands += 1
-        self.times.record(time.perf_counter() - arrival)
+        self.times.record(time.perf_counter() - arrival, time.thread_time() - self._arrival_cpu)

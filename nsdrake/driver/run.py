@@ -114,6 +114,7 @@ def _timing(loop: ControllerLoop, pauses: GcPauses, paused: bool) -> dict:
     return timing_summary(
         loop.times.seconds,
         loop.period,
+        loop.times.cpu_seconds,
         commands=loop.commands,
         statuses_skipped=loop.skipped,
         gc_disabled=paused,

@@ -13,39 +13,48 @@ import numpy as np
 
 
 class TickTimes:
-    """Compute times of the ticks, preallocated so that recording allocates nothing."""
+    """Compute times of the ticks, preallocated so that recording allocates nothing: the
+    wall-clock time of each and the CPU time the loop's thread spent in it (the two differ
+    by the time the thread waited: preempted by other processes, or paged)."""
 
     def __init__(self, capacity: int):
-        self._times = np.zeros(max(1, capacity))
+        self._times = np.zeros((2, max(1, capacity)))
         self.count = 0
 
-    def record(self, seconds: float) -> None:
-        if self.count == self._times.size:  # longer than planned: grow (rare)
-            self._times = np.concatenate([self._times, np.zeros(self._times.size)])
-        self._times[self.count] = seconds
+    def record(self, seconds: float, cpu_seconds: float = np.nan) -> None:
+        if self.count == self._times.shape[1]:  # longer than planned: grow (rare)
+            self._times = np.concatenate([self._times, np.zeros_like(self._times)], axis=1)
+        self._times[0, self.count] = seconds
+        self._times[1, self.count] = cpu_seconds
         self.count += 1
 
     @property
     def seconds(self) -> np.ndarray:
-        return self._times[: self.count]
+        return self._times[0, : self.count]
+
+    @property
+    def cpu_seconds(self) -> np.ndarray:
+        return self._times[1, : self.count]
 
 
-def timing_summary(times: np.ndarray, period: float, **extra) -> dict:
+def timing_summary(times: np.ndarray, period: float, cpu_times: np.ndarray | None = None, **extra) -> dict:
     """p50, p99, p99.9 and max of the tick times [µs], the ticks, and the ticks longer than
-    the control period."""
+    the control period; with ``cpu_times``, the same percentiles of the ticks' CPU time
+    (``cpu_p50_us`` …)."""
     us = np.asarray(times) * 1e6
     summary = {"ticks": int(us.size), "period_us": period * 1e6}
     if us.size:
-        p50, p99, p999 = np.percentile(us, [50.0, 99.0, 99.9])
-        summary.update(
-            p50_us=float(p50),
-            p99_us=float(p99),
-            p999_us=float(p999),
-            max_us=float(us.max()),
-            over_period=int(np.count_nonzero(us > period * 1e6)),
-        )
+        summary.update(_percentiles(us, ""), over_period=int(np.count_nonzero(us > period * 1e6)))
+        if cpu_times is not None:
+            summary.update(_percentiles(np.asarray(cpu_times) * 1e6, "cpu_"))
     summary.update(extra)
     return summary
+
+
+def _percentiles(us: np.ndarray, prefix: str) -> dict:
+    p50, p99, p999 = np.percentile(us, [50.0, 99.0, 99.9])
+    names = ("p50_us", "p99_us", "p999_us", "max_us")
+    return {prefix + name: float(v) for name, v in zip(names, (p50, p99, p999, us.max()), strict=True)}
 
 
 def timing_line(summary: dict) -> str:
@@ -56,6 +65,7 @@ def timing_line(summary: dict) -> str:
         f"timing: {summary['ticks']} ticks, status in to command out p50 {summary['p50_us']:.0f} µs, "
         f"p99 {summary['p99_us']:.0f} µs, p99.9 {summary['p999_us']:.0f} µs, max {summary['max_us']:.0f} µs; "
         f"{summary['over_period']} over the {summary['period_us']:.0f} µs period"
+        + (f" (its CPU time: p99.9 {summary['cpu_p999_us']:.0f} µs)" if "cpu_p999_us" in summary else "")
     )
 
 

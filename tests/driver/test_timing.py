@@ -11,15 +11,18 @@ from nsdrake.driver.timing import GcPauses, TickTimes, collector_paused, timing_
 
 def test_summary_of_known_times():
     times = TickTimes(capacity=4)
-    for us in range(1, 1001):  # 1 … 1000 µs, growing past the capacity
-        times.record(us * 1e-6)
-    s = timing_summary(times.seconds, 5e-4)
+    for us in range(1, 1001):  # 1 … 1000 µs, growing past the capacity; CPU time a tenth
+        times.record(us * 1e-6, us * 1e-7)
+    s = timing_summary(times.seconds, 5e-4, times.cpu_seconds)
     assert s["ticks"] == 1000
     np.testing.assert_allclose(
         [s["p50_us"], s["p99_us"], s["p999_us"], s["max_us"]], [500.5, 990.01, 999.001, 1000.0]
     )
+    np.testing.assert_allclose(
+        [s["cpu_p50_us"], s["cpu_p99_us"], s["cpu_p999_us"], s["cpu_max_us"]], [50.05, 99.001, 99.9001, 100.0]
+    )
     assert s["over_period"] == 500  # 501 … 1000 µs over a 500 µs period
-    assert "p99.9 999 µs" in timing_line(s)
+    assert "p99.9 999 µs" in timing_line(s) and "CPU time: p99.9 100 µs" in timing_line(s)
 
 
 def test_the_collector_is_off_inside_and_restored_after():

@@ -110,6 +110,8 @@ def test_every_good_status_gets_one_command_with_its_utime(scenario):
     assert (command.num_joint_torque, command.num_joint_position, command.num_joint_velocity) == (7, 0, 0)
     assert command.control_mode_expected == lcmt_panda_status.CONTROL_MODE_TORQUE
     assert loop.time == pytest.approx(9 * scenario.control_period, abs=1e-15)
+    wall, cpu = loop.times.seconds, loop.times.cpu_seconds  # each tick's, both clocks
+    assert wall.size == 10 and np.all(cpu > 0.0) and np.all(cpu <= wall + 1e-5)  # one thread: CPU ≤ wall
 
 
 def test_no_first_status_ends_without_sending(scenario):

@@ -235,19 +235,22 @@ def test_a_hung_variant_is_stopped_at_its_time_limit_and_the_others_finish(
 
     import nsdrake.studies.compare as compare
 
+    # The variants' kernels compiled and cached first (a fresh install compiles them in
+    # whichever process runs first, ~35 s): the limit below is for the run, not the compile.
+    run_family(subset("lyapunov", 0), tmp_path / "warm", duration=0.01, jobs=1)
     monkeypatch.setenv("NSDRAKE_TEST_FAULT", f"1:{fault}")
     if grace is not None:
         monkeypatch.setattr(compare, "STOP_GRACE", grace)
     out = tmp_path / "lyap"
     start = time.monotonic()
-    with deadline(180):
+    with deadline(240):
         code = main(["compare", "lyapunov", "--duration", "0.2", "--out", str(out), "--jobs", "2",
-                     "--variant-timeout", "6"])  # fmt: skip
+                     "--variant-timeout", "20"])  # fmt: skip
     assert code == 1
-    assert time.monotonic() - start < 60
+    assert time.monotonic() - start < 120
     with (out / "table.csv").open() as f:
         rows = {row["variant"]: row for row in csv.DictReader(f)}
-    reason = "failed: timed out after 6 s (--variant-timeout)"
+    reason = "failed: timed out after 20 s (--variant-timeout)"
     assert rows["no Coriolis compensation"]["error"] == reason
     for name in ("full law", "no compensation at all"):
         assert rows[name]["error"] == "" and float(rows[name]["nu_final"]) > 0
