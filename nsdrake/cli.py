@@ -241,16 +241,17 @@ def _compare(args) -> int:
     with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
         print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
         progress = Progress(args.family, 1.0)
-        result = run_family(
-            family,
-            out,
-            config=args.config,
-            duration=args.duration,
-            jobs=args.jobs,
-            isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
-            progress=progress,
-            variant_timeout=args.variant_timeout,
-        )
+        with progress:  # the heartbeat: a variant reports only when it ends
+            result = run_family(
+                family,
+                out,
+                config=args.config,
+                duration=args.duration,
+                jobs=args.jobs,
+                isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
+                progress=progress,
+                variant_timeout=args.variant_timeout,
+            )
         progress.end_line()
     if result.interrupted:
         print(

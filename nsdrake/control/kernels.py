@@ -28,7 +28,8 @@ from numba.core import event
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
-NOTICE = "nsdrake: compiling nsdrake's kernels (once per install)…"
+# The one line a first run prints; the time is fig3's on 2 cores (README, "First run").
+NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about 40 s)…"
 
 
 def kernel_sources(package: Path = PACKAGE) -> list[Path]:

@@ -4,12 +4,15 @@ On a terminal, a bar redrawn in place (``\\r``). Anywhere else (a pipe, a CI log
 would be a wall of carriage returns, and silence looks hung: panda_wipe's run takes
 minutes. There, one short line every :data:`LOG_INTERVAL` seconds of wall time says how
 far the work is (and, for a simulation, how much time it has simulated and at what
-real-time factor), and nothing more.
+real-time factor), and nothing more. Work that reports only when a piece of it ends (a
+compare variant, a sweep run: minutes each for panda_wipe) keeps the lines coming from a
+heartbeat thread while it runs (``with progress:``).
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from collections.abc import Callable
 
@@ -41,16 +44,49 @@ class Progress:
         self.start = clock()
         self.next_line = self.start + interval
         self.partial = False  # a bar is drawn and its line not ended
+        self.done, self.failed = 0.0, 0  # the last report
+        self._lock, self._stop, self._thread = threading.Lock(), threading.Event(), None
 
     def __call__(self, done: float, failed: int = 0) -> None:
-        if self.on_terminal:
-            self._draw(done, failed)
-            return
+        with self._lock:
+            self.done, self.failed = done, failed
+            if self.on_terminal:
+                self._draw(done, failed)
+            else:
+                self._line_if_due()
+
+    def beat(self) -> None:
+        """The heartbeat: the log line for the last report, if one is due (the work goes on
+        though nothing reported); nothing on a terminal."""
+        if not self.on_terminal:
+            with self._lock:
+                self._line_if_due()
+
+    def _line_if_due(self) -> None:
         now = self.clock()
-        if now >= self.next_line and done < self.total:
-            self.stream.write(self.log_line(done, failed, now - self.start) + "\n")
+        if now >= self.next_line and self.done < self.total:
+            self.stream.write(self.log_line(self.done, self.failed, now - self.start) + "\n")
             self.stream.flush()
             self.next_line = now + self.interval
+
+    def __enter__(self) -> Progress:
+        """Starts the heartbeat thread (not on a terminal), which calls :meth:`beat` about
+        once a second until the ``with`` block ends."""
+        if not self.on_terminal and self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._heartbeat, name="nsdrake-progress", daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+
+    def _heartbeat(self) -> None:
+        while not self._stop.wait(min(max(self.interval, 0.1), 1.0)):
+            self.beat()
 
     def end_line(self) -> None:
         """Ends a bar left half-drawn (the work stopped), so that a message starts a line."""

@@ -386,16 +386,17 @@ def sweep_command(args) -> int:
     print(f"nsdrake: sweeping {spec.name}: {len(runs)} runs on {_engine_words(args)} into {out}/")
     progress = Progress(spec.name, len(runs), unit="runs")
     try:
-        outcome = run_sweep(
-            spec,
-            runs,
-            out,
-            engine=args.engine,
-            jobs=args.jobs,
-            scheduler=args.scheduler,
-            progress=progress,
-            prepared=True,
-        )
+        with progress:  # the heartbeat: a run reports only when it ends
+            outcome = run_sweep(
+                spec,
+                runs,
+                out,
+                engine=args.engine,
+                jobs=args.jobs,
+                scheduler=args.scheduler,
+                progress=progress,
+                prepared=True,
+            )
     except KeyboardInterrupt:
         kept = sum(1 for r in runs if finished(out, r, spec) is not None)
         progress.end_line()

@@ -4,7 +4,9 @@ LOG_INTERVAL seconds of wall time elsewhere, so that a CI log shows a run is ali
 from __future__ import annotations
 
 import io
+import re
 import sys
+import threading
 
 from nsdrake.cli import main
 from nsdrake.reporting.progress import LOG_INTERVAL, Progress
@@ -59,9 +61,53 @@ def test_counted_work_says_what_it_counts_and_what_failed():
 
 
 def test_nsdrake_run_in_a_pipe_prints_no_bar(tmp_path, capsys, monkeypatch):
-    """The command itself, stderr not a terminal and a run far shorter than LOG_INTERVAL:
-    no carriage return and no progress line in the log."""
+    """The command itself, stderr not a terminal: no carriage return, and a progress line
+    only as a whole line of the log's format (a run far shorter than LOG_INTERVAL prints
+    none, unless it is the first after an install and compiles the kernels first)."""
     monkeypatch.setattr(sys.stderr, "isatty", lambda: False, raising=False)
     assert main(["run", "fig3", "--duration", "0.1", "--no-replay", "--out", str(tmp_path / "r")]) in (0, 1)
     err = capsys.readouterr().err
-    assert "\r" not in err and "simulated in" not in err
+    assert "\r" not in err
+    line = r"fig3: +\d+%, [\d.e+-]+ s simulated in \d+ s \([\d.e+-]+x real time\)"
+    assert all(re.fullmatch(line, x) for x in err.splitlines() if "simulated in" in x), err
+
+
+def test_the_heartbeat_repeats_the_line_while_nothing_reports():
+    """A compare variant or a sweep run reports only when it ends, which can take minutes:
+    the heartbeat prints the line for the last report when it is due, once per interval.
+    Catches silence between reports, a heartbeat line before the interval, and one after
+    the work is done."""
+    log, clock = io.StringIO(), Clock()
+    progress = Progress("realism", 9, unit="variants", stream=log, clock=clock)
+    progress(3)
+    clock.now += LOG_INTERVAL - 1.0
+    progress.beat()
+    assert log.getvalue() == ""
+    clock.now += 1.0
+    progress.beat()
+    progress.beat()
+    clock.now += LOG_INTERVAL
+    progress.beat()
+    assert log.getvalue().splitlines() == ["realism: 3/9 variants, 10 s", "realism: 3/9 variants, 20 s"]
+    progress(9)
+    clock.now += LOG_INTERVAL
+    progress.beat()
+    assert log.getvalue().count("\n") == 2
+
+
+def test_the_heartbeat_thread_prints_without_reports():
+    """``with progress:`` runs the heartbeat in a thread. (Waits for its line with a
+    deadline far above the interval; no duration is asserted.)"""
+    printed = threading.Event()
+
+    class Log(io.StringIO):
+        def write(self, text):
+            printed.set()
+            return super().write(text)
+
+    log = Log()
+    with Progress("lyapunov", 3, unit="variants", stream=log, interval=0.01) as progress:
+        progress(1)
+        assert printed.wait(timeout=30.0)
+    assert log.getvalue().startswith("lyapunov: 1/3 variants, ")
+    assert progress._thread is None  # stopped with the work
