@@ -11,7 +11,9 @@ exists and releases the claim.
 
 ``--overwrite`` (:func:`prepare_output_folder`) removes exactly the files listed, and
 refuses, removing nothing, a folder holding anything else, a folder without a manifest,
-and a folder whose claim is held by a live nsdrake process. A claim whose process is gone
+a manifest that lists anything outside the folder (``../x``, an absolute path, a path
+through a symbolic link in the folder: a manifest is a file anyone can edit), and a
+folder whose claim is held by a live nsdrake process. A claim whose process is gone
 (killed) is stale: it is reclaimed like a finished one. Sweeps take over their own folder
 to resume (:func:`take_over`) under the same rules.
 
@@ -20,8 +22,10 @@ Every problem is an :class:`OutputFolderError` with a one-line message naming th
 
 from __future__ import annotations
 
+import errno
 import os
 import socket
+import stat
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -216,19 +220,95 @@ def refuse_foreign(folder: Path, manifest: Manifest) -> None:
         )
 
 
+def unsafe_entry(folder: Path, entry: str) -> str | None:
+    """Why the manifest entry ``entry`` names something outside ``folder`` (an absolute path,
+    a ``..`` or empty component, a path through a symbolic link inside the folder), else
+    None. A manifest is a file anyone can edit or ship in a zipped run folder: only a plain
+    relative path that stays inside the folder may be removed."""
+    if not entry or "\0" in entry:
+        return "an empty or binary path"
+    if entry.startswith("/"):
+        return "an absolute path"
+    parts = entry.rstrip("/").split("/")
+    if any(p in ("", ".", "..") for p in parts):
+        return "a path outside the folder" if ".." in parts else "a path that is not plain"
+    inside = Path(folder)
+    for p in parts[:-1]:
+        inside = inside / p
+        try:
+            if stat.S_ISLNK(os.lstat(inside).st_mode):
+                return f"a path through the symbolic link {inside.relative_to(folder).as_posix()}"
+        except FileNotFoundError:
+            return None  # nothing there to remove
+        except OSError as e:
+            return f"a path that cannot be checked ({_why(e)})"
+    return None
+
+
+def refuse_unsafe(folder: Path, listed: Iterable[str]) -> None:
+    """Refuses, before anything is removed, a manifest that lists a path outside ``folder``
+    (:func:`unsafe_entry`)."""
+    for e in sorted(listed):
+        why = unsafe_entry(folder, e)
+        if why is not None:
+            raise OutputFolderError(
+                f"{folder}: --overwrite refused: its {MANIFEST} lists {e!r}, {why}; nsdrake never writes "
+                "outside its folder, so the manifest was edited: nothing was removed"
+            )
+
+
+def _remove_one(top: int, entry: str) -> None:
+    """Removes ``entry`` below the open folder ``top`` without following a symbolic link on the
+    way (each folder opened with O_NOFOLLOW relative to its parent, so a link swapped in after
+    :func:`refuse_unsafe` is not followed either): a file or a link is unlinked, a folder
+    removed only if empty; what does not exist is skipped."""
+    parts = entry.rstrip("/").split("/")
+    opened = []
+    try:
+        fd = top
+        for p in parts[:-1]:
+            try:
+                fd = os.open(p, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=fd)
+            except FileNotFoundError:
+                return
+            opened.append(fd)
+        try:
+            mode = os.lstat(parts[-1], dir_fd=fd).st_mode
+        except FileNotFoundError:
+            return
+        if entry.endswith("/"):
+            if stat.S_ISDIR(mode):
+                try:
+                    os.rmdir(parts[-1], dir_fd=fd)
+                except OSError as e:
+                    if e.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                        raise
+        elif not stat.S_ISDIR(mode):
+            os.unlink(parts[-1], dir_fd=fd)
+    finally:
+        for fd in opened:
+            os.close(fd)
+
+
 def remove_listed(folder: Path, listed: Iterable[str]) -> None:
-    """Removes the ``listed`` entries that exist (files, then the folders they leave empty)."""
+    """Removes the ``listed`` entries that exist (files, then the folders they leave empty),
+    never anything outside ``folder``: a list naming such a path is refused first, removing
+    nothing (:func:`refuse_unsafe`)."""
+    listed = list(listed)
+    refuse_unsafe(folder, listed)
     listed = _with_folders(listed)
     try:
-        for e in sorted(listed, key=lambda e: e.count("/") - e.endswith("/"), reverse=True):
-            path = Path(folder) / e
-            if e.endswith("/"):
-                if path.is_dir() and not path.is_symlink() and not any(path.iterdir()):
-                    path.rmdir()
-            elif path.is_file() or path.is_symlink():
-                path.unlink()
+        top = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
     except OSError as e:
-        raise OutputFolderError(f"{folder}: --overwrite: cannot remove {e.filename}: {_why(e)}") from None
+        raise OutputFolderError(f"{folder}: --overwrite: cannot open the folder: {_why(e)}") from None
+    try:
+        for e in sorted(listed, key=lambda e: e.count("/") - e.endswith("/"), reverse=True):
+            try:
+                _remove_one(top, e)
+            except OSError as err:
+                raise OutputFolderError(f"{folder}: --overwrite: cannot remove {e}: {_why(err)}") from None
+    finally:
+        os.close(top)
 
 
 def _manifest_or_refuse(folder: Path) -> Manifest:
@@ -247,6 +327,7 @@ def _remove_previous_run(folder: Path) -> None:
     list, and one whose claim a live process still holds."""
     manifest = _manifest_or_refuse(folder)
     _refuse_if_held(folder, manifest)
+    refuse_unsafe(folder, manifest.listed)
     refuse_foreign(folder, manifest)
     remove_listed(folder, manifest.listed)
     try:
@@ -322,6 +403,8 @@ def take_over(folder: Path) -> Manifest:
     process holds. Two commands taking over at once: one succeeds, the other is refused."""
     folder = Path(folder)
     manifest = _manifest_or_refuse(folder)
+    refuse_unsafe(folder, manifest.listed)
+    _refuse_links(folder)
     lock = folder / _LOCK
     for attempt in range(2):
         try:
@@ -346,6 +429,17 @@ def take_over(folder: Path) -> Manifest:
     finally:
         lock.unlink(missing_ok=True)
     return manifest
+
+
+def _refuse_links(folder: Path) -> None:
+    """A folder taken over is written into: a symbolic link in it (nsdrake never makes one)
+    could lead a write outside it."""
+    for e in entries(folder):
+        if os.path.islink(folder / e.rstrip("/")):
+            raise OutputFolderError(
+                f"{folder}: holds the symbolic link {e.rstrip('/')}, which nsdrake never writes; "
+                "move it away or choose another --out"
+            )
 
 
 def _read_quietly(path: Path) -> str | None:
