@@ -27,7 +27,8 @@ extensions = [
 ]
 
 source_suffix = {".md": "myst-nb", ".ipynb": "myst-nb"}
-exclude_patterns = ["_build", "**/.ipynb_checkpoints", "results/README.md"]
+# docs/results/FAMILY/table.md: included by the nsdrake-results directive, not pages of their own
+exclude_patterns = ["_build", "**/.ipynb_checkpoints", "results/**"]
 myst_enable_extensions = ["colon_fence", "dollarmath"]
 # Links to a page's sections by their heading ([…](page.md#the-contract)).
 myst_heading_anchors = 3

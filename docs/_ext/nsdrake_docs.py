@@ -378,11 +378,56 @@ class PydrakeSystemDirective(SphinxDirective):
         return [table(["input ports", "system", "output ports"], rows, [40, 20, 40])]
 
 
+# --- measured tables -----------------------------------------------------------------------
+
+
+class ResultsDirective(SphinxDirective):
+    """``.. nsdrake-results:: FAMILY``: the family's description (its file in
+    nsdrake/studies/families/), the command that measures it, and its table: the
+    ``table.md`` that command wrote, committed as docs/results/FAMILY/table.md. Until that
+    file is committed, the directive's content (the README's table, or nothing) is shown
+    under a note saying so."""
+
+    required_arguments = 1
+    has_content = True
+
+    def run(self):
+        from pathlib import Path
+
+        from docutils.statemachine import StringList
+
+        family = self.arguments[0]
+        docs = Path(self.env.srcdir)
+        family_file = docs.parent / "nsdrake" / "studies" / "families" / f"{family}.yaml"
+        spec = yaml.safe_load(family_file.read_text())
+        command = f"nsdrake compare {family}"
+        out = [nodes.paragraph("", "", *inline(" ".join(spec["description"].split())))]
+        out.append(nodes.literal_block(command, command, language="bash"))
+        table_file = docs / "results" / family / "table.md"
+        container = nodes.container(classes=["nsdrake-results"])
+        if table_file.exists():
+            self.env.note_dependency(str(table_file))
+            text = table_file.read_text().splitlines()
+            self.state.nested_parse(StringList(text, source=str(table_file)), 0, container)
+        else:
+            note = nodes.note()
+            message = f"docs/results/{family}/table.md is not committed yet; " + (
+                "the table below is the README's copy." if self.content else f"run ``{command}`` for it."
+            )
+            note += nodes.paragraph("", "", *inline(message))
+            container += note
+            if self.content:
+                self.state.nested_parse(self.content, self.content_offset, container)
+        out.append(container)
+        return out
+
+
 def setup(app):
     app.add_directive("pydrake_system", PydrakeSystemDirective)
     app.add_directive("nsdrake-ports", PortsDirective)
     app.add_directive("nsdrake-fields", FieldsDirective)
     app.add_directive("nsdrake-fields-table", FieldsTableDirective)
+    app.add_directive("nsdrake-results", ResultsDirective)
     app.connect("autodoc-process-docstring", append_fields)
     return {"parallel_read_safe": True, "parallel_write_safe": True, "version": "1"}
 
