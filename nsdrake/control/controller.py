@@ -193,7 +193,7 @@ class NullSpaceImpedanceController(Diagram):
             its own ports, what ``diagram.svg`` shows; True: the same stages in one
             LeafSystem (``fused_controller``) between a Multiplexer of the inputs and a
             Demultiplexer of the outputs, with the same ports and the same τ at every
-            tick, about a third of the cost per tick (README, "Speed").
+            tick, about a third of the cost per tick (docs/architecture.md, "Speed, measured").
 
     Timing and state: :mod:`nsdrake.control.stages` (the stages, their order, the
     discrete state and Drake's event order, which both structures keep).
@@ -217,7 +217,7 @@ class NullSpaceImpedanceController(Diagram):
     period has no q̈_dⁿ feed-forward and no torque-rate limit. The constructor raises
     ControllerConfigError (a ValueError) for a configuration the model cannot do, and
     ValueError, FileNotFoundError or Drake's RuntimeError for a model it cannot read,
-    and refuses gains whose sampled loops are unstable at the period. README, "Use the
+    and refuses gains whose sampled loops are unstable at the period. docs/own_diagram.md, "Use the
     controller in your own diagram": the measurements, and the wiring for a plant with
     more joints than the arm.
     """

@@ -86,7 +86,7 @@ class FrictionConfig:
     Acting at the gear output: on the joint of the rigid arm, on the motor side of
     the belt with ``belt`` on. The plant then steps at least ``min_substeps`` times
     per control period (friction needs it; finer physics alone changes fig3's figures
-    by less than 0.005 N, see the README's table). The numbers are choices for a light arm with
+    by less than 0.005 N, see the table in docs/claims.md). The numbers are choices for a light arm with
     low-ratio gears (the paper gives none): τ_c is 3–6% of the 1.6–2.9 N m joints 1–3
     carry in fig3 while pressing 10 N (a quarter of joint 4's 0.4 N m).
     """
