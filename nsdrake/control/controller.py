@@ -140,15 +140,17 @@ class NullSpaceImpedanceController(Diagram):
     - ``desired_angular_velocity``, ``desired_angular_acceleration`` (3 each) [rad/s,
       rad/s²]: with rotational task axes, ω_d and ω̇_d (world frame); the law uses their
       task rows.
-    - ``desired_null_space_velocity`` (n) [rad/s]: q̇_dⁿ, optional. Connected (or fixed),
-      it is the q̇_dⁿ of Eq. 21 and wins over the configured source (the criteria through
-      Fig. 1's selector, or the sweep), used as given (no joint-speed scaling, no blend);
-      unconnected, the configured source's.
+    - ``desired_null_space_velocity`` (n) [rad/s]: q̇_dⁿ from outside (teleoperation of the
+      elbow, a planner, a policy), optional. Connected (or fixed), it is the q̇_dⁿ of
+      Eq. 21 and wins over the configured source (the criteria through Fig. 1's selector,
+      or the sweep), used as given (no joint-speed scaling, no blend); unconnected, the
+      configured source's.
 
     Outputs:
 
-    - ``generalized_force`` (n) [N m]: τ, velocity order (map it to the plant's actuation
-      with Bᵀ).
+    - ``generalized_force`` (n) [N m]: τ of Eq. 7 (τ₀ included), velocity order; if your
+      actuators are not one per joint in order, map it with Bᵀ
+      (``MatrixGain(plant.MakeActuationMatrix().T)``).
     - ``null_space_torque`` (n) [N m]: s τ₀, Eq. 21's τ₀ as it is in τ, after the
       actuator limits (J H⁻¹ τ₀ = 0: it does not move the task).
     - ``task_torque`` (n) [N m]: τ − τ₀ of Eq. 7, before the limits.
