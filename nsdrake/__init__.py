@@ -9,6 +9,7 @@ __version__ = "0.1.0"
 from nsdrake.control import (
     ControllerConfig,
     ControllerConfigError,
+    ControllerInputError,
     ControllerModel,
     ControllerStep,
     NullSpaceImpedanceController,
@@ -30,6 +31,7 @@ __all__ = [
     "ControlHold",
     "ControllerConfig",
     "ControllerConfigError",
+    "ControllerInputError",
     "ControllerModel",
     "ControllerStep",
     "NullSpaceImpedanceController",
