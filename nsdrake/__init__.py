@@ -15,7 +15,7 @@ from nsdrake.control import (
     NullSpaceImpedanceController,
     Obstacle,
 )
-from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
+from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress, TaskReferenceError
 from nsdrake.experiment.reference_system import SurfaceReference
 from nsdrake.station.control_hold import ControlHold
 from nsdrake.station.force_sensor import ForceSensor
@@ -39,4 +39,5 @@ __all__ = [
     "Obstacle",
     "SlideAndPress",
     "SurfaceReference",
+    "TaskReferenceError",
 ]
