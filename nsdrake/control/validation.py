@@ -47,6 +47,13 @@ LARGEST_GRAVITY = 1000.0
 # [m] the largest length or distance from the world origin a model may have: no robot cell
 # is larger, and far beyond it the obstacle criterion's cubes overflow (1e200 m → inf).
 LARGEST_LENGTH = 100.0
+# [rad] the largest posture q_d or offset of a joint: one turn either way holds every pose
+# of a revolute joint (for a prismatic one the same number in metres, beyond any arm's
+# travel); far beyond it the posture's torque overflows (1e300 rad → inf).
+LARGEST_POSTURE = 2.0 * math.pi
+# [-] the largest posture weight w (W = diag(w), 1 where not given): six orders of
+# magnitude between joints is more than any weighting asks; 1e300 overflows the criterion.
+LARGEST_POSTURE_WEIGHT = 1e6
 
 
 class ControllerConfigError(ValueError):
@@ -208,8 +215,11 @@ def config_problems(config) -> Iterator[tuple[str, str]]:
         if problem:
             yield where, problem
     yield from _impedance_problems(config.impedance)
-    yield from _null_space_problems(config.null_space)
-    yield from desired_null_space_problems(config.desired_null_space)
+    problems = list(_null_space_problems(config.null_space))
+    problems += desired_null_space_problems(config.desired_null_space)
+    yield from problems
+    if not problems:  # the sections' own rules hold: the fields that read each other
+        yield from unused_posture_problems(config.null_space, config.desired_null_space)
     limits = config.actuator_limits
     problems = list(_fields(limits, "actuator_limits", ("torque", "torque_rate")))
     yield from problems
@@ -336,9 +346,9 @@ def _posture_problems(posture) -> Iterator[tuple[str, str]]:
     if problems:
         yield from problems
         return
-    yield from table_problems(f"{where}.q_d", posture.q_d, finite_problem)
-    yield from table_problems(f"{where}.offset", posture.offset, finite_problem)
-    yield from table_problems(f"{where}.weight", posture.weight, positive_problem)
+    yield from table_problems(f"{where}.q_d", posture.q_d, _posture_angle_problem)
+    yield from table_problems(f"{where}.offset", posture.offset, _posture_angle_problem)
+    yield from table_problems(f"{where}.weight", posture.weight, _posture_weight_problem)
     gain = finite_problem(posture.gain)
     if gain is None and posture.gain > 0:
         gain = f"must be <= 0 (a negative gain minimises the distance to q_d), got {show(posture.gain)}"
@@ -349,6 +359,41 @@ def _posture_problems(posture) -> Iterator[tuple[str, str]]:
     ):
         if problem:
             yield f"{where}.{name}", problem
+
+
+def _posture_angle_problem(value) -> str | None:
+    problem = finite_problem(value)
+    if problem is None and abs(value) > LARGEST_POSTURE:
+        problem = f"must be within ±{LARGEST_POSTURE:.4g} [rad] (one turn either way), got {show(value)}"
+    return problem
+
+
+def _posture_weight_problem(value) -> str | None:
+    problem = positive_problem(value)
+    if problem is None and value > LARGEST_POSTURE_WEIGHT:
+        problem = f"must be in (0, {LARGEST_POSTURE_WEIGHT:g}], got {show(value)}"
+    return problem
+
+
+def unused_posture_problems(null_space, desired) -> Iterator[tuple[str, str]]:
+    """A posture setting nothing reads, refused as an unused posture gain of the laws is
+    (:func:`_law_problems`): q_d and its offset are read by the posture laws and by the
+    source ``posture``; the weight and Eq. 30's gain by the source ``posture`` alone."""
+    p, law, source = desired.posture, null_space.law, desired.source
+    why = f"nothing uses it (desired_null_space.source is {source} and null_space.law is {law})"
+    uses_q_d, uses_gain = law != "paper" or source == "posture", source == "posture"
+    where = "desired_null_space.posture"
+    for name, used, unset in (
+        ("q_d", uses_q_d, p.q_d == {}),
+        ("offset", uses_q_d, p.offset == {}),
+        ("offset_time", uses_q_d, p.offset_time == 0),
+        ("offset_ramp_time", uses_q_d, p.offset_ramp_time == 0),
+        ("weight", uses_gain, p.weight == {}),
+        ("gain", uses_gain, p.gain == 0),
+    ):
+        if not used and not unset:
+            empty = "empty" if isinstance(getattr(p, name), dict) else "0"
+            yield f"{where}.{name}", f"must be {empty}: {why}, got {show(getattr(p, name))}"
 
 
 def _criteria_problems(crit, sel) -> Iterator[tuple[str, str]]:
