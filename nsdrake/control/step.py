@@ -217,14 +217,14 @@ class ControllerStep:
                 raise _RefusedError
             if self._t_previous is not None and not t >= self._t_previous:
                 raise _RefusedError
-            self._inputs[0] = t
+            self._inputs[0] = t + 0.0  # a number (numpy would read the text "0.1")
             self._q[:], self._v[:] = q, v
             if wrench is None or f_d is None or not plan.has_force_axis:
                 self._optional_force(wrench, f_d)
             else:
                 if len(wrench) != 6:
                     raise _RefusedError
-                c[:6], c[6 + 3 * m_t] = wrench, f_d
+                c[:6], c[6 + 3 * m_t] = wrench, f_d + 0.0
             c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
             rotation = R_d is not None or omega_d is not None or omegadot_d is not None
             if rotation:

@@ -111,6 +111,8 @@ REFUSED = {
         r"t = 0 s is before the previous call's 0\.002 s: reset\(\)",
     ),
     "t text": (bad(2, t="later"), r"t must be a finite number"),
+    "t text of a number (numpy would read it)": (bad(0, t="0.1"), r"t must be a finite number, got '0\.1'"),
+    "f_d text of a number": (bad(2, f_d="4"), r"f_d must be a number \[N\], got '4'"),
 }
 
 
@@ -390,3 +392,12 @@ def test_a_state_gone_nan_mid_run_in_a_users_diagram_is_named():
         r"::user::controller at t = 0\.02 s: estimated_state\[v joint4\] is nan: must be finite",
         str(caught.value),
     ), str(caught.value)
+
+
+def test_the_first_call_refuses_a_time_given_as_text():
+    """numpy reads the text "0.1" as 0.1 when it is copied into an array: the first call
+    (with no previous time to compare against) still refuses it, by name."""
+    with pytest.raises(
+        ControllerInputError, match=r"^ControllerStep\.step: t must be a finite number, got '0\.1'"
+    ):
+        planar().step("0.1", *good_call(0)[1:])
