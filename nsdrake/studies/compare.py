@@ -747,8 +747,10 @@ def run_family(
     isolate: bool | None = None,
     progress: Callable[[float], None] | None = None,
     variant_timeout: float = VARIANT_TIMEOUT,
+    checked: bool = False,
 ) -> FamilyResult:
-    """Runs every variant, writes the table and the overlay plot.
+    """Runs every variant, writes the table and the overlay plot; first checks every
+    variant (:func:`check_variants`) unless the caller has (``checked``).
 
     With ``isolate`` (the default when ``jobs`` > 1) each variant runs in a process of its
     own, ``jobs`` at a time, and is stopped after ``variant_timeout`` seconds of wall time;
@@ -758,7 +760,8 @@ def run_family(
     every variant (each keeps its traces so far), writes the table with the rows so far
     and returns with ``interrupted``.
     """
-    check_variants(family, config, duration)  # every input error before any simulation
+    if not checked:
+        check_variants(family, config, duration)  # every input error before any simulation
     folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
     declare(out, [*COMPARE_FILES, *(f"{f.relative_to(out).as_posix()}/traces.csv" for f in folders)])
     try:
