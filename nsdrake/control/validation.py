@@ -574,10 +574,27 @@ def check_against_model(config, model, name: str = "config") -> None:
             f"{name}.desired_null_space.posture.q_d",
             f"the posture objective needs every joint; missing {', '.join(missing)}",
         )
+    if uses_posture:
+        posture_limit_problem(d.posture, model, name)
     problem = arm_problem(model.n, model.m, model.arm.task_axes)
     if problem:
         raise ControllerConfigError(*problem)
     check_task_span(model)
+
+
+def posture_limit_problem(posture, model, name: str = "config") -> None:
+    """Refuses a posture q_d, or q_d plus its offset, outside a joint's position limits (the
+    model's URDF limits, where finite): the posture would drive the joint into its stop."""
+    lower, upper = model.plant.GetPositionLowerLimits(), model.plant.GetPositionUpperLimits()
+    for joint, lo, hi in zip(model.joint_names, lower, upper, strict=True):
+        q_d = posture.q_d[joint]
+        for what, value in (("q_d", q_d), ("q_d + offset", q_d + posture.offset.get(joint, 0.0))):
+            if not lo <= value <= hi:
+                raise ControllerConfigError(
+                    f"{name}.desired_null_space.posture.q_d.{joint}",
+                    f"{what} = {value:.6g} is outside the joint's limits [{lo:.6g}, {hi:.6g}] "
+                    "(the posture would drive it into its stop)",
+                )
 
 
 SPAN_SAMPLES = 8  # random poses at which the task Jacobian's rank is checked

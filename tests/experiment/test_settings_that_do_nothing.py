@@ -232,3 +232,52 @@ def test_the_cli_runs_from_a_fresh_process_with_a_good_posture(tmp_path):
         1,
     )
     assert (out / "traces.csv").exists() or any(Path(out).iterdir())
+
+
+PANDA_Q_D = (
+    "{panda_joint1: 0.0, panda_joint2: 0.182, panda_joint3: 0.0, panda_joint4: %s, panda_joint5: 0.0, "
+    "panda_joint6: 2.582, panda_joint7: 0.785}"
+)
+
+
+@pytest.mark.parametrize(
+    "posture, expected",
+    [
+        (
+            f"{{q_d: {PANDA_Q_D % '0.3'}, gain: -0.263}}",
+            r"posture\.q_d\.panda_joint4: q_d = 0\.3 is outside the joint's limits \[-3\.0718, -0\.0698\]",
+        ),
+        (
+            f"{{q_d: {PANDA_Q_D % '-2.4'}, offset: {{panda_joint4: 2.5}}, gain: -0.263}}",
+            r"posture\.q_d\.panda_joint4: q_d \+ offset = 0\.1 is outside the joint's limits",
+        ),
+    ],
+)
+def test_a_posture_beyond_a_joints_limits_is_refused(tmp_path, capsys, posture, expected):
+    """A posture q_d (or q_d plus its offset) outside the Panda's joint-4 limits would drive
+    the joint into its stop: refused before any simulation, naming the joint and limits;
+    the same posture at −2.4 rad (inside) is taken by the same command up to the run."""
+    import re
+
+    config = tmp_path / "mine.yaml"
+    config.write_text(f"desired_null_space: {{source: posture, posture: {posture}}}")
+    out = tmp_path / "out"
+    assert main(["run", "panda_self_motion", "--config", str(config), "--out", str(out), "--no-replay"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and re.search(expected, err) and "mine.yaml" in err, err
+    assert not out.exists()
+    config.write_text(
+        f"desired_null_space: {{source: posture, posture: {{q_d: {PANDA_Q_D % '-2.4'}, gain: -0.263}}}}"
+    )
+    args = [
+        "run",
+        "panda_self_motion",
+        "--config",
+        str(config),
+        "--duration",
+        "0.01",
+        "--out",
+        str(out),
+        "--no-replay",
+    ]
+    assert main(args) in (0, 1)
