@@ -300,6 +300,13 @@ def _drive(args) -> int:
         finally:
             progress.end_line()
         result = write_drive_folder(run, out)
+    if run.interrupted:
+        print(f"nsdrake: {timing_line(run.timing)}")
+        print(
+            f"nsdrake: drive {run.failure}; what was computed is in {out}/, marked interrupted",
+            file=sys.stderr,
+        )
+        return INTERRUPTED
     for m in result.metrics:
         mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
         bound = f"  (bound: {m.bound})" if m.bound else ""

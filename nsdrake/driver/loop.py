@@ -34,6 +34,7 @@ from pydrake.systems.analysis import Simulator
 from nsdrake.driver.controller_side import DriveDiagram
 from nsdrake.driver.faults import clock_steps, jump_problem, start_problem, status_problem
 from nsdrake.driver.panda import NUM_JOINTS
+from nsdrake.driver.stop import StopRequest
 from nsdrake.driver.timing import TickTimes
 
 
@@ -44,6 +45,13 @@ class DriveFaultError(RuntimeError):
         self.t, self.problem, self.commands = t, problem, commands
         where = "before the first command" if t is None else f"at t = {t:.3f} s"
         super().__init__(f"{where}: {problem}; stopped commanding after {commands} command(s)")
+
+
+class DriveInterruptedError(DriveFaultError):
+    """Ctrl-C stopped the controller (:mod:`nsdrake.driver.stop`): nothing was sent after it."""
+
+    def __init__(self, t: float | None, commands: int):
+        super().__init__(t, "interrupted (Ctrl-C)", commands)
 
 
 def warm_up(drive: DriveDiagram) -> None:
@@ -100,6 +108,7 @@ class ControllerLoop:
             if system is not None
         ]
         self._publisher_context = drive.command_publisher.GetMyContextFromRoot(self.context)
+        self.stop = StopRequest()  # Ctrl-C's flag, read at each status (Drive.run sets it)
         warm_up(drive)
 
     @property
@@ -112,6 +121,10 @@ class ControllerLoop:
     def _on_force_torque(self, data: bytes) -> None:
         self._force_torque_messages += 1
 
+    def _check_stop(self, started: bool = True) -> None:
+        if self.stop.requested:
+            raise DriveInterruptedError(self.time if started else None, self.commands)
+
     def _fault(self, problem: str, started: bool = True) -> DriveFaultError:
         return DriveFaultError(self.time if started else None, problem, self.commands)
 
@@ -121,10 +134,12 @@ class ControllerLoop:
         c = self.config
         deadline = time.perf_counter() + c.first_status_timeout
         while not self._inbox or (self._needs_force_torque() and time.perf_counter() < deadline):
+            self._check_stop(started=False)
             remaining = deadline - time.perf_counter()
             if remaining <= 0:
                 raise self._fault(self._silence_at_start(), started=False)
             self.lcm.HandleSubscriptions(max(1, min(100, int(remaining * 1e3))))
+        self._check_stop(started=False)
         arrival, status = self._newest_status()
         problem = status_problem(status, NUM_JOINTS)
         q = np.asarray(status.joint_position)
@@ -147,6 +162,7 @@ class ControllerLoop:
             self.lcm.HandleSubscriptions(0)
         deadline = self._last_arrival + self.config.status_timeout_periods * self.period
         while not self._inbox:
+            self._check_stop()
             remaining = deadline - time.perf_counter()
             if remaining <= 0:
                 raise self._fault(
@@ -156,6 +172,7 @@ class ControllerLoop:
                 )
             self.lcm.HandleSubscriptions(1 if remaining > 1e-3 else 0)
         self.lcm.HandleSubscriptions(0)  # the force-torque message of the same instant, if queued
+        self._check_stop()
         arrival, status = self._newest_status()
         steps = self._check(status)
         self._absorb_messages()

@@ -21,8 +21,9 @@ from drake import lcmt_panda_command
 from pydrake.lcm import DrakeLcm, DrakeLcmInterface
 
 from nsdrake.driver.controller_side import build_drive_diagram
-from nsdrake.driver.loop import ControllerLoop, DriveFaultError
+from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
 from nsdrake.driver.simulated_driver import SimulatedDriver
+from nsdrake.driver.stop import ctrl_c_requests
 from nsdrake.driver.timing import GcPauses, collector_paused, timing_line, timing_summary, write_timing
 from nsdrake.experiment.output import declare, record_written
 from nsdrake.experiment.scenario import Scenario
@@ -43,6 +44,7 @@ class DriveRun:
     timing: dict
     failure: str | None = None  # the DriveFaultError's line
     notes: list[str] = field(default_factory=list)
+    interrupted: bool = False  # Ctrl-C stopped it (failure says when)
 
     @property
     def scenario(self) -> Scenario:
@@ -58,20 +60,23 @@ class Drive:
         self.loop, self.driver = loop, driver
 
     def run(self, *, pause_gc: bool = True, progress=None) -> DriveRun:
-        """Runs to the scenario's duration or the first fault. ``pause_gc``: the garbage
-        collector off during the loop (:func:`nsdrake.driver.timing.collector_paused`)."""
+        """Runs to the scenario's duration, the first fault or Ctrl-C (which stops it at the
+        next status, :mod:`nsdrake.driver.stop`). ``pause_gc``: the garbage collector off
+        during the loop (:func:`nsdrake.driver.timing.collector_paused`)."""
         loop, driver = self.loop, self.driver
         duration = loop.drive.scenario.duration
-        failure, pauses = None, GcPauses()
-        with collector_paused(pause_gc), pauses.watching():
+        failure, interrupted, pauses = None, False, GcPauses()
+        with collector_paused(pause_gc), pauses.watching(), ctrl_c_requests() as stop:
+            loop.stop = stop
             try:
                 if driver is None:
                     loop.run(duration, progress=progress)
                 else:
                     _lockstep(loop, driver, duration, progress)
             except DriveFaultError as e:
-                failure = str(e)
-        return DriveRun(loop=loop, driver=driver, timing=_timing(loop, pauses, pause_gc), failure=failure)
+                failure, interrupted = str(e), isinstance(e, DriveInterruptedError)
+        timing = _timing(loop, pauses, pause_gc)
+        return DriveRun(loop=loop, driver=driver, timing=timing, failure=failure, interrupted=interrupted)
 
 
 def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, progress) -> None:
@@ -208,9 +213,18 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     scenario = run.scenario
     declare(out, DRIVE_FILES)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
-    write_timing(out / "timing.json", run.timing | ({"failure": run.failure} if run.failure else {}))
+    status = "interrupted" if run.interrupted else "failed" if run.failure else "ok"
+    write_timing(
+        out / "timing.json", run.timing | ({"failure": run.failure, "status": status} if run.failure else {})
+    )
     if run.loop.commands == 0:
-        return RunResult(out=out, metrics=[], notes=[timing_line(run.timing)], failure=run.failure)
+        return RunResult(
+            out=out,
+            metrics=[],
+            notes=[timing_line(run.timing)],
+            failure=run.failure,
+            interrupted=run.interrupted,
+        )
     traces = drive_traces(run)
     traces.write_csv(out / "traces.csv")
     traces = Traces.read_csv(out / "traces.csv")
@@ -227,7 +241,7 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     extra = {
         "scenario": scenario.source,
         "duration": scenario.duration,
-        "status": "failed" if run.failure else "ok",
+        "status": status,
         "contact_events": [{"event": e, "t": t} for e, t in events],
         "driver": "simulated (memq://, lockstep)" if run.driver is not None else "on the bus",
     }
@@ -250,7 +264,7 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
         notes=notes,
         failure=run.failure,
     )
-    return RunResult(out=out, metrics=metrics, notes=notes, failure=run.failure)
+    return RunResult(out=out, metrics=metrics, notes=notes, failure=run.failure, interrupted=run.interrupted)
 
 
 @dataclass
