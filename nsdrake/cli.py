@@ -284,12 +284,22 @@ def _lcm(url: str):
         raise ScenarioError(f"--lcm: {e}") from None
 
 
+def _bus(url: str):
+    """The controller side's bus at ``url`` (the ``lcm`` package, nsdrake/driver/bus.py)."""
+    from nsdrake.driver.bus import BusError, LcmBus
+
+    try:
+        return LcmBus(url)
+    except BusError as e:
+        raise ScenarioError(f"--lcm: {e}") from None
+
+
 def _drive(args) -> int:
     from nsdrake.driver.run import prepare, write_drive_folder
     from nsdrake.driver.timing import timing_line
 
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
-    lcm = _lcm(args.lcm) if args.lcm else None
+    lcm = _bus(args.lcm) if args.lcm else None
     drive = prepare(scenario, lcm, realtime_rate=args.realtime_rate)  # every input error before the folder
     with _claimed(args.out, f"drive-{args.scenario}", args.overwrite) as out:
         where = "the simulated driver over memq://" if lcm is None else f"the driver at {args.lcm}"

@@ -20,7 +20,8 @@ import yaml
 from drake import lcmt_panda_command
 from pydrake.lcm import DrakeLcm, DrakeLcmInterface
 
-from nsdrake.driver.controller_side import build_drive_diagram
+from nsdrake.driver.bus import Bus, DrakeBus
+from nsdrake.driver.controller_side import _Log, build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
 from nsdrake.driver.simulated_driver import SimulatedDriver
 from nsdrake.driver.stop import ctrl_c_requests
@@ -30,7 +31,6 @@ from nsdrake.experiment.scenario import Scenario
 from nsdrake.experiment.simulate import collect_traces
 from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.metrics import contact_events, write_metrics
-from nsdrake.reporting.replay import write_diagram_picture
 from nsdrake.reporting.report import write_report
 from nsdrake.reporting.run_folder import RunResult, compute_metrics, contact_note, scenario_yaml, write_plots
 
@@ -81,6 +81,7 @@ class Drive:
 
 def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, progress) -> None:
     """Status, command, step: the driver publishes, the controller answers, the driver steps."""
+    loop.ready()
     driver.start()
     loop.start()
     while loop.time < duration - 0.5 * loop.period:
@@ -92,21 +93,21 @@ def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, pr
 
 def prepare(
     scenario: Scenario,
-    lcm: DrakeLcmInterface | None = None,
+    bus: Bus | None = None,
     *,
     realtime_rate: float = 1.0,
     robot_adds_gravity: bool = True,
 ) -> Drive:
-    """The controller side on ``lcm``; without one, the controller side and the simulated
+    """The controller side on ``bus``; without one, the controller side and the simulated
     driver in this process over ``memq://``, the driver paced at ``realtime_rate`` (1: the
     robot's real time; 0: as fast as possible) and adding g to the command when
     ``robot_adds_gravity`` (the controller side follows ``scenario.driver.robot_adds_gravity``)."""
-    driver = None
-    simulated = lcm is None
-    lcm = DrakeLcm("memq://") if simulated else lcm
-    loop = ControllerLoop(build_drive_diagram(scenario, lcm), lcm)  # the scenario's problems first
-    if simulated:
-        driver = SimulatedDriver(scenario, lcm, adds_gravity=robot_adds_gravity, realtime_rate=realtime_rate)
+    side = build_controller_side(scenario)  # the scenario's problems first
+    if bus is not None:
+        return Drive(ControllerLoop(side, bus), None)
+    lcm = DrakeLcm("memq://")
+    driver = SimulatedDriver(scenario, lcm, adds_gravity=robot_adds_gravity, realtime_rate=realtime_rate)
+    loop = ControllerLoop(side, DrakeBus(lcm), clock=lambda: driver.time)  # lockstep: the robot's time
     return Drive(loop, driver)
 
 
@@ -122,28 +123,17 @@ def _timing(loop: ControllerLoop, pauses: GcPauses, paused: bool) -> dict:
         loop.times.cpu_seconds,
         commands=loop.commands,
         statuses_skipped=loop.skipped,
+        periods=loop.periods,
+        clock=loop.clock_name,
         gc_disabled=paused,
         gc_collections=pauses.count,
         gc_longest_pause_us=pauses.longest * 1e6,
     )
 
 
-class _Log:
-    """A logger's record made of arrays (``sample_times()``, ``data()``)."""
-
-    def __init__(self, times: np.ndarray, data: np.ndarray):
-        self._times, self._data = times, data
-
-    def sample_times(self) -> np.ndarray:
-        return self._times
-
-    def data(self) -> np.ndarray:
-        return self._data
-
-
 def drive_traces(run: DriveRun) -> Traces:
     """The drive's traces, with the columns of ``nsdrake run``'s (README) from the
-    controller side's loggers, and:
+    controller side's records, and:
 
     - with the simulated driver, ``f_x…``, ``f_n`` and ``forbidden_contacts`` from the
       simulated station (its sensor and contact monitor, the truth), and
@@ -155,8 +145,8 @@ def drive_traces(run: DriveRun) -> Traces:
       simulated driver ``tau_applied1…`` the torque its plant applied from that row's time
       to the next row's [N m] (as the realism rungs' column; NaN on the last row).
     """
-    drive = run.loop.drive
-    logs = {name: logger.FindLog(run.loop.context) for name, logger in drive.loggers.items()}
+    side = run.loop.side
+    logs = run.loop.recorder.logs()
     times = logs["state"].sample_times()
     measured = logs["wrench"].data()
     if run.driver is not None:
@@ -166,14 +156,14 @@ def drive_traces(run: DriveRun) -> Traces:
             logs[name] = _Log(times, truth[name].data()[:, rows])
     else:
         logs["forbidden_contacts"] = _Log(times, np.full((1, times.size), np.nan))
-    traces = collect_traces(drive, drive.station_diagram.CreateDefaultContext(), logs=logs)
+    traces = collect_traces(side, side.station_diagram.CreateDefaultContext(), logs=logs)
     columns = {name: traces[name] for name in traces.names}
-    arm = drive.station.arm_model
+    arm = side.station.arm_model
     if run.driver is not None:
         force = measured[3:][arm.rows]
         for axis, row in zip(arm.task_axes[: arm.m_t], force, strict=True):
             columns[f"f_{axis}_measured"] = row
-        columns["f_n_measured"] = drive.station.normal @ force
+        columns["f_n_measured"] = side.station.normal @ force
     for i, row in enumerate(logs["command"].data()):
         columns[f"cmd{i + 1}"] = row
     if run.driver is not None:  # applied over [t, t + T): the plant reports it at t + T
@@ -187,8 +177,6 @@ def drive_traces(run: DriveRun) -> Traces:
 DRIVE_FILES = (
     "scenario.yaml",
     "traces.csv",
-    "diagram.dot",
-    "diagram.svg",
     "metrics.json",
     "pose.png",
     "fig3.png",
@@ -228,7 +216,6 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     traces = drive_traces(run)
     traces.write_csv(out / "traces.csv")
     traces = Traces.read_csv(out / "traces.csv")
-    picture = write_diagram_picture(run.loop.drive.diagram, out)
     metrics = [] if run.failure else compute_metrics(scenario, run.loop.drive.station, traces, None)
     notes = [timing_line(run.timing)]
     if run.driver is None:
@@ -244,13 +231,13 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
         "status": status,
         "contact_events": [{"event": e, "t": t} for e, t in events],
         "driver": "simulated (memq://, lockstep)" if run.driver is not None else "on the bus",
+        "statuses_skipped": run.loop.skipped,
     }
     if run.failure:
         extra["failure"] = run.failure
     write_metrics(out / "metrics.json", metrics, extra)
     plots = write_plots(scenario, run.loop.drive, traces, None, out)
     notes += [contact_note(events)] if any(e == "lost" for e, _ in events) else []
-    notes += [picture.note] if picture.note else []
     write_report(
         out,
         title=f"nsdrake drive {out.resolve().name}",
@@ -259,7 +246,7 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
         parameters=yaml.safe_load(scenario_yaml(scenario)),
         metrics=metrics,
         plots=plots,
-        diagram=picture,
+        diagram=None,
         replay=None,
         notes=notes,
         failure=run.failure,
