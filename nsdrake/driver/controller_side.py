@@ -112,6 +112,21 @@ def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
     return dataclasses.replace(scenario, actuator_limits=limits)
 
 
+def check_drive_scenario(scenario: Scenario) -> Scenario:
+    """``scenario`` as a drive runs it (:func:`drive_scenario`), or a one-line
+    ScenarioError: realism rungs on, a model that is not a 7-joint arm, limits above the
+    Panda's. Cheap (the station's model only): ``nsdrake sim-driver`` checks with it."""
+    if scenario.realism.any:
+        raise ScenarioError(
+            f"{scenario.source or 'scenario'}: realism: nsdrake drive runs the controller against a robot "
+            "(or the simulated driver, which models none of the realism rungs); turn them off"
+        )
+    builder = DiagramBuilder()
+    station = add_scenario_station(builder, scenario)
+    check_with_model(scenario, station)
+    return drive_scenario(scenario, station)
+
+
 def build_controller_side(scenario: Scenario) -> ControllerSide:
     """The controller side for ``scenario`` (module docstring); the force source and the
     gravity setting come from ``scenario.driver``. Every problem with the scenario is a

@@ -100,3 +100,19 @@ def elapsed_periods(clock: int, anchor: int, period_us: int) -> int:
     nearest: the controller's time is this many periods, re-anchored at every status on
     the robot's clock (never a sum of rounded gaps, which drifts with the clock's jitter)."""
     return (2 * (clock - anchor) + period_us) // (2 * period_us)
+
+
+SLOW_STREAM = 10  # statuses in a row each two periods or more after the previous: a slower stream
+
+
+def slow_stream_problem(in_a_row: int, gap: int, period_us: int, name: str) -> str | None:
+    """A stream slower than the controller's period (250 Hz against 1 kHz), told from lost
+    statuses by persistence: ``in_a_row`` statuses in a row, the last ``gap`` [µs] after
+    the previous, each at least two periods after the one before (a lost status now and
+    then is a skipped period; :data:`SLOW_STREAM` in a row is the stream's period)."""
+    if in_a_row < SLOW_STREAM:
+        return None
+    return (
+        f"{in_a_row} statuses in a row came two periods or more apart (the last {gap} µs after the "
+        f"previous, by its {name}): the stream's period is not the controller's {period_us} µs"
+    )

@@ -35,7 +35,13 @@ import numpy as np
 
 from nsdrake.driver.bus import Bus
 from nsdrake.driver.controller_side import ControllerSide, Recorder
-from nsdrake.driver.faults import clock_problem, elapsed_periods, jump_problem, start_problem
+from nsdrake.driver.faults import (
+    clock_problem,
+    elapsed_periods,
+    jump_problem,
+    slow_stream_problem,
+    start_problem,
+)
 from nsdrake.driver.panda import NUM_JOINTS, limit_problem
 from nsdrake.driver.stop import StopRequest
 from nsdrake.driver.timing import TickTimes
@@ -116,6 +122,7 @@ class ControllerLoop:
         self._q, self._v, self._tau_ext, self._q_last = (np.zeros(NUM_JOINTS) for _ in range(4))
         self._wrench = np.zeros(6)
         self._anchor = self._last_clock = 0
+        self._long_gaps = 0  # statuses in a row two periods or more after the previous
         self._last_arrival = 0.0
         self.time = 0.0
         self.started = self._ready = False
@@ -207,6 +214,15 @@ class ControllerLoop:
                 self.period_us,
                 self.config.status_timeout_periods,
                 self.clock_name,
+            )
+            if problem:
+                raise self._fault(f"status refused: {problem}")
+            gap_periods = elapsed_periods(clock, self._anchor, self.period_us) - elapsed_periods(
+                self._last_clock, self._anchor, self.period_us
+            )
+            self._long_gaps = self._long_gaps + 1 if gap_periods >= 2 else 0
+            problem = slow_stream_problem(
+                self._long_gaps, clock - self._last_clock, self.period_us, self.clock_name
             )
             if problem:
                 raise self._fault(f"status refused: {problem}")

@@ -14,7 +14,7 @@ from drake import lcmt_panda_command, lcmt_panda_status
 from pydrake.lcm import DrakeLcm
 
 from nsdrake.cli import main
-from nsdrake.driver.run import serve_simulated_driver
+from nsdrake.driver.serve import serve_simulated_driver
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.traces import Traces
 
@@ -96,6 +96,20 @@ def test_simulated_driver_writes_the_run_folder(tmp_path, capsys):
             'cannot open the LCM bus bogus://x: LCM provider "bogus"',
         ),
         (["sim-driver", "panda_wipe"], "the following arguments are required: --lcm"),
+        (["drive", "panda_wipe", "--lcm", ""], "--lcm: the URL is empty"),
+        (
+            ["drive", "panda_wipe", "--lcm", "memq://", "--realtime-rate", "0"],
+            "paces the simulated driver only",
+        ),
+        (
+            ["sim-driver", "fig3", "--lcm", "udpm://239.255.76.67:7667?ttl=0"],
+            "the Panda driver speaks 7 joints",
+        ),
+        (
+            ["sim-driver", "panda_wipe", "--lcm", "memq://"],
+            "another process cannot reach the simulated driver",
+        ),
+        (["sim-driver", "panda_wipe", "--lcm", "bogus://x", "--expire-sec", "0"], "--expire-sec must be"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
@@ -113,23 +127,52 @@ def test_a_bad_driver_setting_is_refused(tmp_path, capsys):
     assert "driver.force_source: must be one of sensor, external_torque, got 'wrist'" in err
 
 
-def test_the_standalone_simulated_driver_pairs_commands_with_statuses():
-    """serve_simulated_driver on memq:// with a controller that answers each status at once
-    with a zero command (the robot holds still: the driver adds g): it steps once per
-    period, each step after the answer to its last status, for 0.1 s after the first."""
-    scenario = load_scenario("panda_wipe")
-    lcm = DrakeLcm("memq://")
-    statuses = []
+class AnsweringController:
+    """Answers each status on ``lcm`` at once with a zero torque command carrying its
+    utime, until ``stop_after`` statuses."""
 
-    def answer(data: bytes):
+    def __init__(self, lcm, stop_after: int = 10**9):
+        self.lcm, self.statuses, self.stop_after = lcm, [], stop_after
+        self._subscription = lcm.Subscribe("PANDA_STATUS", self._answer)
+
+    def _answer(self, data: bytes):
         status = lcmt_panda_status.decode(data)
-        statuses.append(status)
+        self.statuses.append(status)
+        if len(self.statuses) > self.stop_after:
+            return
         command = lcmt_panda_command()
         command.utime, command.control_mode_expected = status.utime, lcmt_panda_status.CONTROL_MODE_TORQUE
         command.num_joint_torque, command.joint_torque = 7, [0.0] * 7
-        lcm.Publish("PANDA_COMMAND", command.encode())
+        self.lcm.Publish("PANDA_COMMAND", command.encode())
 
-    subscription = lcm.Subscribe("PANDA_STATUS", answer)  # noqa: F841
-    served = serve_simulated_driver(scenario, lcm, duration=0.1)
-    assert served.steps == 100 and served.commands >= 100
+
+def test_the_standalone_simulated_driver_applies_each_command_one_period_late():
+    """nsdrake sim-driver's loop on memq:// with a controller that answers every status at
+    once with a zero command (the robot holds still: it adds g): 100 periods after the
+    first command, each applying a fresh command (in one process the answer to the status
+    just published is already in), statuses stamped on the wall clock
+    (utime) and the robot's clock (robot_utime, 1 ms apart), kMove."""
+    scenario = load_scenario("panda_wipe")
+    lcm = DrakeLcm("memq://")
+    controller = AnsweringController(lcm)
+    served = serve_simulated_driver(scenario, lcm, duration=0.1, low_pass_freq=1000.0)
+    assert served.periods == 100 and served.fresh == 100 and served.stale == served.expired == 0, served
+    statuses = controller.statuses
+    assert np.all(np.diff([s.robot_utime for s in statuses]) == 1000)
+    assert abs(statuses[-1].utime - time.time() * 1e6) < 5e6 and statuses[-1].robot_mode == 2
+    assert statuses[-1].control_command_success_rate == 1.0
     assert np.max(np.abs(np.array(statuses[-1].joint_position) - np.array(statuses[0].joint_position))) < 1e-9
+
+
+def test_the_simulated_driver_falls_back_to_damping_when_commands_expire():
+    """The controller stops answering after 30 statuses: the driver applies its last
+    command while younger than expire_sec (20 ms of wall clock here), then damping (catches a driver
+    that applies a dead controller's last torque for ever, or drops it at once)."""
+    scenario = load_scenario("panda_wipe")
+    lcm = DrakeLcm("memq://")
+    AnsweringController(lcm, stop_after=30)
+    served = serve_simulated_driver(scenario, lcm, duration=0.1, expire_sec=0.02, low_pass_freq=1000.0)
+    assert served.periods == 100 and served.fresh == 31, served  # 30 answers, the last also a period on
+    # how many periods 20 ms of wall clock spans depends on the machine (a driver behind real
+    # time catches up faster): some, then damping to the end
+    assert served.stale >= 5 and served.expired >= 20 and served.expired == 100 - 31 - served.stale, served

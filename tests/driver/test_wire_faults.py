@@ -201,6 +201,31 @@ def test_a_clock_that_is_not_the_robot_s_period_stops_the_controller(sides, cloc
     assert error.problem.startswith("status refused: its robot_utime") and words in error.problem
 
 
+def test_a_slower_stream_is_told_from_lost_statuses(sides):
+    """driver.status_timeout_periods 5: a status two periods after the previous now and
+    then (one lost) is taken, nine in a row too; the tenth in a row at 250 Hz (4 periods
+    each, within the bound) stops the controller naming the stream's period (catches a
+    250 Hz stream run as a 1 kHz one that loses three statuses in four)."""
+    loop, robot, bus = start_loop(sides, **{})
+    loop.bound = 5 * T
+    loop.config = dataclasses.replace(loop.config, status_timeout_periods=5.0)
+    robot.status()
+    loop.start()
+    for _ in range(5):
+        robot.status(after=2e-3, clock_step=2000)
+        loop.tick()
+        robot.status()
+        loop.tick()
+    for _ in range(9):
+        robot.status(after=4e-3, clock_step=4000)
+        loop.tick()
+    robot.status(after=4e-3, clock_step=4000)
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    assert "10 statuses in a row came two periods or more apart (the last 4000 µs" in info.value.problem
+    assert "the stream's period is not the controller's 1000 µs" in info.value.problem
+
+
 def test_two_publishers_on_the_status_channel_are_named(sides):
     """A second driver's statuses, on its own clock, between the first's: refused at the
     first one whose clock goes back, named as a second publisher."""
