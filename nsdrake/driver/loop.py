@@ -47,6 +47,10 @@ from nsdrake.driver.stop import StopRequest
 from nsdrake.driver.timing import TickTimes
 from nsdrake.driver.wire import CommandBuffer, ForceTorqueBuffer, StatusBuffer
 
+ROBOT_MODE_MOVE = 2  # lcmt_panda_status.kMove: the only mode in which a Panda takes torque commands
+ROBOT_MODES = {0: "kOther", 1: "kIdle", 2: "kMove", 3: "kGuiding", 4: "kReflex", 5: "kUserStopped",
+               6: "kAutomaticErrorRecovery"}  # fmt: skip
+
 
 class DriveFaultError(RuntimeError):
     """The controller stopped commanding; the message is one line saying why."""
@@ -107,6 +111,9 @@ class ControllerLoop:
         self.recorder = Recorder(side, capacity)
         self.stop = StopRequest()  # Ctrl-C's flag, read at each status (Drive.run sets it)
         self.clock_name = "utime"
+        # the lowest control_command_success_rate the robot reported (drake-franka-driver sends
+        # libfranka's: the fraction of its last 100 cycles that received a command in time)
+        self.success_rate_min = float("nan")
         self._clock = clock
         self._names = side.station.arm_model.joint_names
         self._inbox: list[
@@ -270,6 +277,16 @@ class ControllerLoop:
         problem = limit_problem(self._q, self._v, self._names)
         if problem:
             raise self._fault(refused + problem)
+        if status.robot_utime(data):  # a driver that reports the robot's own state (drake-franka-driver)
+            mode = status.robot_mode
+            if mode != ROBOT_MODE_MOVE:
+                name = ROBOT_MODES.get(mode, "unknown")
+                raise self._fault(
+                    f"{refused}the robot is in mode {name} ({mode}), not kMove ({ROBOT_MODE_MOVE}): "
+                    "it applies no torque command"
+                )
+            rate = status.success_rate
+            self.success_rate_min = rate if not rate >= self.success_rate_min else self.success_rate_min
 
     def _measured_wrench(self) -> np.ndarray:
         side = self.side

@@ -125,6 +125,9 @@ def _timing(loop: ControllerLoop, pauses: GcPauses, paused: bool) -> dict:
         statuses_skipped=loop.skipped,
         periods=loop.periods,
         clock=loop.clock_name,
+        control_command_success_rate_min=None
+        if loop.success_rate_min != loop.success_rate_min
+        else loop.success_rate_min,
         gc_disabled=paused,
         gc_collections=pauses.count,
         gc_longest_pause_us=pauses.longest * 1e6,

@@ -123,7 +123,7 @@ def serve_simulated_driver(
                 status.robot_utime = round(driver.time * 1e6)
                 status.utime = wall_utime()
                 status.robot_mode = ROBOT_MODE_MOVE
-                status.control_command_success_rate = float(np.mean(recent)) if recent else 0.0
+                status.control_command_success_rate = float(np.mean(recent)) if recent else 1.0
                 published.append(status.utime)
                 data = status.encode()
             lcm.Publish(channel, data)

@@ -61,6 +61,7 @@ def status_bytes(q, *, utime: int, robot_utime: int = 0, v=None, num_joints: int
         setattr(status, field, zeros)
     status.joint_position = list(np.asarray(q, dtype=float)[:num_joints])
     status.joint_velocity = zeros if v is None else list(v)
+    status.robot_mode, status.control_command_success_rate = 2, 1.0  # kMove, as a running Panda reports
     return status.encode()
 
 

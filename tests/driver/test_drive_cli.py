@@ -119,6 +119,22 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.parametrize(
+    ("setting", "words"),
+    [
+        ("first_status_timeout: 1e9", "driver.first_status_timeout: must be at most 600 s"),
+        ("status_timeout_periods: 0.5", "driver.status_timeout_periods: must be >= 1"),
+    ],
+)
+def test_driver_timeouts_out_of_range_are_refused(tmp_path, capsys, setting, words):
+    """A first wait of 1e9 s (a drive that hangs for ever) and a silence bound under a period."""
+    config = tmp_path / "c.yaml"
+    config.write_text(f"driver: {{{setting}}}\n")
+    assert main(["drive", "panda_wipe", "--simulated-driver", "--config", str(config)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err, err
+
+
 def test_a_bad_driver_setting_is_refused(tmp_path, capsys):
     config = tmp_path / "c.yaml"
     config.write_text("driver: {force_source: wrist}\n")

@@ -422,3 +422,21 @@ def test_pure_checks():
     assert clock_problem(4000, 1000, 0, 1000, 3.0, "utime") is None  # at the bound
     assert "jumped" in clock_problem(4001, 1000, 0, 1000, 3.0, "utime")
     assert elapsed_periods(10_499, 0, 1000) == 10 and elapsed_periods(10_500, 0, 1000) == 11
+
+
+def test_a_robot_out_of_kmove_stops_the_controller(sides):
+    """A status whose robot_mode is kReflex (4): the robot applies no torque command; the
+    controller stops naming the mode (catches robot_mode never read)."""
+    loop, robot, bus = start_loop(sides)
+
+    def reflex(r):
+        r.utime += 1000
+        r.robot_utime += 1000
+        r.arrival += T
+        message = lcmt_panda_status.decode(status_bytes(r.q, utime=r.utime, robot_utime=r.robot_utime))
+        message.robot_mode = 4
+        bus.at(r.arrival, "PANDA_STATUS", message.encode())
+        bus.at(r.arrival, "PANDA_FORCE_TORQUE", force_torque_bytes())
+
+    error = run_until_fault(loop, robot, bus, reflex)
+    assert "the robot is in mode kReflex (4), not kMove (2): it applies no torque command" in error.problem
