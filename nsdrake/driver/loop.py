@@ -126,7 +126,10 @@ class ControllerLoop:
             ForceTorqueBuffer(),
             CommandBuffer(),
         )
-        self._q, self._v, self._tau_ext, self._q_last = (np.zeros(NUM_JOINTS) for _ in range(4))
+        self._measured = np.zeros((3, NUM_JOINTS))
+        self._q, self._v, self._tau_ext = self._measured
+        self._q_last = np.zeros(NUM_JOINTS)
+
         self._wrench = np.zeros(6)
         self._anchor = self._last_clock = 0
         self._long_gaps = 0  # statuses in a row two periods or more after the previous
@@ -239,7 +242,7 @@ class ControllerLoop:
         inbox.clear()
         periods = elapsed_periods(self._last_clock, self._anchor, self.period_us)
         self._q_last[:] = self._q
-        self._load(data, "status refused: ")
+        self._load(data, "status refused: ", checked=True)  # decodable: checked with its clock above
         problem = jump_problem(
             self._q, self._q_last, self.config.max_joint_step, periods - self.periods, self._names
         )
@@ -257,23 +260,22 @@ class ControllerLoop:
             if progress is not None and self.commands % 1000 == 0:
                 progress(min(1.0, self.time / duration))
 
-    def _load(self, data: bytes, refused: str) -> None:
+    def _load(self, data: bytes, refused: str, checked: bool = False) -> None:
         """The status's q, q̇, τ_ext into the loop's arrays, checked: decodable, finite,
         within the Panda's limits."""
         status = self._status
-        problem = status.problem(data)
+        problem = None if checked else status.problem(data)
         if problem:
             raise self._fault(refused + problem)
         status.load(data)
-        self._q[:], self._v[:], self._tau_ext[:] = status.q, status.v, status.tau_ext
-        for name, values in (
-            ("joint_position", self._q),
-            ("joint_velocity", self._v),
-            ("joint_torque_external", self._tau_ext),
-        ):
-            if not np.isfinite(values).all():
-                k = int(np.flatnonzero(~np.isfinite(values))[0])
-                raise self._fault(f"{refused}{name}[{k}] is {float(values[k])!r}")
+        measured = self._measured  # rows q, q̇, τ_ext: one finiteness test, one limit test
+        measured[0], measured[1], measured[2] = status.q, status.v, status.tau_ext
+        if not np.isfinite(measured.sum()):
+            names = ("joint_position", "joint_velocity", "joint_torque_external")
+            for name, values in zip(names, measured, strict=True):
+                bad = np.flatnonzero(~np.isfinite(values))
+                if bad.size:
+                    raise self._fault(f"{refused}{name}[{bad[0]}] is {float(values[bad[0]])!r}")
         problem = limit_problem(self._q, self._v, self._names)
         if problem:
             raise self._fault(refused + problem)
@@ -288,7 +290,11 @@ class ControllerLoop:
             rate = status.success_rate
             self.success_rate_min = rate if not rate >= self.success_rate_min else self.success_rate_min
 
-    def _measured_wrench(self) -> np.ndarray:
+    def _measured_wrench(self, arrival: float) -> np.ndarray:
+        """The wrench for the status that arrived at ``arrival``: estimated, or the newest
+        force-torque message, which must have arrived within the silence bound before the
+        status (both stamped as the loop drains the bus: a tick preempted after the drain
+        is not the sensor's silence)."""
         side = self.side
         if not side.sensor:
             return side.estimated_wrench(self._q, self._tau_ext)
@@ -301,7 +307,7 @@ class ControllerLoop:
                     f"force-torque message refused on {self.config.force_torque_channel}: {problem}"
                 )
             self._wrench_message.load(data)
-        silent = self._clock() - self._force_torque_arrival
+        silent = arrival - self._force_torque_arrival
         if silent > self.bound:
             raise self._fault(
                 f"no lcmt_force_torque on {self.config.force_torque_channel} for {silent * 1e3:.1f} ms "
@@ -311,7 +317,7 @@ class ControllerLoop:
 
     def _answer(self, data: bytes, arrival: float, wall: float, cpu: float) -> None:
         """The controller side's tick for the loaded status, its command sent and recorded."""
-        wrench = self._measured_wrench()
+        wrench = self._measured_wrench(arrival)
         np.copyto(self._wrench, wrench)
         side = self.side
         desired, result = side.tick(self.time, self._q, self._v, self._wrench)

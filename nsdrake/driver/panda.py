@@ -61,14 +61,20 @@ POSITION_MARGIN = 0.01  # [rad]
 VELOCITY_MARGIN = 0.05  # [-] of VELOCITY_LIMIT
 
 
+_LOWER, _UPPER = POSITION_LOWER - POSITION_MARGIN, POSITION_UPPER + POSITION_MARGIN
+_FAST = VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN)
+
+
 def limit_problem(q: np.ndarray, v: np.ndarray, joint_names) -> str | None:
     """A joint position or velocity beyond the Panda's published limits by more than the
     margins above (the worst joint named), else None."""
+    if (
+        (q >= _LOWER).all() and (q <= _UPPER).all() and (v <= _FAST).all() and (v >= -_FAST).all()
+    ):  # the usual case, in four array comparisons (this runs inside every tick)
+        return None
     below = POSITION_LOWER - POSITION_MARGIN - q
     above = q - POSITION_UPPER - POSITION_MARGIN
     fast = np.abs(v) - VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN)
-    if below.max() <= 0.0 and above.max() <= 0.0 and fast.max() <= 0.0:
-        return None
     for excess, kind in ((below, "below"), (above, "above")):
         k = int(np.argmax(excess))
         if excess[k] > 0.0:
