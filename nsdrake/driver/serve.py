@@ -53,17 +53,23 @@ class ServeResult:
     stale: int = 0  # … that applied an older command, not yet expired
     expired: int = 0  # … that fell back to damping (no command within expire_sec)
     behind: int = 0  # periods the driver itself started late (its own step overran the period)
+    # periods, and fresh ones, up to the last command received (the controller's run; after
+    # it the driver damps until it is stopped, which is not the controller's doing)
+    commanded_periods: int = 0
+    commanded_fresh: int = 0
     ages: dict[int, int] = field(default_factory=dict)  # periods between the applied command's status and now
 
     @property
     def fresh_fraction(self) -> float:
-        return self.fresh / self.periods if self.periods else math.nan
+        """Of the periods up to the last command received, those that applied a fresh one."""
+        return self.commanded_fresh / self.commanded_periods if self.commanded_periods else math.nan
 
     def line(self) -> str:
         return (
+            f"{self.commanded_periods} periods from the first command to the last, {self.commanded_fresh} "
+            f"of them applied a fresh command ({100 * self.fresh_fraction:.2f}%); in all "
             f"{self.periods} periods after the first command, {self.commands} commands received; "
-            f"{self.fresh} applied a fresh command ({100 * self.fresh_fraction:.2f}%), "
-            f"{self.stale} a stale one, "
+            f"{self.fresh} applied a fresh command, {self.stale} a stale one, "
             f"{self.expired} fell back to damping; the driver itself started {self.behind} periods late"
         )
 
@@ -130,6 +136,7 @@ def serve_simulated_driver(
         outgoing.clear()
         # 2. the newest command that arrived, unless expired
         lcm.HandleSubscriptions(0)
+        got_command = bool(received)
         if received:
             result.commands += len(received)
             command = received[-1]
@@ -163,6 +170,8 @@ def serve_simulated_driver(
                 result.stale += not fresh
                 recent.append(float(fresh))
             del recent[:-100]
+            if got_command:
+                result.commanded_periods, result.commanded_fresh = result.periods, result.fresh
         # 4. step the plant one period with this torque, then wait for the wall clock
         driver.apply_torque(torque, utime=published[-1] if published else 0)
         driver.advance()

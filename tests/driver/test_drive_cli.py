@@ -173,6 +173,7 @@ def test_the_standalone_simulated_driver_applies_each_command_one_period_late():
     controller = AnsweringController(lcm)
     served = serve_simulated_driver(scenario, lcm, duration=0.1, low_pass_freq=1000.0)
     assert served.periods == 100 and served.fresh == 100 and served.stale == served.expired == 0, served
+    assert served.fresh_fraction == 1.0 and "100 of them applied a fresh command (100.00%)" in served.line()
     statuses = controller.statuses
     assert np.all(np.diff([s.robot_utime for s in statuses]) == 1000)
     assert abs(statuses[-1].utime - time.time() * 1e6) < 5e6 and statuses[-1].robot_mode == 2
@@ -189,6 +190,7 @@ def test_the_simulated_driver_falls_back_to_damping_when_commands_expire():
     AnsweringController(lcm, stop_after=30)
     served = serve_simulated_driver(scenario, lcm, duration=0.1, expire_sec=0.02, low_pass_freq=1000.0)
     assert served.periods == 100 and served.fresh == 31, served  # 30 answers, the last also a period on
+    assert served.commanded_periods == 30 and served.fresh_fraction == 1.0  # the controller's part: all fresh
     # how many periods 20 ms of wall clock spans depends on the machine (a driver behind real
     # time catches up faster): some, then damping to the end
     assert served.stale >= 5 and served.expired >= 20 and served.expired == 100 - 31 - served.stale, served

@@ -5,6 +5,7 @@ with the reason where one cannot be made, required in CI)."""
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -100,3 +101,25 @@ def test_a_drive_over_udp_between_two_processes(tmp_path):
     traces = Traces.read_csv(tmp_path / "out" / "traces.csv")
     assert len(traces) == timing["commands"] and traces["t"][-1] == pytest.approx(1.5, abs=1e-9)
     assert float(traces["f_n"].max()) > 2.0  # it reached the table: the run is a real one
+
+
+@pytest.mark.slow
+def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
+    """Issue 27's acceptance: 20 s of panda_wipe over UDP between the two processes,
+    free-running at 1 kHz real time with the default bounds: the drive ends without a
+    fault, every bound met, the controller's clock on the robot's (20 000 periods), and
+    at least 99% of the simulated driver's periods applied a fresh command. This needs
+    both processes to keep real time: on a machine loaded beyond its cores it is skipped,
+    saying so (measured here at load 10-11: README, "On a real arm")."""
+    require_namespace()
+    load, cores = os.getloadavg()[0], os.cpu_count() or 1
+    if load > 0.75 * cores:
+        pytest.skip(f"load average {load:.1f} on {cores} cores: the machine cannot keep two 1 kHz loops")
+    result = run_in_namespace(pair_script(20.0, "out"), cwd=tmp_path, timeout=900)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "drive.rc").read_text().strip() == "0", (tmp_path / "drive.err").read_text()
+    timing = json.loads((tmp_path / "out" / "timing.json").read_text())
+    assert "failure" not in timing and timing["periods"] == 20000
+    line = (tmp_path / "driver.out").read_text().splitlines()[-1]
+    fresh = float(line.split("of them applied a fresh command (")[1].split("%")[0])
+    assert fresh >= 99.0, line
