@@ -57,7 +57,13 @@ def open_bus(url: str) -> DrakeLcm:
     """``DrakeLcm(url)``, or BusError with LCM's own reason. Drake's DrakeLcm does not raise
     when LCM cannot open the URL (an unknown provider, a bad multicast address, a log file
     that cannot be opened): LCM prints "Error: …" on the process's standard error and the
-    bus then silently sends and receives nothing. That output is turned into the error."""
+    bus then silently sends and receives nothing. That output is turned into the error; and
+    the URL is first opened with the ``lcm`` package, which raises where LCM fails (an
+    invalid URL, a tcpq:// server that refuses the connection), since LCM's line for those
+    does not always begin with "Error"."""
+    import lcm
+
+    _checked(url, lambda: lcm.LCM(url))
     return _checked(url, lambda: DrakeLcm(url))
 
 
