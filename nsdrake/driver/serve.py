@@ -98,94 +98,119 @@ def serve_simulated_driver(
     """The simulated driver on ``lcm`` (module docstring) for ``duration`` [s] (default the
     scenario's) after the first command; ``stop``: a :class:`nsdrake.driver.stop.StopRequest`
     that ends it at the next period."""
-    d, period = scenario.driver, scenario.control_period
-    inner = DrakeLcm("memq://")
-    driver = SimulatedDriver(scenario, inner, adds_gravity=d.robot_adds_gravity)
-    plant, plant_context = driver.built.station.plant, None
-    plant_context = plant.GetMyContextFromRoot(driver.context)
-    received: list[lcmt_panda_command] = []
-    outgoing: list[tuple[str, bytes]] = []
-    inner_subscriptions = [  # noqa: F841 (kept alive)
-        inner.Subscribe(d.status_channel, lambda data: outgoing.append((d.status_channel, data))),
-        inner.Subscribe(d.force_torque_channel, lambda data: outgoing.append((d.force_torque_channel, data))),
-    ]
-    subscription = lcm.Subscribe(  # noqa: F841
-        d.command_channel, lambda data: received.append(lcmt_panda_command.decode(data))
-    )
-    result, recent = ServeResult(), []
+    server = _Server(scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime)
     duration = scenario.duration if duration is None else duration
-    command, applied = None, np.zeros(NUM_JOINTS)
-    published: list[int] = []  # utime of each status published
-    first = None
-    driver.start()
+    period = server.period
+    server.driver.start()
     next_time = clock()
-    while first is None or driver.time < first + duration - 0.5 * period:
+    while server.first is None or server.driver.time < server.first + duration - 0.5 * period:
         if stop is not None and stop.requested:
             break
-        # 1. the status of t_k (published by the station's diagram when it reached t_k)
-        for channel, data in outgoing:
+        server.publish_status()
+        server.step()
+        next_time += period
+        server.wait_until(next_time, clock)
+        if progress is not None and server.first is not None and server.result.periods % 1000 == 0:
+            progress((server.driver.time - server.first) / duration)
+    return server.result
+
+
+class _Server:
+    """One period of :func:`serve_simulated_driver` at a time (module docstring)."""
+
+    def __init__(self, scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime):
+        d = self.channels = scenario.driver
+        self.period, self.lcm = scenario.control_period, lcm
+        self.expire_us, self.low_pass_freq, self.rate_limit = expire_sec * 1e6, low_pass_freq, rate_limit
+        self.wall_utime = wall_utime
+        self.inner = DrakeLcm("memq://")  # the station's diagram talks here; this loop forwards
+        self.driver = SimulatedDriver(scenario, self.inner, adds_gravity=d.robot_adds_gravity)
+        self.plant = self.driver.built.station.plant
+        self.plant_context = self.plant.GetMyContextFromRoot(self.driver.context)
+        self.received: list[lcmt_panda_command] = []
+        self.outgoing: list[tuple[str, bytes]] = []
+        self._subscriptions = [
+            self.inner.Subscribe(
+                d.status_channel, lambda data: self.outgoing.append((d.status_channel, data))
+            ),
+            self.inner.Subscribe(
+                d.force_torque_channel, lambda data: self.outgoing.append((d.force_torque_channel, data))
+            ),
+            lcm.Subscribe(
+                d.command_channel, lambda data: self.received.append(lcmt_panda_command.decode(data))
+            ),
+        ]
+        self.result, self.recent = ServeResult(), []
+        self.command, self.applied = None, np.zeros(NUM_JOINTS)
+        self.published: list[int] = []  # utime of each status published
+        self.first = None
+
+    def publish_status(self) -> None:
+        """The status of t_k (the station's diagram published it on reaching t_k), stamped."""
+        d = self.channels
+        for channel, data in self.outgoing:
             if channel == d.status_channel:
                 status = lcmt_panda_status.decode(data)
-                status.robot_utime = round(driver.time * 1e6)
-                status.utime = wall_utime()
+                status.robot_utime = round(self.driver.time * 1e6)
+                status.utime = self.wall_utime()
                 status.robot_mode = ROBOT_MODE_MOVE
-                status.control_command_success_rate = float(np.mean(recent)) if recent else 1.0
-                published.append(status.utime)
+                status.control_command_success_rate = float(np.mean(self.recent)) if self.recent else 1.0
+                self.published.append(status.utime)
                 data = status.encode()
-            lcm.Publish(channel, data)
-        outgoing.clear()
-        # 2. the newest command that arrived, unless expired
-        lcm.HandleSubscriptions(0)
-        got_command = bool(received)
-        if received:
-            result.commands += len(received)
-            command = received[-1]
-            received.clear()
-            if first is None:
-                first = driver.time
-        if command is not None and abs(wall_utime() - command.utime) > expire_sec * 1e6:
-            command = None
-        q, v = plant.GetPositions(plant_context), plant.GetVelocities(plant_context)
-        wanted = np.asarray(command.joint_torque) if command is not None else -DAMPING * v
-        # 3. libfranka's filter and rate limiter
-        torque = lowpass(applied, wanted, period, low_pass_freq)
-        if rate_limit:
-            step = TORQUE_RATE_LIMIT * period
-            torque = np.clip(torque, applied - step, applied + step)
-        applied = torque
-        if first is not None:
-            result.periods += 1
-            if command is None:
-                result.expired += 1
-                recent.append(0.0)
-            else:
-                age = (
-                    len(published) - 1 - published.index(command.utime)
-                    if command.utime in published[-50:]
-                    else -1
-                )
-                result.ages[age] = result.ages.get(age, 0) + 1
-                fresh = 0 <= age <= 1  # answers the status just published (in-process) or the one before
-                result.fresh += fresh
-                result.stale += not fresh
-                recent.append(float(fresh))
-            del recent[:-100]
-            if got_command:
-                result.commanded_periods, result.commanded_fresh = result.periods, result.fresh
-        # 4. step the plant one period with this torque, then wait for the wall clock
-        driver.apply_torque(torque, utime=published[-1] if published else 0)
-        driver.advance()
-        del q
-        next_time += period
-        remaining = next_time - clock()
+            self.lcm.Publish(channel, data)
+        self.outgoing.clear()
+
+    def step(self) -> None:
+        """The newest command unless expired (else damping), filtered and rate limited,
+        counted, and the plant stepped one period with it."""
+        self.lcm.HandleSubscriptions(0)
+        got_command = bool(self.received)
+        if got_command:
+            self.result.commands += len(self.received)
+            self.command = self.received[-1]
+            self.received.clear()
+            if self.first is None:
+                self.first = self.driver.time
+        if self.command is not None and abs(self.wall_utime() - self.command.utime) > self.expire_us:
+            self.command = None
+        v = self.plant.GetVelocities(self.plant_context)
+        wanted = np.asarray(self.command.joint_torque) if self.command is not None else -DAMPING * v
+        torque = lowpass(self.applied, wanted, self.period, self.low_pass_freq)
+        if self.rate_limit:
+            limit = TORQUE_RATE_LIMIT * self.period
+            torque = np.clip(torque, self.applied - limit, self.applied + limit)
+        self.applied = torque
+        if self.first is not None:
+            self._count(got_command)
+        self.driver.apply_torque(torque, utime=self.published[-1] if self.published else 0)
+        self.driver.advance()
+
+    def _count(self, got_command: bool) -> None:
+        result, command = self.result, self.command
+        result.periods += 1
+        if command is None:
+            result.expired += 1
+            self.recent.append(0.0)
+        else:
+            recent = self.published[-50:]
+            age = len(recent) - 1 - recent.index(command.utime) if command.utime in recent else -1
+            result.ages[age] = result.ages.get(age, 0) + 1
+            fresh = 0 <= age <= 1  # answers the status just published (in-process) or the one before
+            result.fresh += fresh
+            result.stale += not fresh
+            self.recent.append(float(fresh))
+        del self.recent[:-100]
+        if got_command:
+            result.commanded_periods, result.commanded_fresh = result.periods, result.fresh
+
+    def wait_until(self, when: float, clock) -> None:
+        """Until the wall clock reaches ``when``, blocking on the bus (never spinning)."""
+        remaining = when - clock()
         if remaining < 0:
-            result.behind += 1
+            self.result.behind += 1
         while remaining > 0:
             if remaining > 1e-3:
-                lcm.HandleSubscriptions(int(remaining * 1e3))  # blocks until a message or the time
+                self.lcm.HandleSubscriptions(int(remaining * 1e3))  # until a message or the time
             else:
                 time.sleep(remaining)
-            remaining = next_time - clock()
-        if progress is not None and first is not None and result.periods % 1000 == 0:
-            progress((driver.time - first) / duration)
-    return result
+            remaining = when - clock()
