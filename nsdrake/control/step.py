@@ -109,6 +109,9 @@ class ControllerStep:
         self._terms = plan.allocate_terms()
         self._m_t = plan.m_t
         self.result = StepResult(self._buffers, plan.n)
+        # g(q) (n) [N m] of the last call's q, the model's gravity term (τ = … + g, the torque
+        # that holds the arm against gravity): a view, rewritten by each call
+        self.gravity = plan.terms_field(self._terms, "g")
         self.reset()
 
     @property

@@ -88,14 +88,13 @@ class ControllerSide:
     def tick(self, t: float, q: np.ndarray, v: np.ndarray, wrench: np.ndarray):
         """The reference and the controller at t [s] for the measured q, q̇ and wrench;
         returns (the reference's (x_d, ẋ_d, ẍ_d, f_d), the step's result); the torque to
-        send is in :attr:`command` (τ − g(q) when the robot adds g, g of the controller's
-        model)."""
+        send is in :attr:`command` (τ − g(q) when the robot adds g, g the controller model's
+        own gravity term, which the step has just computed at q)."""
         desired = self.reference.tick(t, wrench)
         rotation = () if self._quaternion is None else (self._quaternion, self._zero3, self._zero3)
         result = self.step.step(t, q, v, wrench, *desired, *rotation)
         if self.adds_gravity:
-            self._plant.SetPositions(self._context, q)
-            np.add(result.tau, self._plant.CalcGravityGeneralizedForces(self._context), out=self.command)
+            np.subtract(result.tau, self.step.gravity, out=self.command)
         else:
             self.command[:] = result.tau
         return desired, result

@@ -62,6 +62,9 @@ VELOCITY_MARGIN = 0.05  # [-] of VELOCITY_LIMIT
 
 
 _LOWER, _UPPER = POSITION_LOWER - POSITION_MARGIN, POSITION_UPPER + POSITION_MARGIN
+# The same limits as a box around a centre, rows q and q̇: |[q; q̇] − centre| ≤ half-width
+ENVELOPE_CENTRE = np.array([(_LOWER + _UPPER) / 2, np.zeros(7)])
+ENVELOPE_HALF_WIDTH = np.array([(_UPPER - _LOWER) / 2, VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN)])
 _FAST = VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN)
 
 
