@@ -24,10 +24,13 @@ files under ``--out`` (default ``bench/out/drive``) and ends with one JSON line:
 ``cpu_p50_us`` and ``cpu_p999_us`` of the UDP run (of memq without a namespace), each
 transport's figures, the targets (issue 27: 80 and 200 µs) and the load.
 
-``--profile``: the loop alone on an in-process bus (``lcm`` memq://, statuses of the arm
-at rest), 3000 unpaced ticks: their CPU time p50 and p99.9, then where it goes under
-cProfile (the shares of the controller's step, the reference, the status checks, the
-record and the bus; a ratio: the profiler inflates Python more than C++).
+``--profile``: the loop alone, replaying on an in-process bus (``lcm`` memq://) the
+statuses and sensor messages the simulated driver published in a 6 s lockstep panda_wipe
+(approach, contact, the start of the circle), unpaced: the ticks' CPU time p50 and
+p99.9 (the controller's own cost, without the driver's simulation in the same thread or
+on the same core), then where it goes under cProfile (the shares of the controller's
+step, the reference, the status checks, the record and the bus; a ratio: the profiler
+inflates Python more than C++).
 """
 
 from __future__ import annotations
@@ -46,8 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
-from nsdrake.driver.run import run_simulated
-from nsdrake.driver.timing import timing_line, write_timing
+from nsdrake.driver.run import prepare, run_simulated
+from nsdrake.driver.timing import collector_paused, timing_line, write_timing
 from nsdrake.experiment.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -116,42 +119,55 @@ def udp(duration: float, out: Path, config: Path | None) -> dict:
     return result
 
 
-def profile(ticks: int = 3000) -> dict:
-    sys.path.insert(0, str(ROOT / "tests" / "driver"))
-    from fake_bus import force_torque_bytes, status_bytes
+def recorded_statuses(duration: float) -> list[tuple[bytes, bytes]]:
+    """The (status, force-torque) messages the simulated driver published in a lockstep
+    panda_wipe drive of ``duration`` [s]: a real sequence, through approach and contact."""
+    drive = prepare(load_scenario("panda_wipe", duration=duration), realtime_rate=0.0)
+    pairs: list[list] = []
 
+    def on_status(data):
+        pairs.append([data, None])
+
+    def on_force_torque(data):
+        pairs[-1][1] = data
+
+    drive.loop.bus.subscribe("PANDA_STATUS", on_status)
+    drive.loop.bus.subscribe("PANDA_FORCE_TORQUE", on_force_torque)
+    drive.run()
+    return [tuple(pair) for pair in pairs]
+
+
+def profile(duration: float = 6.0) -> dict:
+    """The loop alone, replaying a recorded panda_wipe sequence on an in-process bus."""
     from nsdrake.driver.bus import LcmBus
     from nsdrake.driver.controller_side import build_controller_side
     from nsdrake.driver.loop import ControllerLoop
 
-    side = build_controller_side(load_scenario("panda_wipe", duration=ticks * 1e-3 + 1))
+    pairs = recorded_statuses(duration)
+    side = build_controller_side(load_scenario("panda_wipe", duration=duration))
     bus = LcmBus("memq://")
-    statuses = [
-        status_bytes(side.station.q0, utime=10**15 + k * 1000, robot_utime=10**6 + k * 1000)
-        for k in range(ticks + 1)
-    ]
-    sensor = force_torque_bytes()
 
     def run(profiler=None):
         side.reset()
         loop = ControllerLoop(side, bus)
         loop.ready()
-        bus.publish("PANDA_STATUS", statuses[0])
-        bus.publish("PANDA_FORCE_TORQUE", sensor)
-        loop.start()
-        if profiler is not None:
-            profiler.enable()
-        for k in range(1, ticks + 1):
-            bus.publish("PANDA_STATUS", statuses[k])
+        for k, (status, sensor) in enumerate(pairs):
+            bus.publish("PANDA_STATUS", status)
             bus.publish("PANDA_FORCE_TORQUE", sensor)
-            loop.tick()
+            if k == 0:
+                loop.start()
+                if profiler is not None:
+                    profiler.enable()
+            else:
+                loop.tick()
         if profiler is not None:
             profiler.disable()
         return loop.times.cpu_seconds * 1e6
 
-    cpu = run()  # unprofiled: the tick's own CPU time
-    profiler = cProfile.Profile(time.thread_time)
-    run(profiler)
+    with collector_paused():
+        cpu = run()  # unprofiled: the tick's own CPU time
+        profiler = cProfile.Profile(time.thread_time)
+        run(profiler)
     stats = pstats.Stats(profiler)
     total = sum(v[3] for k, v in stats.stats.items() if k[2] == "tick" and "loop.py" in k[0])
 
@@ -161,14 +177,13 @@ def profile(ticks: int = 3000) -> dict:
     shares = {
         "ControllerStep.step": cumulative("control/step.py", "step"),
         "reference": cumulative("experiment/reference.py", "tick"),
-        "gravity g(q)": cumulative("", "CalcGravityGeneralizedForces>"),
         "status decode and checks": cumulative("driver/loop.py", "_load"),
         "record": cumulative("driver/controller_side.py", "record"),
         "bus (handle, publish)": cumulative("driver/bus.py", "handle")
         + cumulative("driver/bus.py", "publish"),
     }
     return {
-        "ticks": ticks,
+        "ticks": int(cpu.size),
         "load_average_1min": os.getloadavg()[0],
         "cpu_p50_us": float(np.percentile(cpu, 50)),
         "cpu_p999_us": float(np.percentile(cpu, 99.9)),
