@@ -123,3 +123,17 @@ def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
     line = (tmp_path / "driver.out").read_text().splitlines()[-1]
     fresh = float(line.split("of them applied a fresh command (")[1].split("%")[0])
     assert fresh >= 99.0, line
+
+
+def test_a_unicast_udpm_address_is_refused_in_one_line(tmp_path):
+    """`--lcm udpm://10.1.2.3:7667` (a unicast address: LCM cannot join it as a multicast
+    group) ends at once with one line and exit 2, before any folder (issue 24, item 4: it
+    was accepted and failed 5 s later as "no status"). Inside the namespace: a udpm URL
+    is never opened outside one."""
+    require_namespace()
+    drive = python_in_namespace("-m nsdrake drive panda_wipe --lcm 'udpm://10.1.2.3:7667?ttl=0' --out out")
+    result = run_in_namespace(f"{drive}\necho $? > rc\n", cwd=tmp_path, timeout=300)
+    assert (tmp_path / "rc").read_text().strip() == "2", result.stderr
+    err = without_notices(result.stderr)
+    assert err.count("\n") == 1 and "cannot open the LCM bus udpm://10.1.2.3:7667?ttl=0" in err, err
+    assert not (tmp_path / "out").exists()
