@@ -47,6 +47,7 @@ from nsdrake.driver.stop import StopRequest
 from nsdrake.driver.timing import TickTimes
 from nsdrake.driver.wire import CommandBuffer, ForceTorqueBuffer, StatusBuffer
 
+SUCCESS_RATE_WINDOW = 100  # libfranka's control_command_success_rate is over its last 100 cycles
 ROBOT_MODE_MOVE = 2  # lcmt_panda_status.kMove: the only mode in which a Panda takes torque commands
 ROBOT_MODES = {0: "kOther", 1: "kIdle", 2: "kMove", 3: "kGuiding", 4: "kReflex", 5: "kUserStopped",
                6: "kAutomaticErrorRecovery"}  # fmt: skip
@@ -111,7 +112,8 @@ class ControllerLoop:
         self.recorder = Recorder(side, capacity)
         self.stop = StopRequest()  # Ctrl-C's flag, read at each status (Drive.run sets it)
         self.clock_name = "utime"
-        # the lowest control_command_success_rate the robot reported (drake-franka-driver sends
+        # the lowest control_command_success_rate the robot reported once the drive had sent
+        # SUCCESS_RATE_WINDOW commands (drake-franka-driver sends
         # libfranka's: the fraction of its last 100 cycles that received a command in time)
         self.success_rate_min = float("nan")
         self._clock = clock
@@ -292,8 +294,9 @@ class ControllerLoop:
                     f"{refused}the robot is in mode {name} ({mode}), not kMove ({ROBOT_MODE_MOVE}): "
                     "it applies no torque command"
                 )
-            rate = status.success_rate
-            self.success_rate_min = rate if not rate >= self.success_rate_min else self.success_rate_min
+            if self.commands >= SUCCESS_RATE_WINDOW:  # before, the rate counts cycles before the drive
+                rate = status.success_rate
+                self.success_rate_min = rate if not rate >= self.success_rate_min else self.success_rate_min
 
     def _measured_wrench(self, arrival: float) -> np.ndarray:
         """The wrench for the status that arrived at ``arrival``: estimated, or the newest

@@ -440,3 +440,32 @@ def test_a_robot_out_of_kmove_stops_the_controller(sides):
 
     error = run_until_fault(loop, robot, bus, reflex)
     assert "the robot is in mode kReflex (4), not kMove (2): it applies no torque command" in error.problem
+
+
+def test_the_robot_s_success_rate_is_reported_once_the_drive_has_run_its_window(sides):
+    """The rate libfranka reports is over its last 100 cycles: 0 in the first 100 ticks (no
+    command before the drive) is not counted, a later 0.9 is the minimum, named in the
+    timing line (catches control_command_success_rate never read, or read from the start)."""
+    from nsdrake.driver.timing import timing_line, timing_summary
+
+    loop, robot, bus = start_loop(sides)
+
+    def status_with_rate(rate):
+        robot.utime += 1000
+        robot.robot_utime += 1000
+        robot.arrival += T
+        message = lcmt_panda_status.decode(
+            status_bytes(robot.q, utime=robot.utime, robot_utime=robot.robot_utime)
+        )
+        message.control_command_success_rate = rate
+        bus.at(robot.arrival, "PANDA_STATUS", message.encode())
+        bus.at(robot.arrival, "PANDA_FORCE_TORQUE", force_torque_bytes())
+
+    status_with_rate(0.0)
+    loop.start()
+    for k in range(150):
+        status_with_rate(0.0 if k < 99 else 0.9 if k == 120 else 1.0)
+        loop.tick()
+    assert loop.success_rate_min == 0.9
+    summary = timing_summary(loop.times.seconds, T, control_command_success_rate_min=loop.success_rate_min)
+    assert "the robot's control_command_success_rate fell to 0.90" in timing_line(summary)
