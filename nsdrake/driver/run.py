@@ -1,13 +1,13 @@
 """Running ``nsdrake drive`` and ``nsdrake sim-driver``, and writing a drive's run folder.
 
-- :func:`run_simulated`: both sides in one process over ``memq://``, in lockstep: the
+- :func:`prepare` and :meth:`Drive.run`: the controller side alone on a bus (a real
+  Panda's driver, or ``nsdrake sim-driver`` in a second process), or with the simulated
+  driver in one process over ``memq://`` (:func:`run_simulated`), in lockstep: the
   simulated driver publishes a status, the controller answers it, the driver steps.
-- :func:`run_on_bus`: the controller side alone on a bus (a real Panda's driver, or
-  ``nsdrake sim-driver`` in a second process).
 - ``nsdrake sim-driver``: the simulated driver alone on a bus, free-running
   (:mod:`nsdrake.driver.serve`).
 - :func:`write_drive_folder`: the run folder as ``nsdrake run`` writes it (traces, metrics
-  with their bounds, plots, report, the controller side's diagram) plus ``timing.json``.
+  with their bounds, plots, report) plus ``timing.json``.
 """
 
 from __future__ import annotations
