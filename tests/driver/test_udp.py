@@ -137,3 +137,20 @@ def test_a_unicast_udpm_address_is_refused_in_one_line(tmp_path):
     err = without_notices(result.stderr)
     assert err.count("\n") == 1 and "cannot open the LCM bus udpm://10.1.2.3:7667?ttl=0" in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_ctrl_c_stops_the_simulated_driver_with_130(tmp_path):
+    """`nsdrake sim-driver` serving on UDP, no controller: SIGINT ends it at the next
+    period with one line and exit 130 (issue 24, item 3: it exited 1)."""
+    require_namespace()
+    driver = python_in_namespace(f"-m nsdrake sim-driver panda_wipe --lcm '{URL}'")
+    script = (
+        f"{driver} > out 2> err &\n"
+        "pid=$!\n"
+        "for i in $(seq 600); do grep -q serving out && break; sleep 0.2; done\n"
+        "sleep 1; kill -INT $pid; wait $pid; echo $? > rc\n"
+    )
+    run_in_namespace(script, cwd=tmp_path, timeout=300)
+    assert (tmp_path / "rc").read_text().strip() == "130"
+    err = without_notices((tmp_path / "err").read_text())
+    assert err == "nsdrake: simulated driver interrupted (Ctrl-C)\n", err
