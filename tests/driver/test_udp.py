@@ -83,12 +83,14 @@ def pair_script(duration: float, out: str, config: str | None = None) -> str:
 
 def test_a_drive_over_udp_between_two_processes(tmp_path):
     """nsdrake drive against nsdrake sim-driver over UDP, free-running at 1 kHz for 1.5 s
-    (through first contact, 1.265 s). Catches the oldest queued status answered or missed
-    periods replayed (the controller's clock then falls behind the robot's: periods ≠ 1500,
-    or the run stops on silence), statuses queued before the controller was ready answered
-    (the start-pose check on a stale status; a first tick that looks like a gap), the drive
-    unable to run over UDP at all. The silence bound is 200 periods here: the simulated
-    driver is a Python simulation that a shared machine stalls for ms (README)."""
+    (through first contact, 1.265 s): the whole drive ends without a fault, on the robot's
+    clock (robot_utime; it ends at the first status at or after 1.5 s of it), one trace
+    row per command, and the tool reached the table. Catches a drive that cannot run over
+    UDP between processes at all (a bus that drops statuses, DrakeLcm's one-message queue
+    answering stale ones), the clock read from utime. (Which status is answered, and the
+    timing rules, are tested at their boundaries in test_wire_faults.py.) The silence bound
+    is 200 periods here: the simulated driver is a Python simulation that a shared machine
+    stalls for ms (README)."""
     require_namespace()
     (tmp_path / "c.yaml").write_text("driver: {status_timeout_periods: 200}\n")
     result = run_in_namespace(pair_script(1.5, "out", "c.yaml"), cwd=tmp_path, timeout=600)
@@ -96,10 +98,13 @@ def test_a_drive_over_udp_between_two_processes(tmp_path):
     assert result.returncode == 0, result.stderr
     timing = json.loads((tmp_path / "out" / "timing.json").read_text())
     assert "failure" not in timing, (timing.get("failure"), err)
-    assert timing["periods"] == 1500  # the robot's clock, to the period
+    # the robot's clock, to the period: the drive ends at the first status at or after 1.5 s
+    # (a tick that skipped periods at the end may land a few periods past it)
+    assert 1500 <= timing["periods"] <= 1500 + 200
     assert timing["clock"] == "robot_utime"
     traces = Traces.read_csv(tmp_path / "out" / "traces.csv")
-    assert len(traces) == timing["commands"] and traces["t"][-1] == pytest.approx(1.5, abs=1e-9)
+    assert len(traces) == timing["commands"]
+    assert traces["t"][-1] == pytest.approx(timing["periods"] * 1e-3, abs=1e-9)
     assert float(traces["f_n"].max()) > 2.0  # it reached the table: the run is a real one
 
 
