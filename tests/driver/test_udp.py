@@ -124,7 +124,7 @@ def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "drive.rc").read_text().strip() == "0", (tmp_path / "drive.err").read_text()
     timing = json.loads((tmp_path / "out" / "timing.json").read_text())
-    assert "failure" not in timing and timing["periods"] == 20000
+    assert "failure" not in timing and 20000 <= timing["periods"] <= 20003
     line = (tmp_path / "driver.out").read_text().splitlines()[-1]
     fresh = float(line.split("of them applied a fresh command (")[1].split("%")[0])
     assert fresh >= 99.0, line
