@@ -1,7 +1,7 @@
 """A Panda driver that misbehaves on purpose, for the wire-fault tests over UDP
 (tests/driver/test_udp.py): it publishes lcmt_panda_status (and lcmt_force_torque) at
 1 kHz with robot_utime, a Panda at rest at --q, and once the controller has answered
-``WARM`` statuses it injects ``--fault``, keeps talking for 0.2 s and prints one JSON
+``WARM`` statuses it injects ``--fault``, keeps talking for 0.4 s and prints one JSON
 line: the commands received in all, and those that answer the faulty status or a later
 one (which must be none). Light on purpose (the lcm package and Drake's message types
 only): it starts in a fraction of a second.
@@ -20,7 +20,7 @@ import lcm
 from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
 
 WARM = 100  # commands before the fault
-AFTER = 0.2  # [s] of talking after it
+AFTER = 0.4  # [s] of talking after it: longer than the controller's silence bound (0.2 s)
 UTIME0 = 1_700_000_000_000_000
 FAULTS = (
     "undecodable", "nan", "position_limit", "velocity_limit", "two_publishers", "silence",

@@ -41,7 +41,7 @@ def test_every_wire_fault_over_udp_is_one_line_and_nothing_after(tmp_path):
     """Each fault of issue 27's items 3-4 injected by a driver process that misbehaves
     (tests/driver/bad_driver.py) over UDP, against the controller side in another
     process: it stops with its one line, the robot received no command after it (every
-    command it got was counted before the fault; it listens 0.2 s more), and the run
+    command it got was counted before the fault; it listens 0.4 s more), and the run
     folder keeps what was computed (traces for the 100 commands sent before)."""
     require_namespace()
     script = python_in_namespace(f"{HERE / 'udp_fault_runner.py'} '{URL}' out {','.join(FAULTS)}")
@@ -52,10 +52,10 @@ def test_every_wire_fault_over_udp_is_one_line_and_nothing_after(tmp_path):
         fault, failure = r["fault"], r["failure"]
         assert failure is not None and "\n" not in failure and FAULTS[fault] in failure, (fault, failure)
         assert f"stopped commanding after {r['commands']} command(s)" in failure
-        if "silence" in fault:  # declared past the 50 ms bound; how far past is the OS's (the
+        if "silence" in fault:  # declared past the 200 ms bound; how far past is the OS's (the
             # boundary itself is tested on a fake clock in test_wire_faults.py)
             waited = float(failure.split(" for ")[1].split(" ms")[0])
-            assert 50.0 <= waited < 100.0, failure  # printed to 0.1 ms
+            assert 200.0 <= waited < 300.0, failure  # printed to 0.1 ms
         assert r["driver"]["commands"] == r["commands"], r  # nothing reached the robot after the fault
         if fault == "no_sensor":
             assert r["commands"] == 0 and "traces.csv" not in r["files"] and "timing.json" in r["files"]

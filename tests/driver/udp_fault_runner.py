@@ -22,7 +22,7 @@ from nsdrake.driver.run import Drive, write_drive_folder
 from nsdrake.experiment.output import prepare_output_folder
 from nsdrake.experiment.scenario import load_scenario
 
-BOUND = 50.0  # driver.status_timeout_periods: a shared machine stalls the Python bad driver for ms
+BOUND = 200.0  # driver.status_timeout_periods: a shared machine stalls the Python bad driver for tens of ms
 
 
 def main() -> None:
