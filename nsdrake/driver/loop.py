@@ -73,8 +73,10 @@ def warm_up(side: ControllerSide) -> None:
     """One tick at the scenario's start pose, then the controller side reset: the first
     call in a process loads the compiled kernels from numba's cache (about 0.1 s for the
     Panda's), which must not happen inside the first tick, where the driver's command
-    deadline runs."""
+    deadline runs. A side that has run before is reset first (its step refuses a time
+    before its previous call's)."""
     station = side.station
+    side.reset()
     side.tick(0.0, station.q0, station.v0, np.zeros(6))
     side.estimated_wrench(station.q0, np.zeros(NUM_JOINTS))
     side.reset()
