@@ -198,6 +198,32 @@ def test_the_scenario_reader_and_the_python_api_state_the_same_problem(
     assert str(info.value).endswith(f": {scenario_field}: {problem}"), str(info.value)
 
 
+# Fields of desired_null_space inside one criterion's hysteresis band: beyond its level-2
+# threshold (d_lim 0.05 m by default, q_lim here), short of threshold + band.
+IN_BAND = [
+    (
+        {"criteria__obstacle__influence_distance": 0.055},
+        "obstacle.influence_distance",
+        "d_lim + d_band = 0.06 m",
+    ),
+    (
+        {"selector__q_lim": 0.1, "selector__q_band": 0.2, "criteria__joint_limits__influence": 0.25},
+        "joint_limits.influence",
+        "q_lim + q_band = 0.3 rad",
+    ),
+]
+
+
+@pytest.mark.parametrize(("fields", "where", "rule"), IN_BAND, ids=["obstacle", "joint limits"])
+def test_an_influence_inside_the_hysteresis_band_is_refused(fields, where, rule):
+    """A criterion that took level 2 keeps it until its distance passes threshold + band; an
+    influence distance short of that leaves it on level 2 with no gradient in between.
+    Catches the check comparing the influence with the threshold alone, forgetting the band
+    (issue 28, mistake 3: the existing case, 0.01 m, is below d_lim too)."""
+    message = refusal(lambda: ControllerConfig(desired_null_space=desired(**fields)))
+    assert message.startswith(f"ControllerConfig.desired_null_space.criteria.{where}: ") and rule in message
+
+
 # --- the controller's own arguments --------------------------------------------------------
 
 
