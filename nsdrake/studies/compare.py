@@ -455,12 +455,13 @@ FAULT_VARIABLE = "NSDRAKE_TEST_FAULT"
 def _injected_fault(index: int) -> None:
     """Test hook: with NSDRAKE_TEST_FAULT=INDEX:KIND in the environment, variant INDEX dies
     as a segfault would, leaving no result (exit), raises (raise), hangs until interrupted
-    (hang), or hangs deaf to Ctrl-C (hang_hard: only a kill ends it). The tests use it to
-    check that ``nsdrake compare`` survives such a variant; unset, it does nothing."""
-    spec = os.environ.get(FAULT_VARIABLE, "")
-    if spec.partition(":")[0] != str(index):
+    (hang), or hangs deaf to Ctrl-C (hang_hard: only a kill ends it); several variants
+    take a comma-separated list (0:hang,1:raise). The tests use it to check that
+    ``nsdrake compare`` survives such a variant; unset, it does nothing."""
+    faults = dict(entry.partition(":")[::2] for entry in os.environ.get(FAULT_VARIABLE, "").split(","))
+    kind = faults.get(str(index))
+    if kind is None:
         return
-    kind = spec.partition(":")[2]
     if kind == "exit":
         os._exit(70)
     if kind in ("hang", "hang_hard"):
