@@ -472,6 +472,27 @@ def _injected_fault(index: int) -> None:
     raise RuntimeError(f"{FAULT_VARIABLE} asked variant {index} to fail")
 
 
+SIMULATING_VARIABLE = "NSDRAKE_TEST_SIMULATING"
+
+
+def _simulated_time_file(task: _Task, scenario) -> Callable[[float], None] | None:
+    """Test hook: with NSDRAKE_TEST_SIMULATING=DIR in the environment, variant INDEX keeps
+    the time it has simulated [s] in DIR/INDEX, rewritten a hundred times per run, so that
+    a test can wait until a variant is simulating (not for an amount of time or CPU, which
+    depends on the machine and on whether the kernels were compiled). Unset: None."""
+    folder = os.environ.get(SIMULATING_VARIABLE)
+    if not folder:
+        return None
+    path = Path(folder) / str(task.index)
+
+    def simulated(fraction: float) -> None:
+        partial = path.with_suffix(".partial")
+        partial.write_text(f"{fraction * scenario.duration!r}\n")
+        partial.replace(path)  # whole, never half-written
+
+    return simulated
+
+
 def _run_variant(task: _Task) -> tuple[str, object]:
     """Simulates one variant, writes its traces and measures them (from the file):
     ("ok", row), or ("interrupted", t) when Ctrl-C stopped it (its traces so far are
@@ -481,8 +502,8 @@ def _run_variant(task: _Task) -> tuple[str, object]:
     _injected_fault(task.index)
     scenario = variant_scenario(task.family, task.index, task.config, task.duration)
     diverged = None
-    try:
-        traces, built = run(scenario, auto_structure="fused")  # the same traces, cheaper
+    try:  # the same traces as the named systems', cheaper
+        traces, built = run(scenario, auto_structure="fused", progress=_simulated_time_file(task, scenario))
     except DivergenceError as e:  # a row that says so, with what it measured up to then
         traces, built, diverged = e.traces, e.built, f"{e.t:.4g} s: {e.reason}"
     except RunInterrupted as e:
