@@ -188,7 +188,7 @@ def test_a_crashing_variant_is_a_failed_row_and_the_others_finish(
     monkeypatch.setenv("NSDRAKE_TEST_FAULT", f"1:{fault}")  # read by the worker processes too
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)  # draw the progress bar
     out = tmp_path / "lyap"
-    with deadline(180):
+    with deadline(900):  # a guard against a hang: a cold kernel cache at load takes minutes
         code = main(["compare", "lyapunov", "--duration", "0.2", "--out", str(out), "--jobs", jobs])
     assert code == 1
     with (out / "table.csv").open() as f:
@@ -267,7 +267,7 @@ def test_a_variant_that_starts_late_gets_the_whole_time_limit(tmp_path, monkeypa
     (issue 28, mistake 5)."""
     monkeypatch.setenv("NSDRAKE_TEST_FAULT", "0:hang,1:raise")  # read by the worker processes
     (tmp_path / "late").mkdir()
-    with deadline(180):
+    with deadline(900):  # a guard against a hang: a cold kernel cache at load takes minutes
         result = run_family(
             subset("lyapunov", 0, 1),
             tmp_path / "late",
