@@ -576,6 +576,8 @@ def _variant_process(task: _Task, conn) -> None:
             raise KeyboardInterrupt
 
     try:
+        if hasattr(signal, "pthread_sigmask"):  # a later worker inherits the start's blocked mask
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         message = _run_variant(task, simulated)
     except BaseException as e:  # every failure, an interruption outside the run included, is the row's
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -608,10 +610,10 @@ def _timed_out_row(timeout: float, t: float | None) -> dict:
 def start_quietly(process) -> None:
     """Starts ``process`` with SIGINT ignored: an ignored signal stays ignored across exec,
     and Python keeps it so, so a Ctrl-C that lands while the worker imports is not a
-    traceback (blocking it is not enough: the spawned interpreter starts with an empty
-    signal mask). This process holds SIGINT blocked meanwhile and gets a Ctrl-C that
-    landed as soon as the start returns (Linux keeps a blocked signal pending though its
-    action is to ignore it)."""
+    traceback (blocking it is not enough: measured in /proc, the first worker began with
+    an empty signal mask, the second with the block inherited, which the worker lifts).
+    This process holds SIGINT blocked meanwhile and gets a Ctrl-C that landed as soon as
+    the start returns (Linux keeps a blocked signal pending though it is ignored)."""
     if not hasattr(signal, "pthread_sigmask"):
         process.start()
         return
