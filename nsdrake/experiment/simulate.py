@@ -37,7 +37,8 @@ class RunInterrupted(KeyboardInterrupt):
 
     def __init__(self, t: float, traces: Traces, built: ControlledStation):
         self.t, self.traces, self.built = t, traces, built
-        self.reason = f"interrupted at t = {t:.4f} s (Ctrl-C)"
+        when = f"at t = {t:.4f} s" if len(traces) else "before its first step"  # no row logged
+        self.reason = f"interrupted {when} (Ctrl-C)"
         super().__init__(self.reason)
 
 
