@@ -254,6 +254,9 @@ def _run(args) -> int:
     if result.interrupted:
         print(f"nsdrake: {result.failure}; the run so far is in {out}/, marked interrupted", file=sys.stderr)
         return INTERRUPTED
+    if answer is not None and answer.pending:  # held through a compile after the run's end
+        print(f"nsdrake: interrupted (Ctrl-C) as the run ended; the whole run is in {out}/", file=sys.stderr)
+        return INTERRUPTED
     for m in result.metrics:
         mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
         bound = f"  (bound: {m.bound})" if m.bound else ""

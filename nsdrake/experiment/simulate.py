@@ -128,7 +128,16 @@ def run(
     _advance(simulator, built, scenario, progress)
     if built.visualizers is not None:
         built.visualizers.publish_recording()
-    return collect_traces(built, context), built
+    traces = collect_traces(built, context)
+    if progress is not None:
+        # the end reported again with the traces in hand: a Ctrl-C held back while their
+        # kernels compiled (a first run compiles some here; nsdrake/ctrl_c.py) stops the run
+        # now, keeping them
+        try:
+            progress(1.0)
+        except KeyboardInterrupt:
+            raise RunInterrupted(context.get_time(), traces, built) from None
+    return traces, built
 
 
 def _advance(simulator: Simulator, built: ControlledStation, scenario: Scenario, progress) -> None:
