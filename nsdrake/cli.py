@@ -26,6 +26,7 @@ import sys
 import time
 from pathlib import Path
 
+from nsdrake import ctrl_c
 from nsdrake.experiment.output import (
     OutputFolderError,
     default_output_folder,
@@ -230,7 +231,7 @@ def _seconds(text: str) -> float:
 def _run(args) -> int:
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     check_scenario(scenario)  # model files, joint names: fail before anything is written
-    with _claimed(args.out, args.scenario, args.overwrite) as out:
+    with _claimed(args.out, args.scenario, args.overwrite, computes=False) as out:
         try:
             meshcat = _live_meshcat() if args.meshcat else None
         except RuntimeError as e:  # e.g. no free port in Meshcat's range
@@ -239,14 +240,22 @@ def _run(args) -> int:
         print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
         runs = 2 if scenario.report.compare_without_null_space_task else 1
         progress = Progress(args.scenario, 1.0, simulated=runs * scenario.duration)
+        answer = ctrl_c.current()
+
+        def report(done: float) -> None:  # each hundredth: a Ctrl-C kept through a compile stops it here
+            if answer is not None:
+                answer.report()
+            progress(done)
+
         try:
-            result = run_to_folder(
-                scenario, out, progress=progress, replay=not args.no_replay, meshcat=meshcat
-            )
+            result = run_to_folder(scenario, out, progress=report, replay=not args.no_replay, meshcat=meshcat)
         finally:
             progress.end_line()
     if result.interrupted:
         print(f"nsdrake: {result.failure}; the run so far is in {out}/, marked interrupted", file=sys.stderr)
+        return INTERRUPTED
+    if answer is not None and answer.pending:  # held through a compile after the run's end
+        print(f"nsdrake: interrupted (Ctrl-C) as the run ended; the whole run is in {out}/", file=sys.stderr)
         return INTERRUPTED
     for m in result.metrics:
         mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
@@ -400,7 +409,7 @@ def _sim_driver(args) -> int:
     return 0
 
 
-INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT), as a shell reports it
+INTERRUPTED = ctrl_c.INTERRUPTED
 
 
 def claim_output_folder(
@@ -414,15 +423,23 @@ def claim_output_folder(
 
 
 @contextlib.contextmanager
-def _claimed(out: Path | None, default_name: str, overwrite: bool):
+def _claimed(out: Path | None, default_name: str, overwrite: bool, *, computes: bool = True):
     """The claimed output folder; if the command ends (fails, is stopped) before writing
-    anything there, the claim is undone and the folders made for it removed."""
+    anything there, the claim is undone and the folders made for it removed. Unless the
+    command reports what it computes (``computes`` False: ``run``), a Ctrl-C from the
+    claim on is a KeyboardInterrupt even while a kernel compiles (nsdrake/ctrl_c.py)."""
     created: list[Path] = []
+    answer = ctrl_c.current()
     folder = claim_output_folder(out, default_name, overwrite=overwrite, created=created)
+    if answer is not None:
+        answer.claims.append((folder, created))  # a Ctrl-C that exits at once undoes it too
+        answer.computed = answer.computed or computes
     try:
         yield folder
     finally:
         release_unused(folder, created)
+        if answer is not None:
+            answer.claims.remove((folder, created))
 
 
 BROWSER_WAIT = 60.0  # [s] how long --meshcat waits for a browser on a terminal
@@ -445,6 +462,13 @@ def _live_meshcat():
 def main(argv: list[str] | None = None) -> int:
     _never_fail_to_print()
     args = build_parser().parse_args(argv)
+    with ctrl_c.answering() as answer:
+        # sweep and sim-driver compute from their start on (a Ctrl-C is a KeyboardInterrupt)
+        answer.computed = args.command in ("sweep", "sim-driver")
+        return _command(args)
+
+
+def _command(args) -> int:
     try:
         if args.command == "list":
             print("scenarios (nsdrake run):  " + ", ".join(shipped_scenarios()))

@@ -37,7 +37,8 @@ class RunInterrupted(KeyboardInterrupt):
 
     def __init__(self, t: float, traces: Traces, built: ControlledStation):
         self.t, self.traces, self.built = t, traces, built
-        self.reason = f"interrupted at t = {t:.4f} s (Ctrl-C)"
+        when = f"at t = {t:.4f} s" if len(traces) else "before its first step"  # no row logged
+        self.reason = f"interrupted {when} (Ctrl-C)"
         super().__init__(self.reason)
 
 
@@ -127,7 +128,16 @@ def run(
     _advance(simulator, built, scenario, progress)
     if built.visualizers is not None:
         built.visualizers.publish_recording()
-    return collect_traces(built, context), built
+    traces = collect_traces(built, context)
+    if progress is not None:
+        # the end reported again with the traces in hand: a Ctrl-C held back while their
+        # kernels compiled (a first run compiles some here; nsdrake/ctrl_c.py) stops the run
+        # now, keeping them
+        try:
+            progress(1.0)
+        except KeyboardInterrupt:
+            raise RunInterrupted(context.get_time(), traces, built) from None
+    return traces, built
 
 
 def _advance(simulator: Simulator, built: ControlledStation, scenario: Scenario, progress) -> None:

@@ -54,5 +54,11 @@ class Traces:
         path = Path(path)
         with path.open() as f:
             header = f.readline().strip().split(",")
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+            rows = f.read()
+        # a run stopped before its first logged row wrote the header alone: zero rows
+        data = (
+            np.loadtxt(rows.splitlines(), delimiter=",", ndmin=2)
+            if rows.strip()
+            else np.empty((0, len(header)))
+        )
         return cls({name: data[:, i] for i, name in enumerate(header)})

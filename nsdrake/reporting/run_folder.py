@@ -132,11 +132,13 @@ RUN_FILES = (
 
 def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, meshcat) -> RunResult:
     declare(out, RUN_FILES)
-    (out / "scenario.yaml").write_text(scenario_yaml(scenario))
     live = meshcat is not None
     if meshcat is None and replay:
         meshcat = start_meshcat(live=False)
     sim = _simulate(scenario, out, progress, meshcat, live)
+    # after the simulation: until its first step (where the kernels compile), the folder
+    # stays empty, so that a Ctrl-C there undoes the claim (nsdrake/ctrl_c.py)
+    (out / "scenario.yaml").write_text(scenario_yaml(scenario))
     replay_path = write_replay(meshcat, out / "replay.html") if replay else None
     picture = write_diagram_picture(sim.built.diagram, out)
     traces = Traces.read_csv(out / "traces.csv")

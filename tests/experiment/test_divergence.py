@@ -135,3 +135,26 @@ def test_ctrl_c_inside_a_step_keeps_every_complete_row(monkeypatch):
     assert isinstance(stopped, simulate.RunInterrupted)
     assert stopped.reason == f"interrupted at t = {stopped.t:.4f} s (Ctrl-C)"
     assert len(stopped.traces) == 19 and stopped.traces["t"][-1] == pytest.approx(0.036)
+
+
+def test_ctrl_c_held_until_the_runs_end_keeps_every_row():
+    """A Ctrl-C held back while the traces' kernels compiled (nsdrake/ctrl_c.py keeps it for
+    the next progress report) is raised by the end's second report, after the traces are
+    collected: the run ends as RunInterrupted at its end with every row. Catches the
+    report made outside the conversion to RunInterrupted (the whole run's traces lost),
+    and a run that never reports its end again (the Ctrl-C never answered)."""
+    import nsdrake.experiment.simulate as simulate
+
+    ends = []
+
+    def progress(done):
+        if done == 1.0:
+            ends.append(done)
+            if len(ends) == 2:
+                raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as info:  # (a plain one escaping would end pytest)
+        simulate.run(load_scenario("fig3", duration=0.05), progress=progress)
+    assert isinstance(info.value, simulate.RunInterrupted)
+    assert info.value.t == pytest.approx(0.05)
+    assert len(info.value.traces) == len(simulate.run(load_scenario("fig3", duration=0.05))[0])
