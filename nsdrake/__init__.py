@@ -23,8 +23,8 @@ from nsdrake.station.force_sensor import ForceSensor
 # shipped scenarios use: a wrench sensor from a weld's reaction force (ForceSensor), the
 # surface reference that freezes the normal where contact is detected (SurfaceReference)
 # and its trajectories (SlideAndPress, CircleOnSurface), and the hold for a plant that
-# steps faster than the controller (ControlHold). README: "Use the controller in your
-# own diagram".
+# steps faster than the controller (ControlHold). docs/own_diagram.md: "Use the
+# controller in your own diagram".
 __all__ = [
     "CircleOnSurface",
     "ControlHold",

@@ -4,12 +4,12 @@
 
 Each folder docs/results/FAMILY/ holds ``command``, the one line that made its table
 (``nsdrake compare FAMILY [options]``), and ``table.md``, the table that command wrote,
-unedited; the README copies that table's lines (a test checks the copy,
+unedited; the docs pages copy that table's rows (a test checks the copy,
 tests/test_results_tables.py). This script re-runs the command of the family named (or of
 every folder, with ``all``) with ``--out RUNS/FAMILY --overwrite`` (default RUNS: runs/results;
 the run folder with every variant's traces is kept there), copies the new ``table.md``
 over the committed one, and prints one line per family: ``unchanged``, or ``changed`` with
-the variants whose rows differ (then copy the rows into the README, and check its prose).
+the variants whose rows differ (then copy the rows into the page, and check its prose).
 
 A family run is CPU-heavy (minutes per family): prefix ``nice`` on a shared machine.
 Exit status: 0 if every command succeeded (changed or not), 1 if one failed, 2 for a

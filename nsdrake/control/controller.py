@@ -124,38 +124,55 @@ class NullSpaceImpedanceController(Diagram):
         - task_position
         - saturation
 
-    Inputs: ``estimated_state`` [q; q̇] (2n) [rad, rad/s] in the controller model's
-    velocity order; ``measured_wrench`` [M; f] (6) [N m, N], the wrench the tool
-    exerts on the environment, world frame, moment about ``wrench_point``;
-    ``desired_position``, ``desired_velocity``, ``desired_acceleration`` x_d, ẋ_d,
-    ẍ_d (m_t, one per translational task axis) [m, m/s, m/s²]; ``desired_force``
-    f_d (1) [N] along n. With rotational task axes (``rx``, ``ry``, ``rz``, after the
-    translational ones): ``desired_orientation`` R_d as a unit quaternion [w, x, y, z]
-    (4), ``desired_angular_velocity`` ω_d and ``desired_angular_acceleration`` ω̇_d
-    (3 each, world frame) [rad/s, rad/s²]; the law uses their task rows.
-    ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s] is optional: connected (or fixed),
-    it is the q̇_dⁿ of Eq. 21 and wins over the configured source (the criteria through
-    Fig. 1's selector, or the sweep), used as given (no joint-speed scaling, no blend);
-    unconnected, the configured source's. With ``normal=None`` (no force axis),
-    ``measured_wrench`` and ``desired_force`` are optional too: unconnected, they read zero.
+    Inputs (name (size) [unit]: meaning; n joints, m_t translational task axes):
 
-    Outputs: ``generalized_force`` τ (n) [N m], velocity order (map it to the
-    plant's actuation with Bᵀ); ``null_space_torque`` s τ₀ (n) [N m], Eq. 21's τ₀ as it
-    is in τ, after the actuator limits (J H⁻¹ τ₀ = 0: it does not move the task);
-    ``task_torque`` τ − τ₀ of Eq. 7 (n) [N m], before the limits;
-    ``null_space_velocity_error`` eⁿ (n) [rad/s];
-    ``lyapunov`` ν (1) [J]; ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s];
-    ``mode`` (1): 0 none, 1 obstacle avoidance, 2 joint torque, 3 manipulability, 4
-    joint limits on level 2; ``speed_scale`` (1) the joint-speed limits' factor on q̇_dⁿ;
-    ``manipulability`` w = √det(J Jᵀ) (1); ``d_min`` (1) [m] smallest link–obstacle
-    distance; ``joint_torque_criterion`` ‖Jᵀ F_d‖² (1) [N² m²];
-    ``obstacle_potential`` (1) [m³]; ``joint_limits_criterion`` (1) [rad³] and
-    ``joint_limit_margin`` (1) [rad], the smallest distance of a joint to a limit of
-    the controller model (:mod:`nsdrake.control.criteria.joint_limits`); ``task_position`` x
-    (m_t) [m]; ``saturation`` (2):
-    the share s of τ₀ kept under the actuator limits and the number of joints whose
-    task torque had to be clipped (:mod:`nsdrake.control.actuator_limits`: τ = τ_task + s τ₀
-    within each joint's torque and torque-rate window, τ₀ reduced first).
+    - ``estimated_state`` (2n) [rad, rad/s]: [q; q̇] in the controller model's velocity
+      order.
+    - ``measured_wrench`` (6) [N m, N]: [M; f], the wrench the tool exerts on the
+      environment, world frame, moment about ``wrench_point``. With ``normal=None`` (no
+      force axis) optional: unconnected, it reads zero.
+    - ``desired_position``, ``desired_velocity``, ``desired_acceleration`` (m_t each)
+      [m, m/s, m/s²]: x_d, ẋ_d, ẍ_d, one entry per translational task axis.
+    - ``desired_force`` (1) [N]: f_d along n. With ``normal=None`` optional: unconnected,
+      it reads zero.
+    - ``desired_orientation`` (4) [-]: with rotational task axes (``rx``, ``ry``, ``rz``,
+      after the translational ones), R_d as a unit quaternion [w, x, y, z].
+    - ``desired_angular_velocity``, ``desired_angular_acceleration`` (3 each) [rad/s,
+      rad/s²]: with rotational task axes, ω_d and ω̇_d (world frame); the law uses their
+      task rows.
+    - ``desired_null_space_velocity`` (n) [rad/s]: q̇_dⁿ from outside (teleoperation of the
+      elbow, a planner, a policy), optional. Connected (or fixed), it is the q̇_dⁿ of
+      Eq. 21 and wins over the configured source (the criteria through Fig. 1's selector,
+      or the sweep), used as given (no joint-speed scaling, no blend); unconnected, the
+      configured source's.
+
+    Outputs:
+
+    - ``generalized_force`` (n) [N m]: τ of Eq. 7 (τ₀ included), velocity order; if your
+      actuators are not one per joint in order, map it with Bᵀ
+      (``MatrixGain(plant.MakeActuationMatrix().T)``).
+    - ``null_space_torque`` (n) [N m]: s τ₀, Eq. 21's τ₀ as it is in τ, after the
+      actuator limits (J H⁻¹ τ₀ = 0: it does not move the task).
+    - ``task_torque`` (n) [N m]: τ − τ₀ of Eq. 7, before the limits.
+    - ``null_space_velocity_error`` (n) [rad/s]: eⁿ (Eq. 14).
+    - ``lyapunov`` (1) [J]: ν (Eq. 23).
+    - ``desired_null_space_velocity`` (n) [rad/s]: q̇_dⁿ.
+    - ``mode`` (1) [-]: the criterion on level 2 of Fig. 1: 0 none, 1 obstacle
+      avoidance, 2 joint torque, 3 manipulability, 4 joint limits.
+    - ``speed_scale`` (1) [-]: the joint-speed limits' factor on q̇_dⁿ (1: none bound).
+    - ``manipulability`` (1) [m²]: w = √det(J Jᵀ).
+    - ``d_min`` (1) [m]: the smallest link–obstacle distance.
+    - ``joint_torque_criterion`` (1) [N² m²]: ‖Jᵀ F_d‖² (Eq. 32).
+    - ``obstacle_potential`` (1) [m³]: the obstacle criterion (Eq. 31).
+    - ``joint_limits_criterion`` (1) [rad³]: the joint-limit criterion
+      (:mod:`nsdrake.control.criteria.joint_limits`).
+    - ``joint_limit_margin`` (1) [rad]: the smallest distance of a joint to a limit of
+      the controller model.
+    - ``task_position`` (m_t) [m]: x, the tool point on the translational task axes.
+    - ``saturation`` (2) [-]: the share s of τ₀ kept under the actuator limits and the
+      number of joints whose task torque had to be clipped
+      (:mod:`nsdrake.control.actuator_limits`: τ = τ_task + s τ₀ within each joint's
+      torque and torque-rate window, τ₀ reduced first).
 
     Args:
         controller_model: a :class:`nsdrake.ControllerModel`, a URDF path (the arm
@@ -178,7 +195,7 @@ class NullSpaceImpedanceController(Diagram):
             its own ports, what ``diagram.svg`` shows; True: the same stages in one
             LeafSystem (``fused_controller``) between a Multiplexer of the inputs and a
             Demultiplexer of the outputs, with the same ports and the same τ at every
-            tick, about a third of the cost per tick (README, "Speed").
+            tick, about a third of the cost per tick (docs/architecture.md, "Speed, measured").
 
     Timing and state: :mod:`nsdrake.control.stages` (the stages, their order, the
     discrete state and Drake's event order, which both structures keep).
@@ -202,7 +219,7 @@ class NullSpaceImpedanceController(Diagram):
     period has no q̈_dⁿ feed-forward and no torque-rate limit. The constructor raises
     ControllerConfigError (a ValueError) for a configuration the model cannot do, and
     ValueError, FileNotFoundError or Drake's RuntimeError for a model it cannot read,
-    and refuses gains whose sampled loops are unstable at the period. README, "Use the
+    and refuses gains whose sampled loops are unstable at the period. docs/own_diagram.md, "Use the
     controller in your own diagram": the measurements, and the wiring for a plant with
     more joints than the arm.
     """

@@ -59,7 +59,7 @@ class ModelMismatchError(ControllerConfigError):
 class Obstacle:
     """A fixed obstacle the controller knows about: a shape at a pose in the world."""
 
-    name: str
+    name: str  # its name
     shape: Shape  # pydrake.geometry.Box, Sphere, Cylinder, …
     X_WO: RigidTransform  # pose of the shape's frame in the world
 

@@ -274,7 +274,7 @@ def _torque_and_manipulability_rows(T, P, out):
     """Stage 2's joint-torque (Eqs. 32–33) and manipulability rows of ``out`` (4, n + 3), in
     Criterion's order. F_d is the nominal force along n (``config.nominal_force``), a
     constant: a criterion that followed the desired force input would rise with every
-    force ramp whatever the posture does (README, "Choices the paper leaves open")."""
+    force ramp whatever the posture does (docs/open_choices.md)."""
     p, Phi = joint_torque_criterion(T.J, T.dJ_dq, P.F_d)
     pack_criterion(out[1], Phi, p, p, 1.0)
     w, Phi = manipulability(T.J, T.dJ_dq)

@@ -137,7 +137,7 @@ class _Log:
 
 
 def drive_traces(run: DriveRun) -> Traces:
-    """The drive's traces, with the columns of ``nsdrake run``'s (README) from the
+    """The drive's traces, with the columns of ``nsdrake run``'s (docs/command_line.md) from the
     controller side's loggers, and:
 
     - with the simulated driver, ``f_x…``, ``f_n`` and ``forbidden_contacts`` from the

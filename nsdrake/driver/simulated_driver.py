@@ -18,7 +18,7 @@ wrench (the exact external torque: a perfect estimator). It publishes at the dri
 **Lockstep.** Before each plant step the driver takes the command that answers the
 status it published last; the torque computed from the state at t_k acts over
 [t_k, t_{k+1}), as in the direct simulation. (A real Panda behind drake-franka-driver
-applies the latest command at its next 1 kHz callback, one period later: README.)
+applies the latest command at its next 1 kHz callback, one period later: docs/real_arm.md.)
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ FORCE_SOURCES = ("sensor", "external_torque")
 
 @dataclass
 class DriverConfig:
-    """The controller behind a Franka Panda's LCM driver (README: "On a real arm")."""
+    """The controller behind a Franka Panda's LCM driver (docs/real_arm.md: "On a real arm")."""
 
     # LCM channel of the driver's lcmt_panda_status messages (drake-franka-driver's default) [-].
     status_channel: str = "PANDA_STATUS"

@@ -159,7 +159,7 @@ def _advance(simulator: Simulator, built: ControlledStation, scenario: Scenario,
 
 
 def collect_traces(built: ControlledStation, root_context, logs: dict | None = None) -> Traces:
-    """The loggers' records as named columns (see README for the column list).
+    """The loggers' records as named columns (docs/command_line.md, "traces.csv", for the column list).
 
     ``logs``: the records by logger name (each with ``sample_times()`` and ``data()``),
     when the loggers do not live in ``root_context``'s diagram (``nsdrake drive``: the

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 class PhysicsConfig:
     """The plant steps finer than the controller, which is sampled and held."""
 
+    # Turn this rung on; every rung is off by default [-].
     enabled: bool = False
     # Plant steps per control period, a power of two (2 ms / 4 = 0.5 ms): then every
     # controller event falls on a plant step at exactly the same floating-point time,
@@ -57,6 +58,7 @@ class ForceSensorConfig:
     and noise and bias of the order of a few counts of a ±100 N sensor.
     """
 
+    # Turn this rung on; every rung is off by default [-].
     enabled: bool = False
     # Standard deviation of the white noise on each force axis, per internal sample,
     # before the filter (the filter leaves ≈ 0.22 of it at the defaults) [N].
@@ -84,11 +86,12 @@ class FrictionConfig:
     Acting at the gear output: on the joint of the rigid arm, on the motor side of
     the belt with ``belt`` on. The plant then steps at least ``min_substeps`` times
     per control period (friction needs it; finer physics alone changes fig3's figures
-    by less than 0.005 N, see the README's table). The numbers are choices for a light arm with
+    by less than 0.005 N, see the table in docs/claims.md). The numbers are choices for a light arm with
     low-ratio gears (the paper gives none): τ_c is 3–6% of the 1.6–2.9 N m joints 1–3
     carry in fig3 while pressing 10 N (a quarter of joint 4's 0.4 N m).
     """
 
+    # Turn this rung on; every rung is off by default [-].
     enabled: bool = False
     # Coulomb friction torque τ_c [N m].
     coulomb: float = 0.1
@@ -117,6 +120,7 @@ class BeltConfig:
     the rigid arm.
     """
 
+    # Turn this rung on; every rung is off by default [-].
     enabled: bool = False
     # Gear ratio N between motor and joint (paper, Section 4: "low gear ratios (6)") [-].
     gear_ratio: float = 6.0
@@ -141,6 +145,7 @@ class DelayConfig:
     """Computation delay: the torque computed from the sample at t_k is applied from
     t_{k+periods} (a controller that sends its output at the next tick)."""
 
+    # Turn this rung on; every rung is off by default [-].
     enabled: bool = False
     # Whole control periods of delay [-].
     periods: int = 1
@@ -151,6 +156,7 @@ class ModelErrorConfig:
     """The controller's model with every link mass and the tool mass (and with them
     the inertias) scaled by (1 + mass_error); the simulated arm keeps the URDF's."""
 
+    # Turn this rung on; every rung is off by default [-].
     enabled: bool = False
     # Relative error of the model's masses. Choice: −20%, a model lighter than the
     # arm, as the paper's would be (belts, pulleys, bearings, cables and the rotors'

@@ -85,7 +85,7 @@ def run_to_folder(
 ) -> RunResult:
     """Simulates ``scenario`` and writes into ``out`` (which must be ready):
 
-    - traces.csv: one row per control period (see README for the columns);
+    - traces.csv: one row per control period (docs/command_line.md, "traces.csv", for the columns);
     - traces_without_null_space_task.csv: the same run with q̇_dⁿ = 0, if the
       scenario asks for the comparison;
     - metrics.json: the acceptance figures, computed from the CSV files;

@@ -2,7 +2,7 @@
 expanded from the grid and the random samples, each run's scenario validated.
 
 A sweep spec (``nsdrake/studies/sweeps/NAME.yaml``, or a file of yours) names a shipped
-base scenario, optionally a YAML overlay, and the fields to vary (README: Sweeps)::
+base scenario, optionally a YAML overlay, and the fields to vary (docs/command_line.md: Sweeps)::
 
     description: "…"                 # optional
     base: fig3                       # a shipped scenario

@@ -1,7 +1,7 @@
-"""The controller's contract as the README states it ("Use the controller in your own
-diagram"): its timing behind a plant of another time step or a continuous one, its
+"""The controller's contract as the documentation states it (docs/own_diagram.md, "Use the
+controller in your own diagram"): its timing behind a plant of another time step or a continuous one, its
 direct feedthrough (the algebraic loop with a reaction-force sensor), its first period,
-a plant with more joints than the arm, the errors its constructor raises, and the README's
+a plant with more joints than the arm, the errors its constructor raises, and the page's
 example being diagrams/own_arm.py.
 
 The set-up is a user's, written with plain Drake: a 4-joint planar arm of the tests' own
@@ -115,7 +115,7 @@ def final_state(hold: str, controller_config: ControllerConfig, duration: float 
 def test_behind_a_continuous_plant_a_reaction_force_sensor_closes_an_algebraic_loop(hold):
     """Every input feeds generalized_force; the reaction forces of a continuous plant depend
     on its actuation: Build refuses the loop, directly or through a hold with feedthrough.
-    Catches a README that calls the direct connection fine."""
+    Catches a page that calls the direct connection fine."""
     builder, _, _ = user_diagram(0.0, hold)
     with pytest.raises(RuntimeError, match="algebraic loop"):
         builder.Build()
@@ -125,7 +125,7 @@ def test_behind_a_continuous_plant_control_hold_keeps_the_feedforward_and_zero_o
     """ControlHold(direct_feedthrough=False) builds and samples τ beside the controller's own
     updates; Drake's ZeroOrderHold samples after them, when the stored previous q̇_dⁿ is
     already the current one: its run is the run without the q̈_dⁿ feed-forward, to the last
-    bit, and differs from ControlHold's. Catches the README recommending ZeroOrderHold."""
+    bit, and differs from ControlHold's. Catches the page recommending ZeroOrderHold."""
     held = final_state("control_hold_state", config())
     zoh = final_state("zoh", config())
     no_feedforward = final_state("control_hold_state", config(acceleration_feedforward=False))
@@ -136,7 +136,7 @@ def test_behind_a_continuous_plant_control_hold_keeps_the_feedforward_and_zero_o
 def test_behind_a_finer_plant_the_hold_applies_one_torque_per_period():
     """A plant stepping at T/4: through ControlHold the actuation is constant over each
     control period (the controller is evaluated once per period); connected directly it
-    changes at every plant step. Catches a README that calls the direct connection fine."""
+    changes at every plant step. Catches a page that calls the direct connection fine."""
 
     def actuation(hold):
         builder, _, tau = user_diagram(T / 4, hold)
@@ -175,10 +175,10 @@ def test_the_first_period_blends_from_rest_without_feedforward_or_rate_limit():
     np.testing.assert_allclose(second["rate"], first["rate"], rtol=0, atol=1e-6 * T * 1.0001)
 
 
-def readme_section() -> str:
-    text = (ROOT / "README.md").read_text()
-    start = text.index("## Use the controller in your own diagram")
-    return text[start : text.index("\n## ", start + 1)]
+def docs_section() -> str:
+    """The documentation's page on the component (docs/own_diagram.md), which holds what
+    the README's section "Use the controller in your own diagram" held."""
+    return (ROOT / "docs" / "own_diagram.md").read_text()
 
 
 def python_blocks(section: str) -> list[str]:
@@ -186,17 +186,20 @@ def python_blocks(section: str) -> list[str]:
     return [textwrap.dedent(b) for b in re.findall(r"```python\n(.*?)```", section, flags=re.S)]
 
 
-def test_the_readme_example_is_diagrams_own_arm_py():
-    """The README shows the whole of diagrams/own_arm.py, which a test runs
-    (test_controller.py): nothing in it left as a comment for the reader to fill in."""
-    assert python_blocks(readme_section())[0] == (ROOT / "diagrams" / "own_arm.py").read_text()
+def test_the_docs_example_is_the_whole_of_diagrams_own_arm_py():
+    """The page shows diagrams/own_arm.py, which a test runs (test_controller.py), whole:
+    included from the file with no option that shows only part of it (:lines:,
+    :start-after:, …), so nothing is left for the reader to fill in and the page cannot
+    drift from the program. Catches an example pasted into the page, or cut short."""
+    includes = re.findall(r"```\{literalinclude\} (\S+)\n((?::\S+:.*\n)*)```", docs_section())
+    assert includes[0] == ("../diagrams/own_arm.py", ":language: python\n")
 
 
-def test_the_readmes_wiring_for_a_plant_with_more_joints_selects_the_arms():
-    """The README's snippet, run as written on a plant whose first model instance is another
+def test_the_docs_wiring_for_a_plant_with_more_joints_selects_the_arms():
+    """The docs' snippet, run as written on a plant whose first model instance is another
     2-joint arm: the controller reads the arm's own [q; q̇], and its τ reaches the arm's
     actuators and no other. Catches a selection that takes the plant's first 2n entries."""
-    (snippet,) = [b for b in python_blocks(readme_section()) if "MakeStateSelectorMatrix" in b]
+    (snippet,) = [b for b in python_blocks(docs_section()) if "MakeStateSelectorMatrix" in b]
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=T), builder)
     parser = Parser(plant)
@@ -289,7 +292,7 @@ def test_the_readmes_wiring_for_a_plant_with_more_joints_selects_the_arms():
     ],
 )
 def test_the_constructor_raises_the_documented_errors(arguments, error, words):
-    """The README's list of what the constructor refuses, each with its exception type and a
+    """The docs' list of what the constructor refuses, each with its exception type and a
     message naming the problem."""
     c = config(**({"K_n": arguments.pop("K_n")} if "K_n" in arguments else {}))
     c.desired_null_space.joint_speed_limits = arguments.pop("joint_speed_limits", {})
