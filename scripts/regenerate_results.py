@@ -8,7 +8,8 @@ unedited; the docs pages copy that table's rows (a test checks the copy,
 tests/test_results_tables.py). This script re-runs the command of the family named (or of
 every folder, with ``all``) with ``--out RUNS/FAMILY --overwrite`` (default RUNS: runs/results;
 the run folder with every variant's traces is kept there), copies the new ``table.md``
-over the committed one, and prints one line per family: ``unchanged``, or ``changed`` with
+over the committed one (and the committed figures, ``*.png``, with the run's), and prints one
+line per family: ``unchanged``, or ``changed`` with
 the variants whose rows differ (then copy the rows into the page, and check its prose).
 
 A family run is CPU-heavy (minutes per family): prefix ``nice`` on a shared machine.
@@ -63,6 +64,9 @@ def regenerate(family: str, runs: Path) -> tuple[str, bool]:
     old_text = committed.read_text() if committed.exists() else ""
     new_text = new.read_text()
     committed.write_text(new_text)
+    for image in (RESULTS / family).glob("*.png"):  # the figures a page shows, refreshed with it
+        if (out / image.name).exists():
+            image.write_bytes((out / image.name).read_bytes())
     if new_text == old_text:
         return f"{family}: unchanged", True
     old, now = table_rows(old_text), table_rows(new_text)
