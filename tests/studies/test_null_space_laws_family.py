@@ -267,3 +267,22 @@ def test_posture_lag_is_the_share_of_the_tool_motion_in_j_bars_null_space(arm_na
         s = np.linalg.solve(K * np.linalg.inv(M), np.linalg.solve(M, Z.T @ T.H @ J_pinv @ xdot))
         assert posture_lag(T, v, K) == pytest.approx(np.linalg.norm(s), rel=1e-9)
         assert np.linalg.norm((np.eye(arm.n) - J_pinv @ T.J) @ J_pinv @ xdot) < 1e-10 * np.linalg.norm(xdot)
+
+
+def test_the_off_path_posture_is_off_the_self_motion():
+    """panda_off_path's q_d offset has no part the self-motion can remove at the start
+    posture (‖Z Zᵀ Δ‖ < 1e-9 ‖Δ‖), but a part the H-weighted PD's equilibrium sees
+    (‖Zᵀ H Δ‖ > 1e-3 ‖H Δ‖): the row where the joint-space laws stay and the H-weighted PD
+    moves. Catches an "off-path" offset that the self-motion can in fact reach."""
+    family = load_family("null_space_laws")
+    index = [v.name for v in family.variants].index("panda_off_path / paper")
+    s = variant_scenario(family, index, None, 0.01)
+    arm = panda_arm()
+    p = s.desired_null_space.posture
+    q_d = np.array([p.q_d[j] for j in arm.joint_names])
+    offset = np.array([p.offset.get(j, 0.0) for j in arm.joint_names])
+    T = arm.terms(arm.plant.CreateDefaultContext(), q_d, np.zeros(arm.n), coriolis=False)
+    Z = np.linalg.svd(T.J)[2][T.J.shape[0] :].T
+    assert np.linalg.norm(offset) == pytest.approx(0.3)
+    assert np.linalg.norm(Z @ (Z.T @ offset)) < 1e-9 * np.linalg.norm(offset)
+    assert np.linalg.norm(Z.T @ T.H @ offset) > 1e-3 * np.linalg.norm(T.H @ offset)
