@@ -9,12 +9,13 @@ __version__ = "0.1.0"
 from nsdrake.control import (
     ControllerConfig,
     ControllerConfigError,
+    ControllerInputError,
     ControllerModel,
     ControllerStep,
     NullSpaceImpedanceController,
     Obstacle,
 )
-from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress
+from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress, TaskReferenceError
 from nsdrake.experiment.reference_system import SurfaceReference
 from nsdrake.station.control_hold import ControlHold
 from nsdrake.station.force_sensor import ForceSensor
@@ -30,6 +31,7 @@ __all__ = [
     "ControlHold",
     "ControllerConfig",
     "ControllerConfigError",
+    "ControllerInputError",
     "ControllerModel",
     "ControllerStep",
     "NullSpaceImpedanceController",
@@ -37,4 +39,5 @@ __all__ = [
     "Obstacle",
     "SlideAndPress",
     "SurfaceReference",
+    "TaskReferenceError",
 ]

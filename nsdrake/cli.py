@@ -38,10 +38,10 @@ from nsdrake.reporting.run_folder import check_scenario, run_to_folder
 from nsdrake.station.visualization import start_meshcat
 from nsdrake.studies.compare import (
     VARIANT_TIMEOUT,
+    check_variants,
     load_family,
     run_family,
     shipped_families,
-    variant_scenario,
 )
 from nsdrake.studies.sweep import sweep_command
 from nsdrake.studies.sweep_engines import ENGINES
@@ -236,8 +236,7 @@ def _run(args) -> int:
 
 def _compare(args) -> int:
     family = load_family(args.family)
-    for i in range(len(family.variants)):  # every input error before any folder or simulation
-        variant_scenario(family, i, args.config, args.duration)
+    check_variants(family, args.config, args.duration)  # every input error before any folder or simulation
     with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
         print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
         progress = Progress(args.family, 1.0)
@@ -251,6 +250,7 @@ def _compare(args) -> int:
                 isolate=True,  # a variant that crashes its process becomes a failed row, even with --jobs 1
                 progress=progress,
                 variant_timeout=args.variant_timeout,
+                checked=True,
             )
         progress.end_line()
     if result.interrupted:

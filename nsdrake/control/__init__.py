@@ -27,10 +27,12 @@ from nsdrake.control.controller import (  # noqa: E402
 )
 from nsdrake.control.model import ControllerModel, Obstacle  # noqa: E402
 from nsdrake.control.step import ControllerStep, StepResult  # noqa: E402
+from nsdrake.control.validation import ControllerInputError  # noqa: E402
 
 __all__ = [
     "ControllerConfig",
     "ControllerConfigError",
+    "ControllerInputError",
     "ControllerModel",
     "ControllerStep",
     "NullSpaceImpedanceController",

@@ -146,6 +146,12 @@ class NullSpaceImpedanceController(Diagram):
       or the sweep), used as given (no joint-speed scaling, no blend); unconnected, the
       configured source's.
 
+    With ``normal=None``, a connected ``desired_force`` is refused when the controller is
+    evaluated (it would change nothing). Every input is checked when it is used: a value
+    that is not finite (or a zero ``desired_orientation``) raises
+    :class:`nsdrake.control.validation.ControllerInputError` naming the port, its entry and
+    the time, before any torque is computed from it.
+
     Outputs:
 
     - ``generalized_force`` (n) [N m]: τ of Eq. 7 (τ₀ included), velocity order; if your
@@ -325,7 +331,9 @@ def _add_named(builder, plan: ControllerPlan) -> tuple[dict, dict]:
         sweep = builder.AddNamedSystem(name, SelfMotionSweep(plan=plan))
         builder.Connect(terms_port, sweep.GetInputPort("robot_terms"))
         qdot = sweep.get_output_port()
-    source = builder.AddNamedSystem("null_space_velocity_source", NullSpaceVelocitySource(plan.n))
+    source = builder.AddNamedSystem(
+        "null_space_velocity_source", NullSpaceVelocitySource(plan.n, plan.model.joint_names)
+    )
     builder.Connect(qdot, source.GetInputPort("configured"))
     qdot = source.get_output_port()
     builder.Connect(qdot, null_space.GetInputPort("desired_null_space_velocity"))
@@ -376,13 +384,22 @@ def _add_fused(builder, plan: ControllerPlan) -> tuple[dict, dict]:
 
 # The inputs a task without a force axis may leave unconnected (they then read zero).
 FREE_SPACE_OPTIONAL = {"measured_wrench": 6, "desired_force": 1}
+# Why desired_force, connected to a controller without a force axis, is refused: it would
+# change nothing (the measured wrench still enters Eq. 6's Jᵀ F, so it may be connected).
+NO_FORCE_AXIS = (
+    "connected, but the controller has no force axis (normal=None), so a desired force would "
+    "change nothing: give the controller a normal, or leave desired_force unconnected"
+)
 
 
 def _optional(builder, plan: ControllerPlan, name: str, port):
     """``port``, or with no force axis for the optional inputs, the input of a
-    ZeroIfUnconnected in front of it."""
+    ZeroIfUnconnected in front of it (which refuses a connected ``desired_force``)."""
     if plan.has_force_axis or name not in FREE_SPACE_OPTIONAL:
         return port
-    zero = builder.AddNamedSystem(f"{name}_or_zero", ZeroIfUnconnected(FREE_SPACE_OPTIONAL[name]))
+    refuse = NO_FORCE_AXIS if name == "desired_force" else None
+    zero = builder.AddNamedSystem(
+        f"{name}_or_zero", ZeroIfUnconnected(FREE_SPACE_OPTIONAL[name], name=name, refuse=refuse)
+    )
     builder.Connect(zero.get_output_port(), port)
     return zero.get_input_port()

@@ -10,6 +10,7 @@ run the same stages on the same numbers (:mod:`nsdrake.control.stages`).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import cached_property
 
 import numpy as np
 from pydrake.geometry import Box, Capsule, Sphere
@@ -51,6 +52,7 @@ from nsdrake.control.stages import (
     state_parts,
     terms_stage,
 )
+from nsdrake.control.validation import entry_names
 
 
 def generalized_inverse(config: ControllerConfig) -> GeneralizedInverse:
@@ -181,6 +183,31 @@ class ControllerPlan:
     def tick_field(self, tick: np.ndarray, name: str) -> np.ndarray:
         """A view of one field of a tick buffer (:class:`nsdrake.control.layout.TickView`'s names)."""
         return field(tick, self._tick_fields, name)
+
+    @cached_property
+    def input_names(self) -> dict[str, list[str]]:
+        """The name of every entry of the controller's inputs, by input port
+        (``estimated_state``, ``desired_null_space_velocity``) and for the packed
+        ``commands``, each entry named after its port (``desired_position[y]``): what a
+        run-time error names (:func:`nsdrake.control.validation.inputs_problem`)."""
+        joints, axes = list(self.model.joint_names), list(self.model.arm.task_axes[: self.m_t])
+        commands = [("measured_wrench", 6), ("desired_position", axes), ("desired_velocity", axes)]
+        commands += [("desired_acceleration", axes), ("desired_force", 1)]
+        if self.m_r:
+            commands += [("desired_orientation", ["w", "x", "y", "z"]), ("desired_angular_velocity", 3)]
+            commands += [("desired_angular_acceleration", 3)]
+        return {
+            "estimated_state": entry_names(
+                [("estimated_state", [f"q {j}" for j in joints] + [f"v {j}" for j in joints])]
+            ),
+            "desired_null_space_velocity": entry_names([("desired_null_space_velocity", joints)]),
+            "commands": entry_names(commands),
+        }
+
+    @property
+    def commands_quaternion(self) -> int:
+        """Where R_d starts in the packed commands; -1 without rotational task axes."""
+        return 7 + 3 * self.m_t if self.m_r else -1
 
     @property
     def rate_limits(self) -> np.ndarray:

@@ -19,10 +19,17 @@ state (the selector's switch state, the previous q̇_dⁿ, the previous τ) live
 In steady state a call allocates no Python object that outlives it (the result's
 arrays are views into one buffer, rewritten by the next call), so Python's garbage
 collector never has work to do on its account.
+
+Every call checks its arguments before anything is computed: their sizes (the copy into
+the step's input buffer, with the lengths compared), then one compiled pass over all of
+them for a value that is not finite (:func:`nsdrake.control.validation.inputs_problem`);
+a wrong one raises :class:`nsdrake.control.validation.ControllerInputError` naming the
+argument (and the joint or entry), and the step's state is left as it was.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -38,10 +45,19 @@ from nsdrake.control.stages import (
     DESIRED,
     PLAIN_STEP,
     SELECTION,
+    commands_size,
     initial_state,
     state_parts,
 )
-from nsdrake.control.validation import validate_controller
+from nsdrake.control.validation import (
+    ControllerInputError,
+    entry_names,
+    finite_problem,
+    inputs_problem,
+    is_number,
+    show,
+    validate_controller,
+)
 
 
 class StepResult:
@@ -85,6 +101,12 @@ class ControllerStep:
 
     Call :meth:`step` once per control period ``config.period``, with the time and the
     state of that tick.
+
+    One thread: a ControllerStep belongs to the thread of its first :meth:`step` (its
+    result is a view into buffers that the next call rewrites, so a lock around the call
+    would not make a second thread's τ its own). A call from any other thread raises
+    :class:`nsdrake.control.validation.ControllerInputError`; make one ControllerStep per
+    thread, or :meth:`reset` it to hand it to another thread.
     """
 
     def __init__(
@@ -105,10 +127,30 @@ class ControllerStep:
             model=model, config=config, normal=normal, wrench_point=wrench_point
         )
         self.model, self.config = model, config
-        self._buffers = StageBuffers(plan, scratch=plan.create_scratch())
+        n, m_t = plan.n, plan.m_t
+        # The inputs of a call in one flat buffer [t; q (n); v (n); commands], so that one
+        # compiled pass checks them all; the commands are the stages' own (a view).
+        self._inputs = np.zeros(1 + 2 * n + commands_size(m_t, plan.m_r))
+        self._q, self._v = self._inputs[1 : 1 + n], self._inputs[1 + n : 1 + 2 * n]
+        commands = self._inputs[1 + 2 * n :]
+        self._quaternion = -1
+        if plan.m_r:
+            self._quaternion = 1 + 2 * n + 7 + 3 * m_t
+            commands[7 + 3 * m_t] = 1.0  # R_d = I until given
+        self._kept_rotation = commands[7 + 3 * m_t :].copy()  # R_d, ω_d, ω̇_d of the last call
+        self._buffers = StageBuffers(plan, scratch=plan.create_scratch(), commands=commands)
         self._terms = plan.allocate_terms()
-        self._m_t = plan.m_t
-        self.result = StepResult(self._buffers, plan.n)
+        self._m_t = m_t
+        self._n = n
+        joints, axes = list(model.joint_names), list(model.arm.task_axes[:m_t])
+        parts = [("t", 1), ("q", joints), ("v", joints), ("wrench", 6)]
+        parts += [(name, axes) for name in ("x_d", "xdot_d", "xddot_d")] + [("f_d", 1)]
+        if plan.m_r:
+            parts += [("R_d", ["w", "x", "y", "z"]), ("omega_d", 3), ("omegadot_d", 3)]
+        self._names = entry_names(parts)
+        self._qdot_names = entry_names([("desired_null_space_velocity", joints)])
+        self._thread, self._claim_lock = None, threading.Lock()
+        self.result = StepResult(self._buffers, n)
         self.reset()
 
     @property
@@ -128,6 +170,19 @@ class ControllerStep:
         ):
             part[:] = value
         self._t_previous = None
+        self._thread = None  # the next call's thread owns the step (class docstring)
+
+    def _claim(self) -> None:
+        """The calling thread takes the step if no thread has it; else refused."""
+        with self._claim_lock:
+            if self._thread is None:
+                self._thread = threading.get_ident()
+            elif self._thread != threading.get_ident():
+                raise ControllerInputError(
+                    "ControllerStep.step",
+                    "called from a second thread: a ControllerStep belongs to the thread of its "
+                    "first call (its result is rewritten by every call); make one per thread",
+                )
 
     def step(
         self,
@@ -154,31 +209,153 @@ class ControllerStep:
         controller's optional ports. ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], when
         given, replaces the configured source's, as the controller's input of that name.
         Returns :attr:`result`, rewritten in place."""
-        b, m_t, plan = self._buffers, self._m_t, self.plan
-        if (wrench is None or f_d is None) and plan.has_force_axis:
-            raise ValueError("wrench and f_d are needed: the task has a force axis (normal)")
-        c = b.commands
-        c[:6] = 0.0 if wrench is None else wrench
-        c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
-        c[6 + 3 * m_t] = 0.0 if f_d is None else f_d
-        if R_d is not None:
-            c[7 + 3 * m_t : 11 + 3 * m_t] = R_d
-        if omega_d is not None:
-            c[11 + 3 * m_t : 14 + 3 * m_t] = omega_d
-        if omegadot_d is not None:
-            c[14 + 3 * m_t : 17 + 3 * m_t] = omegadot_d
-        plan.terms(b.scratch, np.asarray(q, dtype=float), np.asarray(v, dtype=float), self._terms)
-        stages = (
-            PLAIN_STEP if self._t_previous is not None else PLAIN_STEP & ~COMMIT
-        )  # first tick: none pending
+        if self._thread != threading.get_ident():
+            self._claim()
+        m_t, n, plan, c = self._m_t, self._n, self.plan, self._buffers.commands
+        try:  # the sizes; numpy's copy refuses any other shape but a scalar's or a 1-vector's
+            if len(q) != n or len(v) != n or len(x_d) != m_t or len(xdot_d) != m_t or len(xddot_d) != m_t:
+                raise _RefusedError
+            if self._t_previous is not None and not t >= self._t_previous:
+                raise _RefusedError
+            self._inputs[0] = t + 0.0  # a number (numpy would read the text "0.1")
+            self._q[:], self._v[:] = q, v
+            if wrench is None or f_d is None or not plan.has_force_axis:
+                self._optional_force(wrench, f_d)
+            else:
+                if len(wrench) != 6:
+                    raise _RefusedError
+                c[:6], c[6 + 3 * m_t] = wrench, f_d + 0.0
+            c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
+            rotation = R_d is not None or omega_d is not None or omegadot_d is not None
+            if rotation:
+                self._rotation(R_d, omega_d, omegadot_d)
+        except (TypeError, ValueError, IndexError, _RefusedError):
+            raise self._refuse(self._argument_problem(locals())) from None
+        problem = inputs_problem(self._inputs, self._names, self._quaternion)
+        if problem is None and desired_null_space_velocity is not None:
+            qdot, problem = self._prescribed_velocity(desired_null_space_velocity)
+        if problem is not None:
+            raise self._refuse(problem)
+        if rotation:  # kept for the calls that pass None
+            self._kept_rotation[:] = c[7 + 3 * m_t :]
+        return self._tick(t, None if desired_null_space_velocity is None else qdot)
+
+    def _tick(self, t: float, qdot: np.ndarray | None) -> StepResult:
+        """The stages on the checked inputs (``qdot``: a prescribed q̇_dⁿ, or None)."""
+        b, plan = self._buffers, self.plan
+        plan.terms(b.scratch, self._q, self._v, self._terms)
+        stages = PLAIN_STEP if self._t_previous is not None else PLAIN_STEP & ~COMMIT  # first: none pending
         t_previous = 0.0 if self._t_previous is None else self._t_previous
-        if desired_null_space_velocity is None:
+        if qdot is None:
             plan.run(stages, t, t_previous, self._terms, b)
         else:  # the selector still runs (mode, scale), its q̇_dⁿ replaced before it is used
             first = stages & (CRITERIA | COMMIT | SELECTION | DESIRED)
             plan.run(first, t, t_previous, self._terms, b)
-            b.part("qdot")[:] = desired_null_space_velocity
+            b.part("qdot")[:] = qdot
             plan.run(stages & ~first, t, t_previous, self._terms, b)
         self._t_previous = t
         self.result.update()
         return self.result
+
+    def _optional_force(self, wrench, f_d) -> None:
+        """The wrench and f_d of a call where one is None or the task has no force axis."""
+        c, m_t = self._buffers.commands, self._m_t
+        if self.plan.has_force_axis:  # one of them None
+            raise _RefusedError
+        if f_d is not None:  # a force along no axis would do nothing
+            raise _RefusedError
+        if wrench is None:
+            c[:6] = 0.0
+        else:
+            if len(wrench) != 6:
+                raise _RefusedError
+            c[:6] = wrench
+        c[6 + 3 * m_t] = 0.0
+
+    def _rotation(self, R_d, omega_d, omegadot_d) -> None:
+        """R_d, ω_d, ω̇_d (each kept from the previous call when None)."""
+        if not self.plan.m_r:
+            raise _RefusedError
+        c, o = self._buffers.commands, 7 + 3 * self._m_t
+        for value, start, size in ((R_d, o, 4), (omega_d, o + 4, 3), (omegadot_d, o + 7, 3)):
+            if value is not None:
+                if len(value) != size:
+                    raise _RefusedError
+                c[start : start + size] = value
+
+    def _prescribed_velocity(self, qdot) -> tuple[np.ndarray, str | None]:
+        """q̇_dⁿ as an array, and why it cannot be taken (or None)."""
+        problem = _vector_size_problem(qdot, self._n, f"{self._n} joint speeds [rad/s] (q̇_dⁿ)")
+        if problem is not None:
+            return qdot, f"desired_null_space_velocity {problem}"
+        qdot = np.asarray(qdot, dtype=float)
+        return qdot, inputs_problem(qdot, self._qdot_names)
+
+    def _refuse(self, problem: str) -> ControllerInputError:
+        """The error of a refused call, the step as it was before it (the kept R_d, ω_d, ω̇_d
+        restored; the discrete state is only written by a call that computes)."""
+        if self.plan.m_r:
+            self._buffers.commands[7 + 3 * self._m_t :] = self._kept_rotation
+        return ControllerInputError("ControllerStep.step", problem)
+
+    def _argument_problem(self, arguments: dict) -> str:
+        """What is wrong with the first argument of a call that :meth:`step` could not take."""
+        n, m_t, plan = self._n, self._m_t, self.plan
+        axes = list(self.model.arm.task_axes[:m_t])
+        t = arguments["t"]
+        problem = finite_problem(t)
+        if problem:
+            return f"t {problem} [s]"
+        if self._t_previous is not None and t < self._t_previous:
+            return f"t = {t:g} s is before the previous call's {self._t_previous:g} s: reset() to start over"
+        joints = list(self.model.joint_names)
+        expected = [
+            ("q", n, f"{n} joint positions [rad], the joints {joints}"),
+            ("v", n, f"{n} joint speeds [rad/s]"),
+        ]
+        expected += [
+            (name, m_t, f"{m_t} numbers, the task axes {axes}") for name in ("x_d", "xdot_d", "xddot_d")
+        ]
+        for name, size, what in expected:
+            problem = _vector_size_problem(arguments[name], size, what)
+            if problem:
+                return f"{name} {problem}"
+        wrench, f_d = arguments["wrench"], arguments["f_d"]
+        if plan.has_force_axis and (wrench is None or f_d is None):
+            return f"{'wrench' if wrench is None else 'f_d'} is None, but the task has a force axis (normal)"
+        if not plan.has_force_axis and f_d is not None:
+            return (
+                f"f_d is {show(f_d)}, but the task has no force axis (normal None), so a desired force "
+                "would do nothing: pass None"
+            )
+        if wrench is not None:
+            problem = _vector_size_problem(wrench, 6, "[M; f] (6) [N m, N]")
+            if problem:
+                return f"wrench {problem}"
+        if not is_number(f_d) and f_d is not None:
+            return f"f_d must be a number [N], got {show(f_d)}"
+        rotation = (("R_d", 4, "a quaternion [w, x, y, z]"), ("omega_d", 3, "3 numbers [rad/s]"),
+                    ("omegadot_d", 3, "3 numbers [rad/s²]"))  # fmt: skip
+        for name, size, what in rotation:
+            value = arguments[name]
+            if value is not None and not plan.m_r:
+                return f"{name} is given, but the task has no rotational axes: pass None"
+            problem = None if value is None else _vector_size_problem(value, size, what)
+            if problem:
+                return f"{name} {problem}"
+        return "its arguments do not match its signature (see its docstring)"
+
+
+class _RefusedError(Exception):
+    """An argument of the wrong size (the slow path names it)."""
+
+
+def _vector_size_problem(value, size: int, what: str) -> str | None:
+    """``value`` is not ``size`` numbers (finiteness is checked after, in one pass)."""
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return f"must be {what}, got {show(value)}"
+    if array.shape != (size,):
+        return f"must be {what}, got {show(value)}"
+    return None

@@ -15,11 +15,14 @@ sections. So the Python API and the command line cannot disagree.
   vector arguments;
 - :func:`check_against_model` and :func:`check_task_span`: what needs the model (joint
   names, obstacle geometry, redundancy, task axes the arm can span);
-- :func:`validate_controller`: all of it, for the controller's constructor.
+- :func:`validate_controller`: all of it, for the controller's constructor;
+- :func:`inputs_problem`: what the controller is given at run time, each tick
+  (:meth:`nsdrake.ControllerStep.step`'s arguments, the values of the controller's input
+  ports), from one compiled pass over the inputs (:func:`nsdrake.control.layout.input_fault`).
 
 Every rule yields or raises one line: ``where: problem``, ``where`` naming the argument
 and the field (``config.impedance.K_f``, ``normal``, ``controller_model``). The errors
-are :class:`ControllerConfigError`.
+are :class:`ControllerConfigError`, and at run time :class:`ControllerInputError`.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from nsdrake.control.dynamics import AXIS_NAMES, ROTATION_AXIS_NAMES, parse_task_axes
+from nsdrake.control.layout import input_fault
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 NULL_SPACE_SOURCES = ("criteria", "sweep", "posture")
@@ -48,6 +52,13 @@ LARGEST_GRAVITY = 1000.0
 # [m] the largest length or distance from the world origin a model may have: no robot cell
 # is larger, and far beyond it the obstacle criterion's cubes overflow (1e200 m → inf).
 LARGEST_LENGTH = 100.0
+# [rad] the largest posture q_d or offset of a joint: one turn either way holds every pose
+# of a revolute joint (for a prismatic one the same number in metres, beyond any arm's
+# travel); far beyond it the posture's torque overflows (1e300 rad → inf).
+LARGEST_POSTURE = 2.0 * math.pi
+# [-] the largest posture weight w (W = diag(w), 1 where not given): six orders of
+# magnitude between joints is more than any weighting asks; 1e300 overflows the criterion.
+LARGEST_POSTURE_WEIGHT = 1e6
 
 
 class ControllerConfigError(ValueError):
@@ -57,6 +68,42 @@ class ControllerConfigError(ValueError):
     def __init__(self, where: str, problem: str | None = None):
         self.where, self.problem = (where, problem) if problem is not None else ("", where)
         super().__init__(f"{where}: {problem}" if problem is not None else where)
+
+
+class ControllerInputError(ValueError):
+    """An input the controller cannot compute a torque from, at run time: an argument of
+    :meth:`nsdrake.ControllerStep.step` or the value of an input port of
+    :class:`nsdrake.NullSpaceImpedanceController` (the wrong size, a value that is not
+    finite, a zero quaternion, a port the task has no use for). One line, ``where:
+    problem``, ``where`` naming the argument or the port (and the time)."""
+
+    def __init__(self, where: str, problem: str):
+        self.where, self.problem = where, problem
+        super().__init__(f"{where}: {problem}")
+
+
+def entry_names(parts: Sequence[tuple[str, Sequence[str] | int]]) -> list[str]:
+    """The name of every entry of a flat input, from its parts in order: (name, size), an
+    entry ``name[i]`` each (``name`` alone for size 1), or (name, labels), an entry
+    ``name[label]`` each (a joint's name, an axis)."""
+    out = []
+    for name, labels in parts:
+        if isinstance(labels, int):
+            labels = [str(i) for i in range(labels)] if labels != 1 else None
+        out.extend([name] if labels is None else [f"{name}[{label}]" for label in labels])
+    return out
+
+
+def inputs_problem(values: np.ndarray, names: Sequence[str], quaternion: int = -1) -> str | None:
+    """Why the flat inputs ``values`` (entries named ``names``, :func:`entry_names`) give no
+    torque, or None: an entry that is not finite, or the desired orientation (the four
+    entries from ``quaternion``, when ≥ 0) zero. One compiled pass (about 0.1 µs)."""
+    k = input_fault(values, quaternion)
+    if k < 0:
+        return None
+    if k == len(values):
+        return f"{names[quaternion].split('[')[0]} is the zero quaternion: it must be a rotation [w, x, y, z]"
+    return f"{names[k]} is {values[k]}: must be finite"
 
 
 # --- values -------------------------------------------------------------------------------
@@ -173,8 +220,11 @@ def config_problems(config) -> Iterator[tuple[str, str]]:
         if problem:
             yield where, problem
     yield from _impedance_problems(config.impedance)
-    yield from _null_space_problems(config.null_space)
-    yield from desired_null_space_problems(config.desired_null_space)
+    problems = list(_null_space_problems(config.null_space))
+    problems += desired_null_space_problems(config.desired_null_space)
+    yield from problems
+    if not problems:  # the sections' own rules hold: the fields that read each other
+        yield from unused_posture_problems(config.null_space, config.desired_null_space)
     limits = config.actuator_limits
     problems = list(_fields(limits, "actuator_limits", ("torque", "torque_rate")))
     yield from problems
@@ -301,9 +351,9 @@ def _posture_problems(posture) -> Iterator[tuple[str, str]]:
     if problems:
         yield from problems
         return
-    yield from table_problems(f"{where}.q_d", posture.q_d, finite_problem)
-    yield from table_problems(f"{where}.offset", posture.offset, finite_problem)
-    yield from table_problems(f"{where}.weight", posture.weight, positive_problem)
+    yield from table_problems(f"{where}.q_d", posture.q_d, _posture_angle_problem)
+    yield from table_problems(f"{where}.offset", posture.offset, _posture_angle_problem)
+    yield from table_problems(f"{where}.weight", posture.weight, _posture_weight_problem)
     gain = finite_problem(posture.gain)
     if gain is None and posture.gain > 0:
         gain = f"must be <= 0 (a negative gain minimises the distance to q_d), got {show(posture.gain)}"
@@ -314,6 +364,41 @@ def _posture_problems(posture) -> Iterator[tuple[str, str]]:
     ):
         if problem:
             yield f"{where}.{name}", problem
+
+
+def _posture_angle_problem(value) -> str | None:
+    problem = finite_problem(value)
+    if problem is None and abs(value) > LARGEST_POSTURE:
+        problem = f"must be within ±{LARGEST_POSTURE:.4g} [rad] (one turn either way), got {show(value)}"
+    return problem
+
+
+def _posture_weight_problem(value) -> str | None:
+    problem = positive_problem(value)
+    if problem is None and value > LARGEST_POSTURE_WEIGHT:
+        problem = f"must be in (0, {LARGEST_POSTURE_WEIGHT:g}], got {show(value)}"
+    return problem
+
+
+def unused_posture_problems(null_space, desired) -> Iterator[tuple[str, str]]:
+    """A posture setting nothing reads, refused as an unused posture gain of the laws is
+    (:func:`_law_problems`): q_d and its offset are read by the posture laws and by the
+    source ``posture``; the weight and Eq. 30's gain by the source ``posture`` alone."""
+    p, law, source = desired.posture, null_space.law, desired.source
+    why = f"nothing uses it (desired_null_space.source is {source} and null_space.law is {law})"
+    uses_q_d, uses_gain = law != "paper" or source == "posture", source == "posture"
+    where = "desired_null_space.posture"
+    for name, used, unset in (
+        ("q_d", uses_q_d, p.q_d == {}),
+        ("offset", uses_q_d, p.offset == {}),
+        ("offset_time", uses_q_d, p.offset_time == 0),
+        ("offset_ramp_time", uses_q_d, p.offset_ramp_time == 0),
+        ("weight", uses_gain, p.weight == {}),
+        ("gain", uses_gain, p.gain == 0),
+    ):
+        if not used and not unset:
+            empty = "empty" if isinstance(getattr(p, name), dict) else "0"
+            yield f"{where}.{name}", f"must be {empty}: {why}, got {show(getattr(p, name))}"
 
 
 def _criteria_problems(crit, sel) -> Iterator[tuple[str, str]]:
@@ -494,10 +579,27 @@ def check_against_model(config, model, name: str = "config") -> None:
             f"{name}.desired_null_space.posture.q_d",
             f"the posture objective needs every joint; missing {', '.join(missing)}",
         )
+    if uses_posture:
+        posture_limit_problem(d.posture, model, name)
     problem = arm_problem(model.n, model.m, model.arm.task_axes)
     if problem:
         raise ControllerConfigError(*problem)
     check_task_span(model)
+
+
+def posture_limit_problem(posture, model, name: str = "config") -> None:
+    """Refuses a posture q_d, or q_d plus its offset, outside a joint's position limits (the
+    model's URDF limits, where finite): the posture would drive the joint into its stop."""
+    lower, upper = model.plant.GetPositionLowerLimits(), model.plant.GetPositionUpperLimits()
+    for joint, lo, hi in zip(model.joint_names, lower, upper, strict=True):
+        q_d = posture.q_d[joint]
+        for what, value in (("q_d", q_d), ("q_d + offset", q_d + posture.offset.get(joint, 0.0))):
+            if not lo <= value <= hi:
+                raise ControllerConfigError(
+                    f"{name}.desired_null_space.posture.q_d.{joint}",
+                    f"{what} = {value:.6g} is outside the joint's limits [{lo:.6g}, {hi:.6g}] "
+                    "(the posture would drive it into its stop)",
+                )
 
 
 SPAN_SAMPLES = 8  # random poses at which the task Jacobian's rank is checked

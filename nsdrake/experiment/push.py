@@ -18,6 +18,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import LeafSystem
 
 
@@ -39,9 +40,10 @@ class PushConfig:
         return self.duration > 0
 
 
-def push_problems(push: PushConfig) -> Iterator[tuple[str, str]]:
-    """(field, problem) of a push that cannot be applied (the body is checked against the
-    plant when the push is added)."""
+def push_problems(push: PushConfig, duration: float | None = None) -> Iterator[tuple[str, str]]:
+    """(field, problem) of a push that cannot be applied, or would never act: one starting
+    at or after the run's end (``duration`` [s], when given). The body is checked against
+    the plant when the push is added (:func:`unknown_body_problem`)."""
     force = push.force
     if not isinstance(force, list) or len(force) != 3 or not all(_finite(f) for f in force):
         yield "push.force", f"must be [fx, fy, fz], three finite numbers [N], got {force!r}"
@@ -51,6 +53,18 @@ def push_problems(push: PushConfig) -> Iterator[tuple[str, str]]:
             yield f"push.{name}", f"must be a finite number >= 0, got {value!r}"
     if _finite(push.duration) and push.duration > 0 and not push.body:
         yield "push.body", "a push needs the name of the body it pushes"
+    if (
+        push.enabled
+        and duration is not None
+        and _finite(push.start_time)
+        and _finite(duration)
+        and push.start_time >= duration
+    ):
+        yield (
+            "push.start_time",
+            f"{push.start_time:g} s is at or after the run's end (duration {duration:g} s): "
+            "the push would never act",
+        )
 
 
 def _finite(value) -> bool:
@@ -103,7 +117,19 @@ def add_push(builder, plant, push: PushConfig):
 
 
 def unknown_body_problem(plant, push: PushConfig) -> str | None:
-    """Why ``push.body`` cannot be pushed in ``plant`` (no such body), or None."""
-    if not push.enabled or plant.HasBodyNamed(push.body):
+    """Why ``push.body`` cannot be pushed in ``plant``, or None: no such body, or one that
+    cannot move (the world, or a body welded to it: the push would do nothing)."""
+    if not push.enabled:
         return None
-    return f"no body named {push.body!r} in the station"
+    fixed = {body.index() for body in plant.GetBodiesWeldedTo(plant.world_body())}
+    moving = sorted(
+        plant.get_body(BodyIndex(i)).name() for i in range(plant.num_bodies()) if BodyIndex(i) not in fixed
+    )
+    if not plant.HasBodyNamed(push.body):
+        return f"no body named {push.body!r} in the station; the bodies that move: {', '.join(moving)}"
+    if plant.GetBodyByName(push.body).index() in fixed:
+        return (
+            f"{push.body!r} cannot move (it is the world or welded to it): a push on it would do nothing; "
+            f"the bodies that move: {', '.join(moving)}"
+        )
+    return None

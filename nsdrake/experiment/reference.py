@@ -28,6 +28,71 @@ from functools import cached_property
 import numpy as np
 
 from nsdrake.control.smoothing import smoothstep
+from nsdrake.control.validation import (
+    finite_problem,
+    non_negative_problem,
+    positive_problem,
+    show,
+    vector_problem,
+)
+
+UNIT_TOLERANCE = 1e-6  # how far from 1 a unit direction's norm, and from 0 two directions' product, may be
+
+
+class TaskReferenceError(ValueError):
+    """A task reference (:class:`SlideAndPress`, :class:`CircleOnSurface`,
+    :class:`nsdrake.SurfaceReference`) that cannot be built; one line, ``where: problem``."""
+
+    def __init__(self, where: str, problem: str):
+        self.where, self.problem = where, problem
+        super().__init__(f"{where}: {problem}")
+
+
+def _raise_first(where: str, problems) -> None:
+    for name, problem in problems:
+        if problem is not None:
+            raise TaskReferenceError(f"{where}.{name}", problem)
+
+
+def _direction_problem(value, size: int) -> str | None:
+    """``value`` is a unit direction of ``size`` entries."""
+    problem = vector_problem(value, size, f"a unit direction of {size} numbers")
+    if problem is None and abs(float(np.linalg.norm(value)) - 1.0) > UNIT_TOLERANCE:
+        problem = f"must be a unit direction (norm 1), got norm {float(np.linalg.norm(value)):.6g}"
+    return problem
+
+
+def _as_arrays(path, names) -> None:
+    """The vector fields of a checked (frozen) path as float arrays (a list is taken too)."""
+    for name in names:
+        if getattr(path, name) is not None:
+            object.__setattr__(path, name, np.asarray(getattr(path, name), dtype=float))
+
+
+def _path_problems(path) -> list[tuple[str, str | None]]:
+    """The fields both paths share: the start, the directions, the approach and the press."""
+    x0 = np.asarray(path.x0, dtype=float) if vector_problem(path.x0, np.size(path.x0), "") is None else None
+    if x0 is None or x0.ndim != 1 or x0.size == 0:
+        return [("x0", f"must be the tool position, finite numbers on the task axes, got {show(path.x0)}")]
+    m = x0.size
+    problems = [("normal", _direction_problem(path.normal, m))]
+    no_slide = getattr(path, "tangent_speed", None) == 0.0  # SlideAndPress without the slide: t may be 0
+    tangent = np.asarray(path.tangent, dtype=float) if vector_problem(path.tangent, m, "") is None else None
+    if not (no_slide and tangent is not None and not tangent.any()):
+        problems.append(("tangent", _direction_problem(path.tangent, m)))
+    if all(p is None for _, p in problems) and tangent.any():
+        along = float(tangent @ np.asarray(path.normal, dtype=float))
+        if abs(along) > UNIT_TOLERANCE:
+            problems.append(
+                ("tangent", f"must be perpendicular to normal, got tangent . normal = {along:.6g}")
+            )
+    return problems + [
+        ("approach_speed", non_negative_problem(path.approach_speed)),
+        ("blend_time", non_negative_problem(path.blend_time)),
+        ("force", non_negative_problem(path.force)),
+        ("force_ramp_time", non_negative_problem(path.force_ramp_time)),
+        ("max_overtravel", non_negative_problem(path.max_overtravel)),
+    ]
 
 
 def ramp_profile(t: float, speed: float, blend_time: float) -> tuple[float, float, float]:
@@ -88,6 +153,25 @@ class SlideAndPress:
     max_overtravel: float = 0.02  # [m] approach beyond a lost contact's surface, at most
     centre: np.ndarray | None = None  # (m,) centre of the reachable disc; None: no limit
     reach: float = math.inf  # [m] its radius
+
+    def __post_init__(self):
+        """Every field checked (:class:`TaskReferenceError` naming the first wrong one)."""
+        problems = _path_problems(self)
+        m = np.size(self.x0)
+        problems += [("tangent_speed", finite_problem(self.tangent_speed))]
+        step = None if self.step_time == math.inf else positive_problem(self.step_time)
+        problems += [
+            ("step_time", step and f"{step} (math.inf: no step)"),
+            ("step_force", finite_problem(self.step_force)),
+        ]
+        if self.centre is not None:
+            problems.append(
+                ("centre", vector_problem(self.centre, m, f"{m} numbers (the task axes) or None"))
+            )
+        reach = None if self.reach == math.inf else positive_problem(self.reach)
+        problems.append(("reach", reach and f"{reach} (math.inf: no limit)"))
+        _raise_first("SlideAndPress", problems)
+        _as_arrays(self, ("x0", "tangent", "normal", "centre"))
 
     def at(
         self,
@@ -217,6 +301,35 @@ class CircleOnSurface:
     force: float  # [N]
     force_ramp_time: float  # [s]
     max_overtravel: float = 0.02  # [m] approach beyond a lost contact's surface, at most
+
+    def __post_init__(self):
+        """Every field checked (:class:`TaskReferenceError` naming the first wrong one)."""
+        problems = [
+            ("x0", vector_problem(self.x0, 3, "[x, y, z], the tool position on the task axes x, y, z"))
+        ]
+        if problems[0][1] is None:
+            problems = _path_problems(self)
+        problems += [
+            ("radius", positive_problem(self.radius)),
+            ("laps", positive_problem(self.laps)),
+            ("speed", finite_problem(self.speed)),
+            ("start_angle", finite_problem(self.start_angle)),
+            ("delay", non_negative_problem(self.delay)),
+        ]
+        if all(p is None for _, p in problems):
+            length = 2.0 * math.pi * self.radius * self.laps
+            if self.speed == 0.0:
+                problems.append(
+                    ("speed", "must not be zero: the circle would never be drawn (and lasts length/speed)")
+                )
+            elif length < abs(self.speed) * self.blend_time:
+                problems.append((
+                    "laps",
+                    f"the circle ({length:.4g} m) is shorter than its speed blends need "
+                    f"(|speed| x blend_time = {abs(self.speed) * self.blend_time:.4g} m)",
+                ))  # fmt: skip
+        _raise_first("CircleOnSurface", problems)
+        _as_arrays(self, ("x0", "tangent", "normal"))
 
     @cached_property
     def press(self) -> SlideAndPress:

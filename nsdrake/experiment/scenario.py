@@ -497,16 +497,18 @@ def check_choice(source: str, where: str, value, choices) -> None:
     _fail_if(source, where, choice_problem(value, choices))
 
 
-def validate(s: Scenario) -> None:
+def validate(s: Scenario, *, push_within_run: bool = True) -> None:
     """Checks every field that does not need the plant; raises ScenarioError for the first
     problem. The controller's sections are checked by the controller's own rules
-    (:mod:`nsdrake.control.validation`), named after the scenario's fields."""
+    (:mod:`nsdrake.control.validation`), named after the scenario's fields.
+    ``push_within_run`` False lets a push start after the run's end (``nsdrake compare
+    --duration`` shortening a family whose push is within its own runs: that row says so)."""
     src = s.source or "scenario"
-    for where, problem in scenario_problems(s):
+    for where, problem in scenario_problems(s, push_within_run=push_within_run):
         _fail(src, where, problem)
 
 
-def scenario_problems(s: Scenario) -> Iterator[tuple[str, str]]:
+def scenario_problems(s: Scenario, *, push_within_run: bool = True) -> Iterator[tuple[str, str]]:
     """(field, problem) for every field that does not need the plant, in the order a
     reader meets them; a later check may assume the earlier ones found nothing (the
     caller stops at the first problem)."""
@@ -529,7 +531,7 @@ def scenario_problems(s: Scenario) -> Iterator[tuple[str, str]]:
         yield f"driver.{where}", problem
     yield from _step_problems(s)
     yield from _obstacle_problems(s)
-    yield from push_problems(s.push)
+    yield from push_problems(s.push, s.duration if push_within_run else None)
 
 
 def _checked(where: str, problem: str | None) -> Iterator[tuple[str, str]]:

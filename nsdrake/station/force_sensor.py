@@ -10,6 +10,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint
 from pydrake.systems.framework import LeafSystem
 
+from nsdrake.station.config import StationError
+
 
 def sensor_tare(plant: MultibodyPlant, sensor_joint: Joint) -> tuple[np.ndarray, np.ndarray]:
     """(p_WSo, W_tare): the sensor origin So in the world [m] and the wrench
@@ -35,6 +37,24 @@ def contact_wrench(R_WJc: np.ndarray, F_J: np.ndarray, tare: np.ndarray) -> np.n
     if not W_J.any():
         return W_J
     return -(W_J - tare)
+
+
+def sensor_problem(plant, sensor_joint) -> str | None:
+    """Why ``sensor_joint`` of ``plant`` cannot be a force sensor (:class:`ForceSensor`), or None."""
+    if not isinstance(plant, MultibodyPlant):
+        return f"plant must be a MultibodyPlant, got {type(plant).__name__}"
+    if not plant.is_finalized():
+        return "plant must be finalized (plant.Finalize()) before the sensor reads its joints"
+    if not isinstance(sensor_joint, Joint):
+        return f"sensor_joint must be a weld joint of the plant, got {type(sensor_joint).__name__}"
+    if sensor_joint.GetParentPlant() is not plant:
+        return f"sensor_joint '{sensor_joint.name()}' is a joint of another plant"
+    if sensor_joint.type_name() != "weld":
+        return (
+            f"sensor_joint '{sensor_joint.name()}' is a {sensor_joint.type_name()} joint: it must be a weld "
+            "(only a weld's reaction is the whole wrench on the body it holds)"
+        )
+    return None
 
 
 class ForceSensor(LeafSystem):
@@ -64,9 +84,17 @@ class ForceSensor(LeafSystem):
     A discrete plant's sampled reaction port reads exactly zero until its first
     step, which no loaded weld does: the sensor reports no sample (zero) for an
     all-zero reading.
+
+    ``plant`` must be finalized and ``sensor_joint`` one of its weld joints (the reaction
+    of any other joint is not the wrench on the plate: a revolute joint's carries no
+    moment about its axis); anything else raises :class:`nsdrake.station.config.StationError`
+    (a ValueError) in one line.
     """
 
     def __init__(self, *, plant: MultibodyPlant, sensor_joint: Joint):
+        problem = sensor_problem(plant, sensor_joint)
+        if problem is not None:
+            raise StationError(f"ForceSensor: {problem}")
         super().__init__()
         self._index = int(sensor_joint.index())
         context = plant.CreateDefaultContext()

@@ -157,12 +157,45 @@ def variant_scenario(family: Family, index: int, config: Path | None, duration: 
         scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(variant.overrides), defaults=base)
     except Exception as e:
         raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_cut(e)}") from None
-    if duration is not None:
-        scenario = dataclasses.replace(scenario, duration=duration)
     scenario.source = f"{family.source} [{variant.name}]"
     scenario.base_dir = base.base_dir
-    validate(scenario)
+    if duration is not None:  # the variant as written (its push within its own run), then shortened
+        validate(scenario)
+        scenario = dataclasses.replace(scenario, duration=duration)
+    validate(scenario, push_within_run=duration is None)  # a push after --duration's end: the row's note
     return scenario
+
+
+def check_variants(family: Family, config: Path | None, duration: float | None) -> None:
+    """Every variant's scenario (with ``config`` overlaid), and its station and joint names
+    (:func:`nsdrake.experiment.scenario_station.add_scenario_station`: fields keyed by
+    joint name against that variant's arm), before any variant runs. A problem that only
+    ``config`` brings (the same variant without it is fine) names the user's file, not the
+    family's: the family's own variants are the shipped ones, tested."""
+    from pydrake.systems.framework import DiagramBuilder
+
+    from nsdrake.experiment.scenario_station import add_scenario_station
+
+    def check(index: int, overlay: Path | None) -> None:
+        scenario = variant_scenario(family, index, overlay, duration)
+        add_scenario_station(DiagramBuilder(), scenario, sensing=False)
+
+    for i, variant in enumerate(family.variants):
+        try:
+            check(i, config)
+        except ScenarioError as e:
+            if config is None:
+                raise
+            try:
+                check(i, None)
+            except ScenarioError:
+                raise e from None
+            where = f"{family.source} [{variant.name}]: "
+            if not str(e).startswith(where):  # it names its file already (the user's)
+                raise e from None
+            raise ScenarioError(
+                f"{config}: {str(e)[len(where) :]} (in the variant '{variant.name}' of {family.name})"
+            ) from None
 
 
 def slug(text: str) -> str:
@@ -726,8 +759,10 @@ def run_family(
     isolate: bool | None = None,
     progress: Callable[[float], None] | None = None,
     variant_timeout: float = VARIANT_TIMEOUT,
+    checked: bool = False,
 ) -> FamilyResult:
-    """Runs every variant, writes the table and the overlay plot.
+    """Runs every variant, writes the table and the overlay plot; first checks every
+    variant (:func:`check_variants`) unless the caller has (``checked``).
 
     With ``isolate`` (the default when ``jobs`` > 1) each variant runs in a process of its
     own, ``jobs`` at a time, and is stopped after ``variant_timeout`` seconds of wall time;
@@ -737,8 +772,8 @@ def run_family(
     every variant (each keeps its traces so far), writes the table with the rows so far
     and returns with ``interrupted``.
     """
-    for i in range(len(family.variants)):
-        variant_scenario(family, i, config, duration)  # every input error before any simulation
+    if not checked:
+        check_variants(family, config, duration)  # every input error before any simulation
     folders = [out / "variants" / f"{i:02d}-{slug(v.name)}" for i, v in enumerate(family.variants)]
     declare(out, [*COMPARE_FILES, *(f"{f.relative_to(out).as_posix()}/traces.csv" for f in folders)])
     try:

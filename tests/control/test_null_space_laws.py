@@ -159,8 +159,13 @@ def panda_step(law: str, **ns) -> ControllerStep:
     model = ControllerModel.from_urdf(
         str(models_dir() / "panda.urdf"), tool_frame="tool", task_axes=("x", "y", "z", "rx", "ry", "rz")
     )
-    posture = PostureConfig(q_d={j: 0.1 * k for k, j in enumerate(PANDA_JOINTS)}, gain=-0.3)
     source = "posture" if law == "paper" else "criteria"
+    # Eq. 30's gain only where the posture source reads it (an unused one is refused)
+    # a posture within the joints' limits (urdf/README's start, moved by 0.1 k rad on joint k)
+    start = (0.0, 0.182, 0.0, -2.4, 0.0, 2.582, 0.785)
+    posture = PostureConfig(
+        q_d={j: start[k] + 0.1 * k for k, j in enumerate(PANDA_JOINTS)}, gain=-0.3 if law == "paper" else 0.0
+    )
     config = ControllerConfig(
         null_space=NullSpaceConfig(law=law, **ns),
         desired_null_space=DesiredNullSpaceConfig(source=source, posture=posture),

@@ -11,6 +11,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from nsdrake.control.plan import ControllerPlan, StageBuffers
+from nsdrake.control.validation import ControllerInputError, inputs_problem
 
 
 class TermsValue:
@@ -48,6 +49,17 @@ def declare_value_cache(system, description: str, create, calc=None, prerequisit
     return system.DeclareCacheEntry(
         description=description, value_producer=producer, prerequisites_of_calc=prerequisites
     )
+
+
+def check_inputs(system, context, values, names, quaternion: int = -1) -> None:
+    """Raises :class:`ControllerInputError` when ``values`` (an input port's value, or the
+    packed commands; entries named ``names``) give no torque: a value that is not finite
+    (a diverged plant, a broken reference) or a zero desired quaternion. Named by the
+    controller's path in the user's diagram, the time, the input port and its entry."""
+    problem = inputs_problem(values, names, quaternion)
+    if problem is not None:
+        controller = system.GetSystemPathname().rsplit("::", 1)[0] or "controller"
+        raise ControllerInputError(f"{controller} at t = {context.get_time():g} s", problem)
 
 
 def scratch(entry, context):

@@ -8,7 +8,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from nsdrake.control.layout import tick_parts
 from nsdrake.control.plan import ControllerPlan, StageBuffers
 from nsdrake.control.stages import COMMIT, DESIRED, SELECTION, STORE, TICK, commands_size, initial_state
-from nsdrake.control.systems._values import declare_value_cache
+from nsdrake.control.systems._values import check_inputs, declare_value_cache
 
 
 class FrontValue:
@@ -49,7 +49,10 @@ class FusedController(LeafSystem):
     (:func:`nsdrake.control.layout.tick_parts`; the controller's Demultiplexer splits it
     into its named output ports). ``desired_null_space_velocity`` (n) [rad/s], when
     connected, is the q̇_dⁿ the null-space stage uses instead of the configured source's;
-    ``limited_null_space_torque`` is s τ₀ (n) [N m], the null-space torque in τ.
+    ``limited_null_space_torque`` is s τ₀ (n) [N m], the null-space torque in τ. An input
+    that is not finite, or a zero quaternion, raises
+    :class:`nsdrake.control.validation.ControllerInputError` naming the controller's input
+    port and entry.
 
     Events, as the named systems': every period an unrestricted update stores the q̇_dⁿ
     and τ of the output (the previous values of Eq. 21's q̈_dⁿ and of the rate limit),
@@ -88,29 +91,35 @@ class FusedController(LeafSystem):
 
     def _calc_front(self, context, front: FrontValue):
         state = self._state.Eval(context)
+        check_inputs(self, context, state, self._plan.input_names["estimated_state"])
         n = self._n
         self._plan.front(front.buffers.scratch, state[:n], state[n:], front.terms, front.buffers)
 
-    def _run(self, context, stages, t_previous, state, tick) -> None:
+    def _run(self, context, stages, t_previous, state, tick, commands=None) -> None:
         front, n = self._front.Eval(context), self._n
         b = front.buffers
+        commands = self._commands.Eval(context) if commands is None else commands
         self._plan.run_arrays(
             stages, context.get_time(), t_previous, front.terms, b.criteria, state[:3], state[3 : n + 4],
-            state[n + 4 :], self._commands.Eval(context), tick, b.scratch,
+            state[n + 4 :], commands, tick, b.scratch,
         )  # fmt: skip
 
     def _calc(self, context, output):
         state = context.get_discrete_state(self._discrete).CopyToVector()
         tick = output.get_mutable_value()
+        plan, commands = self._plan, self._commands.Eval(context)
+        check_inputs(self, context, commands, plan.input_names["commands"], plan.commands_quaternion)
         if not self._external.HasValue(context):
-            self._run(context, TICK, 0.0, state, tick)
+            self._run(context, TICK, 0.0, state, tick, commands)
             return
         # q̇_dⁿ from outside: the selector still runs (its mode and scale are reported),
         # then its q̇_dⁿ is replaced before the stages that use it.
-        self._run(context, SELECTION | DESIRED, 0.0, state, tick)
+        external = self._external.Eval(context)
+        check_inputs(self, context, external, plan.input_names["desired_null_space_velocity"])
+        self._run(context, SELECTION | DESIRED, 0.0, state, tick, commands)
         start, size = self._offsets["desired_null_space_velocity"]
-        tick[start : start + size] = self._external.Eval(context)
-        self._run(context, TICK & ~(SELECTION | DESIRED), 0.0, state, tick)
+        tick[start : start + size] = external
+        self._run(context, TICK & ~(SELECTION | DESIRED), 0.0, state, tick, commands)
 
     def _calc_tau0(self, context, output):
         tick, (s, _), (t0, n) = (

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.stages import TASK
-from nsdrake.control.systems._values import StageSystem
+from nsdrake.control.systems._values import StageSystem, check_inputs
 
 
 class ImpedanceController(StageSystem):
@@ -37,7 +37,9 @@ class ImpedanceController(StageSystem):
     takes the desired tool orientation ``R_d`` as a quaternion [w, x, y, z] (4), and
     ω_d, ω̇_d (3 each) [rad/s, rad/s²], world frame; their task rows enter the law with
     the orientation error log(R_d R_WTᵀ) (:mod:`nsdrake.control.orientation`).
-    ``generalized_force`` (n) [N m] is in velocity order.
+    ``generalized_force`` (n) [N m] is in velocity order. An input that is not finite, or
+    a zero quaternion, raises :class:`nsdrake.control.validation.ControllerInputError`
+    naming the controller's input port.
     """
 
     def __init__(self, *, plan: ControllerPlan):
@@ -63,5 +65,7 @@ class ImpedanceController(StageSystem):
         b = self.buffers(context)
         for port, where in self._inputs:
             b.commands[where] = port.Eval(context)
+        plan = self._plan
+        check_inputs(self, context, b.commands, plan.input_names["commands"], plan.commands_quaternion)
         self.run(context, TASK, b)
         output.SetFromVector(b.part("task"))

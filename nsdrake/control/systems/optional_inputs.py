@@ -6,6 +6,9 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from nsdrake.control.systems._values import check_inputs
+from nsdrake.control.validation import ControllerInputError, entry_names
+
 
 class NullSpaceVelocitySource(LeafSystem):
     """q̇_dⁿ for the null-space controller: the ``desired_null_space_velocity`` input when it
@@ -21,11 +24,14 @@ class NullSpaceVelocitySource(LeafSystem):
         output_ports:
         - desired_null_space_velocity
 
-    All three are n [rad/s]. The input is used as given: no joint-speed scaling, no blend.
+    All three are n [rad/s]. The input is used as given: no joint-speed scaling, no blend;
+    a value that is not finite raises :class:`nsdrake.control.validation.ControllerInputError`
+    naming the entry (``joints``: the joints' names, velocity order).
     """
 
-    def __init__(self, n: int):
+    def __init__(self, n: int, joints=None):
         super().__init__()
+        self._names = entry_names([("desired_null_space_velocity", n if joints is None else list(joints))])
         self._configured = self.DeclareVectorInputPort("configured", n)
         self._external = self.DeclareVectorInputPort("desired_null_space_velocity", n)
         self.DeclareVectorOutputPort(
@@ -36,14 +42,20 @@ class NullSpaceVelocitySource(LeafSystem):
         )
 
     def _calc(self, context, output):
-        port = self._external if self._external.HasValue(context) else self._configured
-        output.SetFromVector(port.Eval(context))
+        if not self._external.HasValue(context):
+            output.SetFromVector(self._configured.Eval(context))
+            return
+        value = self._external.Eval(context)
+        check_inputs(self, context, value, self._names)
+        output.SetFromVector(value)
 
 
 class ZeroIfUnconnected(LeafSystem):
     """Its input, or zeros when the input is not connected: ``measured_wrench`` and
     ``desired_force`` of a task without a force axis (nothing to press, so a user need
-    not wire a sensor or a force command).
+    not wire a sensor or a force command). With ``refuse`` (a reason), a connected input is
+    refused instead (:class:`nsdrake.control.validation.ControllerInputError`, ``name`` the
+    controller's port): ``desired_force`` without a force axis, which would do nothing.
 
     .. pydrake_system::
 
@@ -54,8 +66,9 @@ class ZeroIfUnconnected(LeafSystem):
         - y0
     """
 
-    def __init__(self, size: int):
+    def __init__(self, size: int, name: str = "u0", refuse: str | None = None):
         super().__init__()
+        self._name, self._refuse = name, refuse
         self._u = self.DeclareVectorInputPort("u0", size)
         self._zeros = np.zeros(size)
         self.DeclareVectorOutputPort(
@@ -63,4 +76,10 @@ class ZeroIfUnconnected(LeafSystem):
         )
 
     def _calc(self, context, output):
-        output.SetFromVector(self._u.Eval(context) if self._u.HasValue(context) else self._zeros)
+        if not self._u.HasValue(context):
+            output.SetFromVector(self._zeros)
+            return
+        if self._refuse is not None:
+            controller = self.GetSystemPathname().rsplit("::", 1)[0] or "controller"
+            raise ControllerInputError(f"{controller} input {self._name}", self._refuse)
+        output.SetFromVector(self._u.Eval(context))

@@ -6,7 +6,13 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from nsdrake.control.plan import ControllerPlan
-from nsdrake.control.systems._values import ScratchValue, TermsValue, declare_value_cache, scratch
+from nsdrake.control.systems._values import (
+    ScratchValue,
+    TermsValue,
+    check_inputs,
+    declare_value_cache,
+    scratch,
+)
 
 
 class RobotTermsSystem(LeafSystem):
@@ -29,7 +35,8 @@ class RobotTermsSystem(LeafSystem):
 
     The terms come from the controller's own model, never from the simulated plant; the
     model scratch memory (a Pinocchio Data, a model context) is per context (a cache
-    entry with no prerequisites), never shared between contexts.
+    entry with no prerequisites), never shared between contexts. A state that is not
+    finite raises :class:`nsdrake.control.validation.ControllerInputError` naming the entry.
     """
 
     def __init__(self, *, plan: ControllerPlan):
@@ -52,6 +59,7 @@ class RobotTermsSystem(LeafSystem):
 
     def _calc_terms(self, context, output):
         state = self._state.Eval(context)
+        check_inputs(self, context, state, self._plan.input_names["estimated_state"])
         n = self._n
         self._plan.terms(
             scratch(self._scratch, context).scratch, state[:n], state[n:], output.get_mutable_value().buffer
