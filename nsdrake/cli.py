@@ -155,6 +155,36 @@ def _add_drive_parsers(sub) -> None:
     sim.add_argument("--lcm", metavar="URL", required=True, help="the LCM URL the controller talks on")
     sim.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
     sim.add_argument("--duration", type=_duration, help="time to serve after the first command [s]")
+    sim.add_argument(
+        "--expire-sec",
+        type=_positive("--expire-sec"),
+        default=0.05,
+        help="a command older than this [s] is dropped and the robot damps (drake-franka-driver's "
+        "--expire_sec; default 0.05)",
+    )
+    sim.add_argument(
+        "--low-pass-freq",
+        type=_positive("--low-pass-freq"),
+        default=30.0,
+        help="libfranka's torque low-pass cutoff [Hz] (drake-franka-driver's --low_pass_freq, default 30; "
+        "1000 turns it off)",
+    )
+    sim.add_argument(
+        "--no-rate-limit", action="store_true", help="turn libfranka's torque rate limiter (1000 N m/s) off"
+    )
+
+
+def _positive(option: str):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} must be a number, got '{text}'") from None
+        if not math.isfinite(value) or value <= 0:
+            raise argparse.ArgumentTypeError(f"{option} must be a finite number > 0, got '{text}'")
+        return value
+
+    return parse
 
 
 def _rate(text: str) -> float:
@@ -284,13 +314,32 @@ def _lcm(url: str):
         raise ScenarioError(f"--lcm: {e}") from None
 
 
+def _bus(url: str):
+    """The controller side's bus at ``url`` (the ``lcm`` package, nsdrake/driver/bus.py)."""
+    from nsdrake.driver.bus import BusError, LcmBus
+
+    try:
+        return LcmBus(url)
+    except BusError as e:
+        raise ScenarioError(f"--lcm: {e}") from None
+
+
 def _drive(args) -> int:
     from nsdrake.driver.run import prepare, write_drive_folder
     from nsdrake.driver.timing import timing_line
 
+    if args.lcm is not None and not args.lcm.strip():
+        raise ScenarioError("--lcm: the URL is empty (an unset variable?); give the robot's LCM URL")
+    if args.lcm is not None and args.realtime_rate != 1.0:
+        raise ScenarioError(
+            "--realtime-rate: paces the simulated driver only; the robot's driver keeps its own time"
+        )
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
-    lcm = _lcm(args.lcm) if args.lcm else None
-    drive = prepare(scenario, lcm, realtime_rate=args.realtime_rate)  # every input error before the folder
+    lcm = _bus(args.lcm) if args.lcm else None
+    # the simulated robot adds g itself, or (driver.robot_adds_gravity false) its driver removes it first
+    drive = prepare(
+        scenario, lcm, realtime_rate=args.realtime_rate, robot_adds_gravity=scenario.driver.robot_adds_gravity
+    )  # every input error before the folder
     with _claimed(args.out, f"drive-{args.scenario}", args.overwrite) as out:
         where = "the simulated driver over memq://" if lcm is None else f"the driver at {args.lcm}"
         print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
@@ -300,6 +349,13 @@ def _drive(args) -> int:
         finally:
             progress.end_line()
         result = write_drive_folder(run, out)
+    if run.interrupted:
+        print(f"nsdrake: {timing_line(run.timing)}")
+        print(
+            f"nsdrake: drive {run.failure}; what was computed is in {out}/, marked interrupted",
+            file=sys.stderr,
+        )
+        return INTERRUPTED
     for m in result.metrics:
         mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
         bound = f"  (bound: {m.bound})" if m.bound else ""
@@ -313,21 +369,34 @@ def _drive(args) -> int:
 
 
 def _sim_driver(args) -> int:
-    from nsdrake.driver.run import serve_simulated_driver
+    from nsdrake.driver.controller_side import check_drive_scenario
+    from nsdrake.driver.serve import serve_simulated_driver
+    from nsdrake.driver.stop import ctrl_c_requests
 
-    scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
+    if args.lcm.startswith("memq://"):
+        raise ScenarioError(
+            "--lcm: memq:// is a bus inside one process; another process cannot reach the simulated "
+            "driver there (nsdrake drive --simulated-driver runs both sides in one process)"
+        )
     lcm = _lcm(args.lcm)
     print(f"nsdrake: simulated driver for {args.scenario} on {args.lcm}; serving (Ctrl-C ends)", flush=True)
-    try:
-        progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
-        served = serve_simulated_driver(scenario, lcm, progress=progress)
-    except KeyboardInterrupt:
-        print("nsdrake: simulated driver stopped", file=sys.stderr)
-        return 1
-    print(
-        f"nsdrake: simulated driver: {served.steps} periods, {served.commands} commands, "
-        f"{served.late} periods without their command in time"
-    )
+    progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
+    with ctrl_c_requests() as stop:
+        served = serve_simulated_driver(
+            scenario,
+            lcm,
+            expire_sec=args.expire_sec,
+            low_pass_freq=args.low_pass_freq,
+            rate_limit=not args.no_rate_limit,
+            progress=progress,
+            stop=stop,
+        )
+    progress.end_line()
+    print(f"nsdrake: simulated driver: {served.line()}")
+    if stop.requested:
+        print("nsdrake: simulated driver interrupted (Ctrl-C)", file=sys.stderr)
+        return INTERRUPTED
     return 0
 
 

@@ -151,6 +151,9 @@ class ControllerStep:
         self._qdot_names = entry_names([("desired_null_space_velocity", joints)])
         self._thread, self._claim_lock = None, threading.Lock()
         self.result = StepResult(self._buffers, n)
+        # g(q) (n) [N m] of the last call's q, the model's gravity term (τ = … + g, the torque
+        # that holds the arm against gravity): a view, rewritten by each call
+        self.gravity = plan.terms_field(self._terms, "g")
         self.reset()
 
     @property

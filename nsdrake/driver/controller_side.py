@@ -1,24 +1,20 @@
-"""The controller side of ``nsdrake drive``: the scenario's reference and controller
-behind a Franka Panda's LCM driver, as one Drake Diagram.
+"""The controller side of ``nsdrake drive``: the scenario's reference and controller as
+plain calls, one tick per status (no Drake diagram runs per tick).
 
 ::
 
-    status_subscriber ─► status_receiver ─► position, velocity ─┐
-      (lcmt_panda_status)  (PandaStatusReceiver)   torque_external ─► [wrench_estimator]
-    [force_torque_subscriber ─► force_torque_receiver] ─► wrench ─┤
-                                                                   ▼
-                         measurement_hold ([q; q̇; W], sampled once per control period)
-                           │ state ───────────────────► controller.estimated_state
-                           │ wrench ──► reference ────► controller.desired_*
-                           │        └─────────────────► controller.measured_wrench
-                           ▼
-    controller.generalized_force τ ─► command_torque = τ − g(q) (robot_adds_gravity)
-      ─► command_sender (PandaCommandSender, torque) ─► command_stamp (the status's utime)
-      ─► command_publisher (lcmt_panda_command, forced publish only)
+    status (q, q̇, τ_ext) ─► W: the sensor's lcmt_force_torque, or (J Jᵀ)⁻¹ J τ_ext
+      ─► reference.tick(t_k, W)          PlainSurfaceReference: contact update, x_d … f_d at t_k
+      ─► step.step(t_k, q, q̇, W, …)      ControllerStep: the scenario's controller, τ
+      ─► command = τ − g(q) (robot_adds_gravity) ─► lcmt_panda_command (the status's utime)
 
-Every LCM system is Drake's (``pydrake.systems.lcm``, ``pydrake.manipulation``).
-:func:`build_drive_diagram` builds it for a user's own script;
-:class:`nsdrake.driver.loop.ControllerLoop` runs it, one command per status.
+The controller is the one ``nsdrake run`` builds for the scenario
+(:func:`nsdrake.experiment.diagram.build_controller`: its model, task, normal, wrench point
+and configuration), run through :class:`nsdrake.control.step.ControllerStep`, which gives
+the Diagram's τ tick by tick; the reference is the scenario's path with the same contact
+detection (:class:`nsdrake.experiment.reference.PlainSurfaceReference`). Each tick's
+signals are recorded into preallocated rows (:class:`Recorder`) and become the run's
+traces, with the columns ``nsdrake run`` writes.
 """
 
 from __future__ import annotations
@@ -27,51 +23,81 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
-from pydrake.lcm import DrakeLcmInterface
-from pydrake.manipulation import PandaCommandSender, PandaControlMode, PandaStatusReceiver
-from pydrake.systems.controllers import InverseDynamics
-from pydrake.systems.framework import Diagram, DiagramBuilder, TriggerType
-from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
-from pydrake.systems.primitives import Adder, Gain, Multiplexer, VectorLogSink
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from nsdrake.control.controller import NullSpaceImpedanceController
+from nsdrake.control.orientation import rotation_to_quaternion
+from nsdrake.control.step import ControllerStep
 from nsdrake.driver.panda import NUM_JOINTS, PandaLimitError, panda_actuator_limits
-from nsdrake.driver.systems import CommandStamp, MeasurementHold
-from nsdrake.driver.wrench import ExternalWrenchEstimator, ForceTorqueReceiver
+from nsdrake.driver.wrench import wrench_from_external_torques
 from nsdrake.experiment.checks import check_with_model
-from nsdrake.experiment.diagram import (
-    add_orientation_reference,
-    add_reference,
-    build_controller,
-    connect_reference,
-    controller_signals,
-    controller_structure,
-    log_signals,
-)
+from nsdrake.experiment.diagram import build_controller, surface_path
+from nsdrake.experiment.reference import PlainSurfaceReference
 from nsdrake.experiment.scenario import Scenario, ScenarioError
 from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.station.plant import Station, desired_tool_orientation, has_joint_limits
 
 
 @dataclass
-class DriveDiagram:
-    """What :func:`build_drive_diagram` returns (``station``, ``controller``, ``loggers``,
-    ``scenario`` and ``desired_orientation`` as :class:`nsdrake.experiment.diagram.ControlledStation`
+class ControllerSide:
+    """What :func:`build_controller_side` returns (``station``, ``controller``, ``scenario``
+    and ``desired_orientation`` as :class:`nsdrake.experiment.diagram.ControlledStation`
     has them, so that the traces are collected the same way)."""
 
-    diagram: Diagram
     scenario: Scenario  # with the Panda's published actuator limits filled in
     station: Station  # the scenario's station, never simulated here: the model's geometry
     station_diagram: Diagram  # the diagram holding ``station`` (a context of it for geometry queries)
-    controller: NullSpaceImpedanceController
-    hold: MeasurementHold
-    status_subscriber: LcmSubscriberSystem
-    force_torque_subscriber: LcmSubscriberSystem | None  # None: the wrench is estimated
-    command_publisher: LcmPublisherSystem
-    loggers: dict[str, VectorLogSink]
-    desired_orientation: np.ndarray | None = None
+    controller: NullSpaceImpedanceController  # never simulated: the step's model and configuration
+    step: ControllerStep
+    reference: PlainSurfaceReference
+    sensor: bool  # the wrench from lcmt_force_torque messages (else estimated from τ_ext)
+    desired_orientation: np.ndarray | None = None  # R_d (3, 3), for a pose task
     wrench_point: np.ndarray | None = None  # the point the measured moment is about; None: the tool
+
+    def __post_init__(self):
+        model = self.controller.model
+        self._plant = model.plant
+        self._context = model.plant.CreateDefaultContext()
+        self._quaternion = (
+            None if self.desired_orientation is None else rotation_to_quaternion(self.desired_orientation)
+        )
+        self._zero3 = np.zeros(3)
+        self.command = np.zeros(NUM_JOINTS)
+        self.adds_gravity = self.scenario.driver.robot_adds_gravity
+
+    def reset(self) -> None:
+        self.step.reset()
+        self.reference.reset()
+
+    def estimated_wrench(self, q: np.ndarray, tau_ext: np.ndarray) -> np.ndarray:
+        """W_T from the external joint torques (nsdrake/driver/wrench.py), J of the
+        controller's own model at q."""
+        plant, context = self._plant, self._context
+        plant.SetPositions(context, q)
+        J = plant.CalcJacobianSpatialVelocity(
+            context,
+            JacobianWrtVariable.kV,
+            self.controller.model.arm.tool_frame,
+            self._zero3,
+            plant.world_frame(),
+            plant.world_frame(),
+        )
+        return wrench_from_external_torques(J, tau_ext)
+
+    def tick(self, t: float, q: np.ndarray, v: np.ndarray, wrench: np.ndarray):
+        """The reference and the controller at t [s] for the measured q, q̇ and wrench;
+        returns (the reference's (x_d, ẋ_d, ẍ_d, f_d), the step's result); the torque to
+        send is in :attr:`command` (τ − g(q) when the robot adds g, g the controller model's
+        own gravity term, which the step has just computed at q)."""
+        desired = self.reference.tick(t, wrench)
+        rotation = () if self._quaternion is None else (self._quaternion, self._zero3, self._zero3)
+        result = self.step.step(t, q, v, wrench, *desired, *rotation)
+        if self.adds_gravity:
+            np.subtract(result.tau, self.step.gravity, out=self.command)
+        else:
+            self.command[:] = result.tau
+        return desired, result
 
 
 def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
@@ -85,23 +111,25 @@ def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
     return dataclasses.replace(scenario, actuator_limits=limits)
 
 
-def add_controller(
-    builder: DiagramBuilder, scenario: Scenario, station: Station, wrench_point
-) -> NullSpaceImpedanceController:
-    """The scenario's controller, on its own model of the arm and obstacles: the one place
-    the controller side builds it: fused (one LeafSystem, the cheapest way to run the tick
-    in a Diagram) unless the scenario's controller_structure asks for the named systems."""
-    controller = build_controller(
-        scenario, station, wrench_point, structure=controller_structure(scenario, "fused")
-    )
-    builder.AddSystem(controller)
-    return controller
+def check_drive_scenario(scenario: Scenario) -> Scenario:
+    """``scenario`` as a drive runs it (:func:`drive_scenario`), or a one-line
+    ScenarioError: realism rungs on, a model that is not a 7-joint arm, limits above the
+    Panda's. Cheap (the station's model only): ``nsdrake sim-driver`` checks with it."""
+    if scenario.realism.any:
+        raise ScenarioError(
+            f"{scenario.source or 'scenario'}: realism: nsdrake drive runs the controller against a robot "
+            "(or the simulated driver, which models none of the realism rungs); turn them off"
+        )
+    builder = DiagramBuilder()
+    station = add_scenario_station(builder, scenario)
+    check_with_model(scenario, station)
+    return drive_scenario(scenario, station)
 
 
-def build_drive_diagram(scenario: Scenario, lcm: DrakeLcmInterface) -> DriveDiagram:
-    """The controller side for ``scenario`` on ``lcm`` (module docstring); the channels,
-    the force source and the gravity setting come from ``scenario.driver``. Every problem
-    with the scenario is a one-line ScenarioError, before anything listens or sends."""
+def build_controller_side(scenario: Scenario) -> ControllerSide:
+    """The controller side for ``scenario`` (module docstring); the force source and the
+    gravity setting come from ``scenario.driver``. Every problem with the scenario is a
+    one-line ScenarioError, before anything listens or sends."""
     if scenario.realism.any:
         raise ScenarioError(
             f"{scenario.source or 'scenario'}: realism: nsdrake drive runs the controller against a robot "
@@ -112,116 +140,100 @@ def build_drive_diagram(scenario: Scenario, lcm: DrakeLcmInterface) -> DriveDiag
     check_with_model(scenario, station)
     station_diagram = station_builder.Build()
     scenario = drive_scenario(scenario, station)
-    d = scenario.driver
-    builder = DiagramBuilder()
-    status = builder.AddNamedSystem(
-        "status_subscriber",
-        LcmSubscriberSystem.Make(d.status_channel, lcmt_panda_status, lcm, use_cpp_serializer=True),
-    )
-    receiver = builder.AddNamedSystem("status_receiver", PandaStatusReceiver(NUM_JOINTS))
-    builder.Connect(status.get_output_port(), receiver.get_input_port())
-    sensor = d.force_source == "sensor"
+    sensor = scenario.driver.force_source == "sensor"
     wrench_point = station.sensor.p_WSo if sensor else None
-    controller = add_controller(builder, scenario, station, wrench_point)
-    wrench, force_torque = _add_wrench_source(builder, scenario, lcm, receiver, controller)
-    hold, state, held_wrench = _add_measurement_hold(builder, receiver, wrench, scenario.control_period)
-    reference = add_reference(builder, scenario, station, wrench=held_wrench)
-    builder.Connect(state, controller.GetInputPort("estimated_state"))
-    builder.Connect(held_wrench, controller.GetInputPort("measured_wrench"))
-    connect_reference(builder, controller, reference)
+    controller = build_controller(scenario, station, wrench_point, structure="fused")
+    step = ControllerStep(
+        controller_model=controller.model,
+        normal=controller.normal,
+        config=controller.config,
+        wrench_point=controller.wrench_point,
+    )
+    path, common = surface_path(scenario, station)
     R_d = None
     if station.arm_model.m_r:
         R_d = desired_tool_orientation(station, scenario.reference.orientation)
-        add_orientation_reference(builder, controller, R_d)
-    command = _add_command_torque(builder, controller, state, d.robot_adds_gravity)
-    publisher = _add_command_path(builder, command, status, lcm, d.command_channel)
-    signals = controller_signals(controller, reference, joint_limits=has_joint_limits(station))
-    signals.update({"state": state, "wrench": held_wrench, "command": command})
-    loggers = log_signals(builder, signals, scenario.control_period)
-    diagram = builder.Build()
-    diagram.set_name("nsdrake_drive")
-    return DriveDiagram(
-        diagram=diagram,
+    return ControllerSide(
         scenario=scenario,
         station=station,
         station_diagram=station_diagram,
         controller=controller,
-        hold=hold,
-        status_subscriber=status,
-        force_torque_subscriber=force_torque,
-        command_publisher=publisher,
-        loggers=loggers,
+        step=step,
+        reference=PlainSurfaceReference(reference=path, **common),
+        sensor=sensor,
         desired_orientation=R_d,
         wrench_point=wrench_point,
     )
 
 
-def _add_wrench_source(builder, scenario, lcm, receiver, controller):
-    """The measured wrench's port and, for the sensor, its subscriber (else None)."""
-    d = scenario.driver
-    if d.force_source == "sensor":
-        subscriber = LcmSubscriberSystem.Make(
-            d.force_torque_channel, lcmt_force_torque, lcm, use_cpp_serializer=True
+class Recorder:
+    """Each tick's signals in preallocated rows (no allocation per tick), and the logs
+    :func:`nsdrake.experiment.simulate.collect_traces` reads (``sample_times()``, ``data()``)."""
+
+    def __init__(self, side: ControllerSide, capacity: int):
+        n, m_t = side.station.arm_model.n, side.station.arm_model.m_t
+        self._n = n
+        sizes = {
+            "state": 2 * n, "wrench": 6, "x_d": m_t, "f_d": 1, "in_contact": 1, "tau": n, "qns": n,
+            "mode": 1, "speed_scale": 1, "w": 1, "d_min": 1, "p_obstacle": 1, "en": n, "nu": 1,
+            "p_tau": 1, "saturation": 2, "command": n,
+        }  # fmt: skip
+        if has_joint_limits(side.station):
+            sizes["p_joint_limits"] = 1
+        if side.scenario.report.null_space_torque:
+            sizes["tau0"] = n
+        self.slices, start = {}, 1
+        for name, size in sizes.items():
+            self.slices[name] = slice(start, start + size)
+            start += size
+        self.rows = np.zeros((max(1, capacity), start))
+        self.count = 0
+
+    def record(self, t: float, q, v, wrench, desired, result, command, in_contact: bool) -> None:
+        if self.count == self.rows.shape[0]:  # longer than planned: grow (rare)
+            self.rows = np.concatenate([self.rows, np.zeros_like(self.rows)])
+        row, s, n = self.rows[self.count], self.slices, self._n
+        row[0] = t
+        state = row[s["state"]]
+        state[:n], state[n:] = q, v
+        row[s["wrench"]] = wrench
+        row[s["x_d"]] = desired[0]
+        row[s["f_d"]] = desired[3]
+        row[s["in_contact"]] = in_contact
+        row[s["tau"]] = result.tau
+        row[s["qns"]] = result.desired_null_space_velocity
+        row[s["mode"]] = result.mode
+        row[s["speed_scale"]] = result.speed_scale
+        c = result.criteria  # one [Φ (n); p; s; a] row per criterion: obstacle, τ, manipulability, limits
+        row[s["w"]], row[s["d_min"]], row[s["p_obstacle"]], row[s["p_tau"]] = (
+            c[2, n],
+            c[0, n + 1],
+            c[0, n],
+            c[1, n],
         )
-        builder.AddNamedSystem("force_torque_subscriber", subscriber)
-        ft = builder.AddNamedSystem("force_torque_receiver", ForceTorqueReceiver())
-        builder.Connect(subscriber.get_output_port(), ft.get_input_port())
-        return ft.GetOutputPort("wrench"), subscriber
-    estimator = builder.AddNamedSystem("wrench_estimator", ExternalWrenchEstimator(model=controller.model))
-    builder.Connect(receiver.get_position_measured_output_port(), estimator.GetInputPort("position_measured"))
-    builder.Connect(receiver.get_torque_external_output_port(), estimator.GetInputPort("torque_external"))
-    return estimator.GetOutputPort("wrench"), None
+        row[s["en"]] = result.null_space_velocity_error
+        row[s["nu"]] = result.lyapunov
+        row[s["saturation"]] = result.saturation
+        row[s["command"]] = command
+        if "p_joint_limits" in s:
+            row[s["p_joint_limits"]] = c[3, n]
+        if "tau0" in s:
+            row[s["tau0"]] = result.null_space_torque
+        self.count += 1
+
+    def logs(self) -> dict:
+        rows = self.rows[: self.count]
+        return {name: _Log(rows[:, 0], rows[:, part].T) for name, part in self.slices.items()}
 
 
-def _add_measurement_hold(builder, receiver, wrench, period):
-    """[q; q̇; W] sampled and held (MeasurementHold); returns it and its state and wrench ports."""
-    n = NUM_JOINTS
-    measurements = builder.AddNamedSystem("measurements", Multiplexer([n, n, 6]))
-    builder.Connect(receiver.get_position_measured_output_port(), measurements.get_input_port(0))
-    builder.Connect(receiver.get_velocity_measured_output_port(), measurements.get_input_port(1))
-    builder.Connect(wrench, measurements.get_input_port(2))
-    hold = MeasurementHold(parts={"state": 2 * n, "wrench": 6}, period=period)
-    builder.AddNamedSystem("measurement_hold", hold)
-    builder.Connect(measurements.get_output_port(), hold.get_input_port())
-    return hold, hold.GetOutputPort("state"), hold.GetOutputPort("wrench")
+class _Log:
+    """A logger's record made of arrays (``sample_times()``, ``data()``)."""
 
+    def __init__(self, times: np.ndarray, data: np.ndarray):
+        self._times, self._data = times, data
 
-def _add_command_torque(builder, controller, state, robot_adds_gravity: bool):
-    """The torque to send: τ − g(q) when the robot adds g itself, else τ. g is the
-    controller model's (Drake's gravity compensation on the model's own plant)."""
-    tau = controller.GetOutputPort("generalized_force")
-    if not robot_adds_gravity:
-        return tau
-    gravity = builder.AddNamedSystem(
-        "gravity",
-        InverseDynamics(controller.model.plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation),
-    )
-    builder.Connect(state, gravity.get_input_port_estimated_state())
-    minus = builder.AddNamedSystem("minus_gravity", Gain(-1.0, NUM_JOINTS))
-    builder.Connect(gravity.get_output_port_generalized_force(), minus.get_input_port())
-    torque = builder.AddNamedSystem("command_torque", Adder(2, NUM_JOINTS))
-    builder.Connect(tau, torque.get_input_port(0))
-    builder.Connect(minus.get_output_port(), torque.get_input_port(1))
-    return torque.get_output_port()
+    def sample_times(self) -> np.ndarray:
+        return self._times
 
-
-def _add_command_path(builder, torque, status, lcm, channel: str) -> LcmPublisherSystem:
-    sender = builder.AddNamedSystem(
-        "command_sender", PandaCommandSender(NUM_JOINTS, int(PandaControlMode.kTorque))
-    )
-    builder.Connect(torque, sender.get_torque_input_port())
-    stamp = builder.AddNamedSystem("command_stamp", CommandStamp())
-    builder.Connect(sender.get_output_port(), stamp.GetInputPort("lcmt_panda_command"))
-    builder.Connect(status.get_output_port(), stamp.GetInputPort("lcmt_panda_status"))
-    publisher = builder.AddNamedSystem(
-        "command_publisher",
-        LcmPublisherSystem.Make(
-            channel,
-            lcmt_panda_command,
-            lcm,
-            use_cpp_serializer=True,
-            publish_triggers={TriggerType.kForced},
-        ),
-    )
-    builder.Connect(stamp.get_output_port(), publisher.get_input_port())
-    return publisher
+    def data(self) -> np.ndarray:
+        return self._data

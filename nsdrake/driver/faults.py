@@ -61,3 +61,58 @@ def clock_steps(utime: int, previous_utime: int, period: float) -> int | None:
     if utime <= previous_utime:
         return None
     return max(1, round((utime - previous_utime) * 1e-6 / period))
+
+
+def clock_problem(
+    clock: int, previous: int, anchor: int, period_us: int, bound_periods: float, name: str
+) -> str | None:
+    """A status's clock (``name``: robot_utime or utime) [µs] against the previous status's
+    and the first's (``anchor``): None when it lies in a later control period
+    (:func:`elapsed_periods`) at most ``bound_periods`` periods on (a gap within the bound
+    is periods the controller skips, never replays); else why not: it repeats or goes
+    back (two publishers on the channel interleave their clocks), it falls in a period
+    already answered (a stream faster than the controller's period, 2 kHz), or it jumps
+    forward beyond the bound (a stream at 250 Hz, statuses lost, a wall clock stepped by
+    NTP). Jitter of less than half a period on the clock (a PC's utime) is taken."""
+    gap = clock - previous
+    if gap == 0:
+        return f"its {name} {clock} µs repeats the previous status's (a second publisher on the channel?)"
+    if gap < 0:
+        return (
+            f"its {name} went back {-gap} µs, from {previous} to {clock} µs "
+            "(a second publisher on the channel?)"
+        )
+    if elapsed_periods(clock, anchor, period_us) <= elapsed_periods(previous, anchor, period_us):
+        return (
+            f"its {name} advanced {gap} µs from the previous status's, within the same control "
+            f"period: the stream is faster than the controller's period of {period_us} µs"
+        )
+    if gap > bound_periods * period_us:
+        return (
+            f"its {name} jumped {gap * 1e-3:.3f} ms ({gap / period_us:.1f} periods) from the previous "
+            f"status's (driver.status_timeout_periods {bound_periods:g})"
+        )
+    return None
+
+
+def elapsed_periods(clock: int, anchor: int, period_us: int) -> int:
+    """Control periods from the first status's clock ``anchor`` to ``clock`` [µs], to the
+    nearest: the controller's time is this many periods, re-anchored at every status on
+    the robot's clock (never a sum of rounded gaps, which drifts with the clock's jitter)."""
+    return (2 * (clock - anchor) + period_us) // (2 * period_us)
+
+
+SLOW_STREAM = 10  # statuses in a row each two periods or more after the previous: a slower stream
+
+
+def slow_stream_problem(in_a_row: int, gap: int, period_us: int, name: str) -> str | None:
+    """A stream slower than the controller's period (250 Hz against 1 kHz), told from lost
+    statuses by persistence: ``in_a_row`` statuses in a row, the last ``gap`` [µs] after
+    the previous, each at least two periods after the one before (a lost status now and
+    then is a skipped period; :data:`SLOW_STREAM` in a row is the stream's period)."""
+    if in_a_row < SLOW_STREAM:
+        return None
+    return (
+        f"{in_a_row} statuses in a row came two periods or more apart (the last {gap} µs after the "
+        f"previous, by its {name}): the stream's period is not the controller's {period_us} µs"
+    )

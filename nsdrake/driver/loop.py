@@ -1,25 +1,30 @@
-"""The controller side's loop: one command per status, driven by the robot's messages.
+"""The controller side's loop: one command per status, on the robot's clock.
 
-Why a loop on ``DrakeLcm.HandleSubscriptions`` and not a Drake ``Simulator`` paced with
-``set_target_realtime_rate(1)`` and an ``LcmInterfaceSystem``: the robot owns the clock.
-A paced simulator advances on the controller's own clock and looks for messages only
-when it takes a step, so a status waits up to a step before it is seen, the controller's
-periodic events drift against the robot's ticks (two updates for one status, or none),
-and a publisher on the controller's clock answers no status in particular. Drake's own
-controller example (``examples/kuka_iiwa_arm/iiwa_controller.cc``) does what this loop
-does: block until a status arrives, set the diagram's time from it, advance, and force
-the command's publish. Here each status k:
+Why a loop of plain calls and not a Drake ``Simulator``: the robot owns the clock. Each
+status k:
 
-1. arrives (``HandleSubscriptions``; the time of arrival starts the tick's clock) and is
-   checked (:mod:`nsdrake.driver.faults`); a refused status ends the run before it
-   reaches the diagram;
-2. is taken into the status subscriber (its forced update), as the force-torque message;
-3. the diagram advances to t_k = t_{k−1} + (periods between the two statuses' utime) T:
-   the periodic updates of t_{k−1} run, the measurement hold samples status k
-   (:class:`nsdrake.driver.systems.MeasurementHold` says why that order);
-4. the command publisher is forced: one command, stamped with status k's utime.
+1. arrives (the bus delivers every queued message, :mod:`nsdrake.driver.bus`; each one's
+   arrival is stamped on the wall clock) and every status received since the last tick
+   is checked in order: decodable, its clock (``robot_utime`` where the driver sends
+   it, else ``utime``) advancing by half a period to ``driver.status_timeout_periods``
+   periods (:func:`nsdrake.driver.faults.clock_problem`);
+2. the newest is taken (the others are counted in ``skipped``: a missed period is a
+   skipped tick, never replayed). Its age is then at most a period plus the time the
+   bus took to deliver it: every status that arrived is read before one is chosen (a
+   stamp taken when the loop reads a message says nothing more, since the loop reads
+   the socket itself), and none queued before the controller was ready is answered
+   (:meth:`ControllerLoop.ready`);
+3. its q, q̇ (and τ_ext) are checked (finite, within the Panda's limits, no jump), the
+   controller's time set from its clock (:func:`nsdrake.driver.faults.elapsed_periods`,
+   re-anchored every tick), the wrench taken (the newest force-torque message, which
+   must have arrived within the silence bound) and the controller side ticks once
+   (:class:`nsdrake.driver.controller_side.ControllerSide`);
+4. one command is sent, stamped with the status's ``utime``, and the tick recorded.
 
-A fault (:class:`DriveFaultError`) stops commanding at once: nothing is sent after it.
+Silence is the wall-clock time since the last status arrived (not counting the
+controller's own compute: a status that arrived during a long tick is not silence).
+A fault (:class:`DriveFaultError`) or Ctrl-C (:mod:`nsdrake.driver.stop`) stops
+commanding at once: nothing is sent after it.
 """
 
 from __future__ import annotations
@@ -27,14 +32,25 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from drake import lcmt_panda_status
-from pydrake.lcm import DrakeLcmInterface
-from pydrake.systems.analysis import Simulator
 
-from nsdrake.driver.controller_side import DriveDiagram
-from nsdrake.driver.faults import clock_steps, jump_problem, start_problem, status_problem
-from nsdrake.driver.panda import NUM_JOINTS
+from nsdrake.driver.bus import Bus
+from nsdrake.driver.controller_side import ControllerSide, Recorder
+from nsdrake.driver.faults import (
+    clock_problem,
+    elapsed_periods,
+    jump_problem,
+    slow_stream_problem,
+    start_problem,
+)
+from nsdrake.driver.panda import ENVELOPE_CENTRE, ENVELOPE_HALF_WIDTH, NUM_JOINTS, limit_problem
+from nsdrake.driver.stop import StopRequest
 from nsdrake.driver.timing import TickTimes
+from nsdrake.driver.wire import CommandBuffer, ForceTorqueBuffer, StatusBuffer
+
+SUCCESS_RATE_WINDOW = 100  # libfranka's control_command_success_rate is over its last 100 cycles
+ROBOT_MODE_MOVE = 2  # lcmt_panda_status.kMove: the only mode in which a Panda takes torque commands
+ROBOT_MODES = {0: "kOther", 1: "kIdle", 2: "kMove", 3: "kGuiding", 4: "kReflex", 5: "kUserStopped",
+               6: "kAutomaticErrorRecovery"}  # fmt: skip
 
 
 class DriveFaultError(RuntimeError):
@@ -46,123 +62,200 @@ class DriveFaultError(RuntimeError):
         super().__init__(f"{where}: {problem}; stopped commanding after {commands} command(s)")
 
 
-def warm_up(drive: DriveDiagram) -> None:
-    """Evaluates every output of the controller once at the scenario's start pose, in a
-    context of its own: the first evaluation in a process loads the compiled kernels from
-    numba's cache (about 0.1 s for the Panda's), which must not happen inside the first
-    tick, where the driver's command deadline runs."""
-    controller = drive.controller
-    context = controller.CreateDefaultContext()
-    station = drive.station
-    for i in range(controller.num_input_ports()):
-        controller.get_input_port(i).FixValue(context, np.zeros(controller.get_input_port(i).size()))
-    controller.GetInputPort("estimated_state").FixValue(context, np.concatenate([station.q0, station.v0]))
-    if controller.HasInputPort("desired_orientation"):
-        controller.GetInputPort("desired_orientation").FixValue(context, np.array([1.0, 0.0, 0.0, 0.0]))
-    for i in range(controller.num_output_ports()):
-        controller.get_output_port(i).Eval(context)
+class DriveInterruptedError(DriveFaultError):
+    """Ctrl-C stopped the controller (:mod:`nsdrake.driver.stop`): nothing was sent after it."""
+
+    def __init__(self, t: float | None, commands: int):
+        super().__init__(t, "interrupted (Ctrl-C)", commands)
+
+
+def warm_up(side: ControllerSide) -> None:
+    """One tick at the scenario's start pose, then the controller side reset: the first
+    call in a process loads the compiled kernels from numba's cache (about 0.1 s for the
+    Panda's), which must not happen inside the first tick, where the driver's command
+    deadline runs. A side that has run before is reset first (its step refuses a time
+    before its previous call's)."""
+    station = side.station
+    side.reset()
+    side.tick(0.0, station.q0, station.v0, np.zeros(6))
+    side.estimated_wrench(station.q0, np.zeros(NUM_JOINTS))
+    side.reset()
 
 
 class ControllerLoop:
-    """Runs a :class:`nsdrake.driver.controller_side.DriveDiagram` on ``lcm`` (module docstring).
+    """Runs a :class:`nsdrake.driver.controller_side.ControllerSide` on ``bus`` (module
+    docstring).
 
-    ``start()`` waits for the first status and answers it; each ``tick()`` answers the
-    next; ``run(duration)`` does both until the controller's clock reaches ``duration``.
-    ``times`` holds each tick's compute time from the status's arrival to the command's
-    publish [s], wall clock and the thread's CPU time; ``commands`` counts the commands sent.
+    ``start()`` waits for the first status that arrives after it was called and answers
+    it; each ``tick()`` answers the newest status since; ``run(duration)`` does both until
+    the controller's clock reaches ``duration``. ``times`` holds each tick's time from the
+    status's arrival to the command's publish [s], wall clock and the thread's CPU time;
+    ``commands`` counts the commands sent, ``skipped`` the statuses superseded by a newer
+    one before the controller could act on them. ``clock`` is the clock [s] the timing
+    rules (silence, a status's age) are measured on: the wall clock against a robot; the
+    simulated driver's time in lockstep, where the robot waits for the controller; a
+    test's own, with a bus that advances it. The ticks' own times are always the wall
+    clock's.
     """
 
-    def __init__(self, drive: DriveDiagram, lcm: DrakeLcmInterface, *, capacity: int = 0):
-        self.drive = drive
-        self.lcm = lcm
-        scenario = drive.scenario
-        self.config = scenario.driver
+    def __init__(self, side: ControllerSide, bus: Bus, *, capacity: int = 0, clock=time.perf_counter):
+        self.side = self.drive = side
+        self.bus = bus
+        scenario = side.scenario
+        self.config = c = scenario.driver
         self.period = scenario.control_period
-        self.simulator = Simulator(drive.diagram)
-        self.context = self.simulator.get_mutable_context()
+        self.period_us = round(self.period * 1e6)
+        self.bound = c.status_timeout_periods * self.period  # [s] the silence bound
         self.commands = 0
-        self.periods = 0  # control periods since the first status: the clock is periods × T, never a sum
-        self.skipped = 0  # statuses that arrived while the controller was busy, superseded by a newer one
-        self.times = TickTimes(capacity or int(round(scenario.duration / self.period)) + 2)
-        self._names = drive.station.arm_model.joint_names
-        self._inbox: list[tuple[float, float, bytes]] = []  # (arrival, CPU clock, message) since last tick
-        self._arrival_cpu = 0.0  # the thread's CPU clock when the status being answered arrived
-        self._force_torque_messages = 0
-        self._statuses_since_force_torque = 0
-        self._last: lcmt_panda_status | None = None
-        self._last_arrival = 0.0
-        self._subscriptions = [lcm.Subscribe(self.config.status_channel, self._on_status)]
-        if drive.force_torque_subscriber is not None:
-            self._subscriptions.append(lcm.Subscribe(self.config.force_torque_channel, self._on_force_torque))
-        self._absorb = [
-            (system, system.GetMyMutableContextFromRoot(self.context))
-            for system in (drive.status_subscriber, drive.force_torque_subscriber)
-            if system is not None
-        ]
-        self._publisher_context = drive.command_publisher.GetMyContextFromRoot(self.context)
-        warm_up(drive)
+        self.periods = 0  # control periods since the first status, on the robot's clock
+        self.skipped = 0
+        capacity = capacity or int(round(scenario.duration / self.period)) + 2
+        self.times = TickTimes(capacity)
+        self.recorder = Recorder(side, capacity)
+        self.stop = StopRequest()  # Ctrl-C's flag, read at each status (Drive.run sets it)
+        self.clock_name = "utime"
+        # the lowest control_command_success_rate the robot reported once the drive had sent
+        # SUCCESS_RATE_WINDOW commands (drake-franka-driver sends
+        # libfranka's: the fraction of its last 100 cycles that received a command in time)
+        self.success_rate_min = float("nan")
+        self._clock = clock
+        self._names = side.station.arm_model.joint_names
+        self._inbox: list[
+            tuple[float, float, float, bytes]
+        ] = []  # (arrival, wall, CPU, bytes) since last tick
+        self._force_torque: tuple[float, bytes] | None = None  # the newest, not yet loaded
+        self._force_torque_arrival = -np.inf
+        self._status, self._wrench_message, self._command = (
+            StatusBuffer(),
+            ForceTorqueBuffer(),
+            CommandBuffer(),
+        )
+        self._measured = np.zeros((3, NUM_JOINTS))
+        self._q, self._v, self._tau_ext = self._measured
+        self._q_last = np.zeros(NUM_JOINTS)
+        self._deviation = np.zeros((2, NUM_JOINTS))
 
-    @property
-    def time(self) -> float:
-        return self.context.get_time()
+        self._wrench = np.zeros(6)
+        self._anchor = self._last_clock = 0
+        self._long_gaps = 0  # statuses in a row two periods or more after the previous
+        self._last_arrival = 0.0
+        self.time = 0.0
+        self.started = self._ready = False
+        bus.subscribe(c.status_channel, self._on_status)
+        if side.sensor:
+            bus.subscribe(c.force_torque_channel, self._on_force_torque)
+        warm_up(side)
 
     def _on_status(self, data: bytes) -> None:
-        self._inbox.append((time.perf_counter(), time.thread_time(), data))
+        self._inbox.append((self._clock(), time.perf_counter(), time.thread_time(), data))
 
     def _on_force_torque(self, data: bytes) -> None:
-        self._force_torque_messages += 1
+        self._force_torque = (self._clock(), data)
 
-    def _fault(self, problem: str, started: bool = True) -> DriveFaultError:
-        return DriveFaultError(self.time if started else None, problem, self.commands)
+    def _fault(self, problem: str) -> DriveFaultError:
+        return DriveFaultError(self.time if self.started else None, problem, self.commands)
+
+    def _check_stop(self) -> None:
+        if self.stop.requested:
+            raise DriveInterruptedError(self.time if self.started else None, self.commands)
+
+    def ready(self) -> None:
+        """The controller is ready: what arrived before now is discarded (a status queued
+        during the warm-up or the folder's claim is stale), and ``start()`` waits for a
+        status that arrives after this call."""
+        self.bus.handle(0)
+        self._inbox.clear()
+        self._force_torque = None
+        self._ready = True
 
     def start(self) -> None:
-        """Waits (up to ``driver.first_status_timeout``) for the first status, checks it
-        against the scenario's start pose, and answers it. DriveFaultError otherwise."""
+        """``ready()`` (unless called already), then waits (up to
+        ``driver.first_status_timeout``) for a status (and, with the sensor, a force-torque
+        message), checks it against the scenario's start pose and answers it."""
         c = self.config
-        deadline = time.perf_counter() + c.first_status_timeout
-        while not self._inbox or (self._needs_force_torque() and time.perf_counter() < deadline):
-            remaining = deadline - time.perf_counter()
+        if not self._ready:
+            self.ready()
+        deadline = self._clock() + c.first_status_timeout
+        while not self._inbox or (self.side.sensor and self._force_torque is None):
+            self._check_stop()
+            remaining = deadline - self._clock()
             if remaining <= 0:
-                raise self._fault(self._silence_at_start(), started=False)
-            self.lcm.HandleSubscriptions(max(1, min(100, int(remaining * 1e3))))
-        arrival, status = self._newest_status()
-        problem = status_problem(status, NUM_JOINTS)
-        q = np.asarray(status.joint_position)
-        problem = problem or start_problem(q, self.drive.station.q0, c.start_tolerance, self._names)
+                raise self._fault(self._silence_at_start())
+            self.bus.handle(max(1, min(100, int(remaining * 1e3))))
+        self._check_stop()
+        arrival, wall, cpu, data = self._inbox[-1]
+        self.skipped += len(self._inbox) - 1
+        self._inbox.clear()
+        self._load(data, "first status refused: ")
+        clock = self._status.robot_utime(data)
+        self.clock_name = "robot_utime" if clock else "utime"
+        self._anchor = self._last_clock = clock or self._status.utime(data)
+        problem = start_problem(self._q, self.side.station.q0, c.start_tolerance, self._names)
         if problem:
-            raise self._fault(f"first status refused: {problem}", started=False)
-        if self._needs_force_torque():
-            raise self._fault(self._silence_at_start(), started=False)
-        self._absorb_messages()
-        hold, hold_context = self.drive.hold, self.drive.hold.GetMyMutableContextFromRoot(self.context)
-        hold.set_held(hold_context, hold.get_input_port().Eval(hold_context))
-        self.simulator.Initialize()
-        self._last, self._last_arrival = status, arrival
-        self._command(arrival)
+            raise self._fault(f"first status refused: {problem}")
+        self._answer(data, arrival, wall, cpu)
+        self.started = True
 
     def tick(self) -> None:
-        """Waits (up to ``driver.status_timeout_periods``) for the next status and answers
-        it. DriveFaultError for a silence, a refused status or a silent force-torque sensor."""
-        if not self._inbox:
-            self.lcm.HandleSubscriptions(0)
-        deadline = self._last_arrival + self.config.status_timeout_periods * self.period
+        """Waits for the next status and answers the newest (module docstring)."""
+        deadline = self._last_arrival + self.bound
+        self.bus.handle(0)
         while not self._inbox:
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0:
+            self._check_stop()
+            remaining = deadline - self._clock()
+            if remaining < 0:
                 raise self._fault(
                     f"no lcmt_panda_status on {self.config.status_channel} for "
-                    f"{(time.perf_counter() - self._last_arrival) * 1e3:.1f} ms "
+                    f"{(self._clock() - self._last_arrival) * 1e3:.1f} ms "
                     f"(driver.status_timeout_periods {self.config.status_timeout_periods:g} periods)"
                 )
-            self.lcm.HandleSubscriptions(1 if remaining > 1e-3 else 0)
-        self.lcm.HandleSubscriptions(0)  # the force-torque message of the same instant, if queued
-        arrival, status = self._newest_status()
-        steps = self._check(status)
-        self._absorb_messages()
-        self.periods += steps
-        self.simulator.AdvanceTo(self.periods * self.period)
-        self._last, self._last_arrival = status, arrival
-        self._command(arrival)
+            self.bus.handle(1 if remaining > 1e-3 else 0)
+            self.bus.handle(0)  # the force-torque message of the same instant, and any newer status
+        self._check_stop()
+        inbox = self._inbox
+        for _, _, _, data in inbox:  # every status received, in order: their clocks, whatever the inbox holds
+            problem = self._status.problem(data)
+            if problem:
+                raise self._fault(f"status refused: {problem}")
+            clock = (
+                self._status.robot_utime(data)
+                if self.clock_name == "robot_utime"
+                else self._status.utime(data)
+            )
+            problem = clock_problem(
+                clock,
+                self._last_clock,
+                self._anchor,
+                self.period_us,
+                self.config.status_timeout_periods,
+                self.clock_name,
+            )
+            if problem:
+                raise self._fault(f"status refused: {problem}")
+            gap_periods = elapsed_periods(clock, self._anchor, self.period_us) - elapsed_periods(
+                self._last_clock, self._anchor, self.period_us
+            )
+            self._long_gaps = self._long_gaps + 1 if gap_periods >= 2 else 0
+            problem = slow_stream_problem(
+                self._long_gaps, clock - self._last_clock, self.period_us, self.clock_name
+            )
+            if problem:
+                raise self._fault(f"status refused: {problem}")
+            self._last_clock = clock
+        arrival, wall, cpu, data = inbox[-1]
+        self.skipped += len(inbox) - 1
+        inbox.clear()
+        periods = elapsed_periods(self._last_clock, self._anchor, self.period_us)
+        self._q_last[:] = self._q
+        self._load(data, "status refused: ", checked=True)  # decodable: checked with its clock above
+        problem = jump_problem(
+            self._q, self._q_last, self.config.max_joint_step, periods - self.periods, self._names
+        )
+        if problem:
+            raise self._fault(f"status refused: {problem}")
+        self.periods = periods
+        self.time = periods * self.period
+        self._answer(data, arrival, wall, cpu)
 
     def run(self, duration: float, progress=None) -> None:
         """start(), then tick() until the controller's clock reaches ``duration`` [s]."""
@@ -172,43 +265,88 @@ class ControllerLoop:
             if progress is not None and self.commands % 1000 == 0:
                 progress(min(1.0, self.time / duration))
 
-    def _check(self, status: lcmt_panda_status) -> int:
-        """The periods since the last status, or DriveFaultError for a status to refuse."""
-        problem = status_problem(status, NUM_JOINTS)
+    def _load(self, data: bytes, refused: str, checked: bool = False) -> None:
+        """The status's q, q̇, τ_ext into the loop's arrays, checked: decodable, finite,
+        within the Panda's limits."""
+        status = self._status
+        problem = None if checked else status.problem(data)
         if problem:
-            raise self._fault(f"status refused: {problem}")
-        steps = clock_steps(status.utime, self._last.utime, self.period)
-        if steps is None:
-            raise self._fault(
-                f"status refused: its utime {status.utime} µs did not advance from {self._last.utime} µs"
-            )
-        problem = jump_problem(
-            status.joint_position, self._last.joint_position, self.config.max_joint_step, steps, self._names
-        )
-        if problem:
-            raise self._fault(f"status refused: {problem}")
-        if self.drive.force_torque_subscriber is not None:
-            if self._force_torque_messages:
-                self._statuses_since_force_torque = 0
-            else:
-                self._statuses_since_force_torque += steps
-            if self._statuses_since_force_torque > self.config.status_timeout_periods:
+            raise self._fault(refused + problem)
+        status.load(data)
+        measured = self._measured  # rows q, q̇, τ_ext: one finiteness test, one limit test
+        measured[0], measured[1], measured[2] = status.q, status.v, status.tau_ext
+        if not np.isfinite(measured.sum()):
+            names = ("joint_position", "joint_velocity", "joint_torque_external")
+            for name, values in zip(names, measured, strict=True):
+                bad = np.flatnonzero(~np.isfinite(values))
+                if bad.size:
+                    raise self._fault(f"{refused}{name}[{bad[0]}] is {float(values[bad[0]])!r}")
+        deviation = self._deviation  # |[q; q̇] − centre| ≤ half-width: within the limits, in 3 operations
+        np.subtract(measured[:2], ENVELOPE_CENTRE, out=deviation)
+        np.abs(deviation, out=deviation)
+        if not (deviation <= ENVELOPE_HALF_WIDTH).all():
+            problem = limit_problem(self._q, self._v, self._names)
+            if problem:
+                raise self._fault(refused + problem)
+        if status.robot_utime(data):  # a driver that reports the robot's own state (drake-franka-driver)
+            mode = status.robot_mode
+            if mode != ROBOT_MODE_MOVE:
+                name = ROBOT_MODES.get(mode, "unknown")
                 raise self._fault(
-                    f"no lcmt_force_torque on {self.config.force_torque_channel} for "
-                    f"{self._statuses_since_force_torque} periods (driver.status_timeout_periods "
-                    f"{self.config.status_timeout_periods:g})"
+                    f"{refused}the robot is in mode {name} ({mode}), not kMove ({ROBOT_MODE_MOVE}): "
+                    "it applies no torque command"
                 )
-        return steps
+            if self.commands >= SUCCESS_RATE_WINDOW:  # before, the rate counts cycles before the drive
+                rate = status.success_rate
+                self.success_rate_min = rate if not rate >= self.success_rate_min else self.success_rate_min
 
-    def _newest_status(self) -> tuple[float, lcmt_panda_status]:
-        """The newest status received (older ones counted as skipped) and its arrival time."""
-        arrival, self._arrival_cpu, data = self._inbox[-1]
-        self.skipped += len(self._inbox) - 1
-        self._inbox.clear()
-        return arrival, lcmt_panda_status.decode(data)
+    def _measured_wrench(self, arrival: float) -> np.ndarray:
+        """The wrench for the status that arrived at ``arrival``: estimated, or the newest
+        force-torque message, which must have arrived within the silence bound before the
+        status (both stamped as the loop drains the bus: a tick preempted after the drain
+        is not the sensor's silence)."""
+        side = self.side
+        if not side.sensor:
+            return side.estimated_wrench(self._q, self._tau_ext)
+        if self._force_torque is not None:
+            self._force_torque_arrival, data = self._force_torque
+            self._force_torque = None
+            problem = self._wrench_message.problem(data)
+            if problem:
+                raise self._fault(
+                    f"force-torque message refused on {self.config.force_torque_channel}: {problem}"
+                )
+            self._wrench_message.load(data)
+        silent = arrival - self._force_torque_arrival
+        if silent > self.bound:
+            raise self._fault(
+                f"no lcmt_force_torque on {self.config.force_torque_channel} for {silent * 1e3:.1f} ms "
+                f"(driver.status_timeout_periods {self.config.status_timeout_periods:g} periods)"
+            )
+        return self._wrench_message.wrench
 
-    def _needs_force_torque(self) -> bool:
-        return self.drive.force_torque_subscriber is not None and self._force_torque_messages == 0
+    def _answer(self, data: bytes, arrival: float, wall: float, cpu: float) -> None:
+        """The controller side's tick for the loaded status, its command sent and recorded."""
+        wrench = self._measured_wrench(arrival)
+        np.copyto(self._wrench, wrench)
+        side = self.side
+        desired, result = side.tick(self.time, self._q, self._v, self._wrench)
+        self.bus.publish(
+            self.config.command_channel, self._command.set(self._status.utime(data), side.command)
+        )
+        self.commands += 1
+        self._last_arrival = arrival
+        self.times.record(time.perf_counter() - wall, time.thread_time() - cpu)
+        self.recorder.record(
+            self.time,
+            self._q,
+            self._v,
+            self._wrench,
+            desired,
+            result,
+            side.command,
+            side.reference.in_contact,
+        )
 
     def _silence_at_start(self) -> str:
         c = self.config
@@ -219,16 +357,6 @@ class ControllerLoop:
             )
         return (
             f"no lcmt_force_torque on {c.force_torque_channel} within {c.first_status_timeout:g} s "
-            "(driver.force_source: sensor); nothing was sent"
+            f"although {len(self._inbox)} lcmt_panda_status arrived (driver.force_source: sensor; "
+            "drake-franka-driver publishes none: use driver.force_source: external_torque); nothing was sent"
         )
-
-    def _absorb_messages(self) -> None:
-        """The latest status and force-torque message into their subscribers' state."""
-        for system, context in self._absorb:
-            system.ExecuteForcedEvents(context, True)
-        self._force_torque_messages = 0
-
-    def _command(self, arrival: float) -> None:
-        self.drive.command_publisher.ForcedPublish(self._publisher_context)
-        self.commands += 1
-        self.times.record(time.perf_counter() - arrival, time.thread_time() - self._arrival_cpu)

@@ -47,3 +47,47 @@ def panda_actuator_limits(limits: ActuatorLimitsConfig, joint_names: tuple[str, 
                     f"published limit {published:g} {unit} for joint {k + 1}"
                 )
     return dataclasses.replace(limits, torque=torque, torque_rate=rate)
+
+
+# Franka's published joint limits (FCI documentation, "Limits for Panda"), joints 1–7.
+POSITION_LOWER = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])  # [rad]
+POSITION_UPPER = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])  # [rad]
+VELOCITY_LIMIT = np.array([2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100])  # [rad/s]
+# How far a status may report a joint beyond them before the controller stops: the robot
+# itself stops with a reflex at the limits, so a reading beyond them by more than its
+# sensing noise (≈ 1e-4 rad, 1e-2 rad/s) is a robot out of its envelope or a broken
+# stream: 0.01 rad of position, 5% of the velocity limit.
+POSITION_MARGIN = 0.01  # [rad]
+VELOCITY_MARGIN = 0.05  # [-] of VELOCITY_LIMIT
+
+
+_LOWER, _UPPER = POSITION_LOWER - POSITION_MARGIN, POSITION_UPPER + POSITION_MARGIN
+# The same limits as a box around a centre, rows q and q̇: |[q; q̇] − centre| ≤ half-width
+ENVELOPE_CENTRE = np.array([(_LOWER + _UPPER) / 2, np.zeros(7)])
+ENVELOPE_HALF_WIDTH = np.array([(_UPPER - _LOWER) / 2, VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN)])
+_FAST = VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN)
+
+
+def limit_problem(q: np.ndarray, v: np.ndarray, joint_names) -> str | None:
+    """A joint position or velocity beyond the Panda's published limits by more than the
+    margins above (the worst joint named), else None."""
+    if (
+        (q >= _LOWER).all() and (q <= _UPPER).all() and (v <= _FAST).all() and (v >= -_FAST).all()
+    ):  # the usual case, in four array comparisons (this runs inside every tick)
+        return None
+    below = POSITION_LOWER - POSITION_MARGIN - q
+    above = q - POSITION_UPPER - POSITION_MARGIN
+    fast = np.abs(v) - VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN)
+    for excess, kind in ((below, "below"), (above, "above")):
+        k = int(np.argmax(excess))
+        if excess[k] > 0.0:
+            limit = POSITION_LOWER[k] if kind == "below" else POSITION_UPPER[k]
+            return (
+                f"{joint_names[k]} is at {q[k]:.4f} rad, {kind} the Panda's limit {limit:g} rad "
+                f"by more than {POSITION_MARGIN:g} rad"
+            )
+    k = int(np.argmax(fast))
+    return (
+        f"{joint_names[k]} moves at {v[k]:.4g} rad/s, beyond the Panda's limit {VELOCITY_LIMIT[k]:g} rad/s "
+        f"by more than {VELOCITY_MARGIN:.0%}"
+    )

@@ -1,35 +1,36 @@
 """Running ``nsdrake drive`` and ``nsdrake sim-driver``, and writing a drive's run folder.
 
-- :func:`run_simulated`: both sides in one process over ``memq://``, in lockstep: the
+- :func:`prepare` and :meth:`Drive.run`: the controller side alone on a bus (a real
+  Panda's driver, or ``nsdrake sim-driver`` in a second process), or with the simulated
+  driver in one process over ``memq://`` (:func:`run_simulated`), in lockstep: the
   simulated driver publishes a status, the controller answers it, the driver steps.
-- :func:`run_on_bus`: the controller side alone on a bus (a real Panda's driver, or
-  ``nsdrake sim-driver`` in a second process).
-- :func:`serve_simulated_driver`: the simulated driver alone on a bus, paced at real time.
+- ``nsdrake sim-driver``: the simulated driver alone on a bus, free-running
+  (:mod:`nsdrake.driver.serve`).
 - :func:`write_drive_folder`: the run folder as ``nsdrake run`` writes it (traces, metrics
-  with their bounds, plots, report, the controller side's diagram) plus ``timing.json``.
+  with their bounds, plots, report) plus ``timing.json``.
 """
 
 from __future__ import annotations
 
-import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
-from drake import lcmt_panda_command
-from pydrake.lcm import DrakeLcm, DrakeLcmInterface
+from pydrake.lcm import DrakeLcm
 
-from nsdrake.driver.controller_side import build_drive_diagram
-from nsdrake.driver.loop import ControllerLoop, DriveFaultError
+from nsdrake.driver.bus import Bus, DrakeBus
+from nsdrake.driver.controller_side import _Log, build_controller_side
+from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
 from nsdrake.driver.simulated_driver import SimulatedDriver
+from nsdrake.driver.stop import ctrl_c_requests
 from nsdrake.driver.timing import GcPauses, collector_paused, timing_line, timing_summary, write_timing
 from nsdrake.experiment.output import declare, record_written
 from nsdrake.experiment.scenario import Scenario
 from nsdrake.experiment.simulate import collect_traces
 from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.metrics import contact_events, write_metrics
-from nsdrake.reporting.replay import write_diagram_picture
 from nsdrake.reporting.report import write_report
 from nsdrake.reporting.run_folder import RunResult, compute_metrics, contact_note, scenario_yaml, write_plots
 
@@ -43,6 +44,7 @@ class DriveRun:
     timing: dict
     failure: str | None = None  # the DriveFaultError's line
     notes: list[str] = field(default_factory=list)
+    interrupted: bool = False  # Ctrl-C stopped it (failure says when)
 
     @property
     def scenario(self) -> Scenario:
@@ -58,24 +60,28 @@ class Drive:
         self.loop, self.driver = loop, driver
 
     def run(self, *, pause_gc: bool = True, progress=None) -> DriveRun:
-        """Runs to the scenario's duration or the first fault. ``pause_gc``: the garbage
-        collector off during the loop (:func:`nsdrake.driver.timing.collector_paused`)."""
+        """Runs to the scenario's duration, the first fault or Ctrl-C (which stops it at the
+        next status, :mod:`nsdrake.driver.stop`). ``pause_gc``: the garbage collector off
+        during the loop (:func:`nsdrake.driver.timing.collector_paused`)."""
         loop, driver = self.loop, self.driver
         duration = loop.drive.scenario.duration
-        failure, pauses = None, GcPauses()
-        with collector_paused(pause_gc), pauses.watching():
+        failure, interrupted, pauses = None, False, GcPauses()
+        with collector_paused(pause_gc), pauses.watching(), ctrl_c_requests() as stop:
+            loop.stop = stop
             try:
                 if driver is None:
                     loop.run(duration, progress=progress)
                 else:
                     _lockstep(loop, driver, duration, progress)
             except DriveFaultError as e:
-                failure = str(e)
-        return DriveRun(loop=loop, driver=driver, timing=_timing(loop, pauses, pause_gc), failure=failure)
+                failure, interrupted = str(e), isinstance(e, DriveInterruptedError)
+        timing = _timing(loop, pauses, pause_gc)
+        return DriveRun(loop=loop, driver=driver, timing=timing, failure=failure, interrupted=interrupted)
 
 
 def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, progress) -> None:
     """Status, command, step: the driver publishes, the controller answers, the driver steps."""
+    loop.ready()
     driver.start()
     loop.start()
     while loop.time < duration - 0.5 * loop.period:
@@ -87,21 +93,21 @@ def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, pr
 
 def prepare(
     scenario: Scenario,
-    lcm: DrakeLcmInterface | None = None,
+    bus: Bus | None = None,
     *,
     realtime_rate: float = 1.0,
     robot_adds_gravity: bool = True,
 ) -> Drive:
-    """The controller side on ``lcm``; without one, the controller side and the simulated
+    """The controller side on ``bus``; without one, the controller side and the simulated
     driver in this process over ``memq://``, the driver paced at ``realtime_rate`` (1: the
     robot's real time; 0: as fast as possible) and adding g to the command when
     ``robot_adds_gravity`` (the controller side follows ``scenario.driver.robot_adds_gravity``)."""
-    driver = None
-    simulated = lcm is None
-    lcm = DrakeLcm("memq://") if simulated else lcm
-    loop = ControllerLoop(build_drive_diagram(scenario, lcm), lcm)  # the scenario's problems first
-    if simulated:
-        driver = SimulatedDriver(scenario, lcm, adds_gravity=robot_adds_gravity, realtime_rate=realtime_rate)
+    side = build_controller_side(scenario)  # the scenario's problems first
+    if bus is not None:
+        return Drive(ControllerLoop(side, bus), None)
+    lcm = DrakeLcm("memq://")
+    driver = SimulatedDriver(scenario, lcm, adds_gravity=robot_adds_gravity, realtime_rate=realtime_rate)
+    loop = ControllerLoop(side, DrakeBus(lcm), clock=lambda: driver.time)  # lockstep: the robot's time
     return Drive(loop, driver)
 
 
@@ -117,28 +123,20 @@ def _timing(loop: ControllerLoop, pauses: GcPauses, paused: bool) -> dict:
         loop.times.cpu_seconds,
         commands=loop.commands,
         statuses_skipped=loop.skipped,
+        periods=loop.periods,
+        clock=loop.clock_name,
+        control_command_success_rate_min=None
+        if loop.success_rate_min != loop.success_rate_min
+        else loop.success_rate_min,
         gc_disabled=paused,
         gc_collections=pauses.count,
         gc_longest_pause_us=pauses.longest * 1e6,
     )
 
 
-class _Log:
-    """A logger's record made of arrays (``sample_times()``, ``data()``)."""
-
-    def __init__(self, times: np.ndarray, data: np.ndarray):
-        self._times, self._data = times, data
-
-    def sample_times(self) -> np.ndarray:
-        return self._times
-
-    def data(self) -> np.ndarray:
-        return self._data
-
-
 def drive_traces(run: DriveRun) -> Traces:
     """The drive's traces, with the columns of ``nsdrake run``'s (docs/command_line.md) from the
-    controller side's loggers, and:
+    controller side's records, and:
 
     - with the simulated driver, ``f_x…``, ``f_n`` and ``forbidden_contacts`` from the
       simulated station (its sensor and contact monitor, the truth), and
@@ -150,8 +148,8 @@ def drive_traces(run: DriveRun) -> Traces:
       simulated driver ``tau_applied1…`` the torque its plant applied from that row's time
       to the next row's [N m] (as the realism rungs' column; NaN on the last row).
     """
-    drive = run.loop.drive
-    logs = {name: logger.FindLog(run.loop.context) for name, logger in drive.loggers.items()}
+    side = run.loop.side
+    logs = run.loop.recorder.logs()
     times = logs["state"].sample_times()
     measured = logs["wrench"].data()
     if run.driver is not None:
@@ -161,14 +159,14 @@ def drive_traces(run: DriveRun) -> Traces:
             logs[name] = _Log(times, truth[name].data()[:, rows])
     else:
         logs["forbidden_contacts"] = _Log(times, np.full((1, times.size), np.nan))
-    traces = collect_traces(drive, drive.station_diagram.CreateDefaultContext(), logs=logs)
+    traces = collect_traces(side, side.station_diagram.CreateDefaultContext(), logs=logs)
     columns = {name: traces[name] for name in traces.names}
-    arm = drive.station.arm_model
+    arm = side.station.arm_model
     if run.driver is not None:
         force = measured[3:][arm.rows]
         for axis, row in zip(arm.task_axes[: arm.m_t], force, strict=True):
             columns[f"f_{axis}_measured"] = row
-        columns["f_n_measured"] = drive.station.normal @ force
+        columns["f_n_measured"] = side.station.normal @ force
     for i, row in enumerate(logs["command"].data()):
         columns[f"cmd{i + 1}"] = row
     if run.driver is not None:  # applied over [t, t + T): the plant reports it at t + T
@@ -182,8 +180,6 @@ def drive_traces(run: DriveRun) -> Traces:
 DRIVE_FILES = (
     "scenario.yaml",
     "traces.csv",
-    "diagram.dot",
-    "diagram.svg",
     "metrics.json",
     "pose.png",
     "fig3.png",
@@ -208,13 +204,21 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     scenario = run.scenario
     declare(out, DRIVE_FILES)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
-    write_timing(out / "timing.json", run.timing | ({"failure": run.failure} if run.failure else {}))
+    status = "interrupted" if run.interrupted else "failed" if run.failure else "ok"
+    write_timing(
+        out / "timing.json", run.timing | ({"failure": run.failure, "status": status} if run.failure else {})
+    )
     if run.loop.commands == 0:
-        return RunResult(out=out, metrics=[], notes=[timing_line(run.timing)], failure=run.failure)
+        return RunResult(
+            out=out,
+            metrics=[],
+            notes=[timing_line(run.timing)],
+            failure=run.failure,
+            interrupted=run.interrupted,
+        )
     traces = drive_traces(run)
     traces.write_csv(out / "traces.csv")
     traces = Traces.read_csv(out / "traces.csv")
-    picture = write_diagram_picture(run.loop.drive.diagram, out)
     metrics = [] if run.failure else compute_metrics(scenario, run.loop.drive.station, traces, None)
     notes = [timing_line(run.timing)]
     if run.driver is None:
@@ -227,16 +231,18 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     extra = {
         "scenario": scenario.source,
         "duration": scenario.duration,
-        "status": "failed" if run.failure else "ok",
+        "status": status,
         "contact_events": [{"event": e, "t": t} for e, t in events],
         "driver": "simulated (memq://, lockstep)" if run.driver is not None else "on the bus",
+        "statuses_skipped": run.loop.skipped,
     }
     if run.failure:
         extra["failure"] = run.failure
     write_metrics(out / "metrics.json", metrics, extra)
-    plots = write_plots(scenario, run.loop.drive, traces, None, out)
+    with warnings.catch_warnings():  # a drive stopped early: the tool has not moved on the surface yet
+        warnings.filterwarnings("ignore", message="Attempting to set identical low and high [xy]lims")
+        plots = write_plots(scenario, run.loop.drive, traces, None, out)
     notes += [contact_note(events)] if any(e == "lost" for e, _ in events) else []
-    notes += [picture.note] if picture.note else []
     write_report(
         out,
         title=f"nsdrake drive {out.resolve().name}",
@@ -245,52 +251,9 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
         parameters=yaml.safe_load(scenario_yaml(scenario)),
         metrics=metrics,
         plots=plots,
-        diagram=picture,
+        diagram=None,
         replay=None,
         notes=notes,
         failure=run.failure,
     )
-    return RunResult(out=out, metrics=metrics, notes=notes, failure=run.failure)
-
-
-@dataclass
-class ServeResult:
-    steps: int  # periods simulated
-    commands: int  # commands received
-    late: int  # periods whose answering command had not arrived by the period's end
-
-
-def serve_simulated_driver(
-    scenario: Scenario, lcm: DrakeLcmInterface, *, duration: float | None = None, progress=None
-) -> ServeResult:
-    """The simulated driver alone on ``lcm``, paced at real time, for ``duration`` [s]
-    (default the scenario's) after the first command arrives; before it the robot holds
-    still (a zero command: gravity alone, compensated). Each period it waits, up to the
-    period's end, for the command that answers its last status (the same ``utime``) and
-    then steps with the latest command received (a late one counts in ``late``)."""
-    driver = SimulatedDriver(scenario, lcm, realtime_rate=0.0)
-    answered = {"utime": -1, "count": 0}
-
-    def on_command(data: bytes):
-        answered["utime"] = lcmt_panda_command.decode(data).utime
-        answered["count"] += 1
-
-    subscription = lcm.Subscribe(scenario.driver.command_channel, on_command)  # noqa: F841 (kept alive)
-    duration = scenario.duration if duration is None else duration
-    period = driver.period
-    driver.start()
-    start, late, first = time.perf_counter(), 0, None
-    while first is None or driver.time < first + duration - 0.5 * period:
-        utime = round(driver.time * 1e6)
-        deadline = start + (driver.steps + 1) * period
-        while answered["utime"] != utime and time.perf_counter() < deadline:
-            lcm.HandleSubscriptions(0)
-        if answered["utime"] != utime:
-            late += answered["count"] > 0
-        elif first is None:
-            first = driver.time
-        time.sleep(max(0.0, deadline - time.perf_counter()))
-        driver.step()
-        if progress is not None and first is not None and driver.steps % 1000 == 0:
-            progress((driver.time - first) / duration)
-    return ServeResult(steps=driver.steps, commands=answered["count"], late=late)
+    return RunResult(out=out, metrics=metrics, notes=notes, failure=run.failure, interrupted=run.interrupted)

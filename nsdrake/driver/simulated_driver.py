@@ -183,6 +183,21 @@ class SimulatedDriver:
         next status)."""
         self.lcm.HandleSubscriptions(0)
         self.built.command_subscriber.ExecuteForcedEvents(self._subscriber_context, True)
+        self.advance()
+
+    def apply_torque(self, torque: np.ndarray, utime: int = 0) -> None:
+        """The torque command for the next period, given directly (``nsdrake sim-driver``
+        chooses it itself: nsdrake/driver/serve.py): a command message on this driver's
+        bus, taken at once."""
+        command = lcmt_panda_command()
+        command.utime, command.control_mode_expected = utime, lcmt_panda_status.CONTROL_MODE_TORQUE
+        command.num_joint_torque, command.joint_torque = NUM_JOINTS, [float(x) for x in torque]
+        self.lcm.Publish(self.scenario.driver.command_channel, command.encode())
+        self.lcm.HandleSubscriptions(0)
+        self.built.command_subscriber.ExecuteForcedEvents(self._subscriber_context, True)
+
+    def advance(self) -> None:
+        """Advances one period (publishing the next status)."""
         self.steps += 1
         self.simulator.AdvanceTo(self.steps * self.period)
 

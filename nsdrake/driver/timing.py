@@ -66,7 +66,16 @@ def timing_line(summary: dict) -> str:
         f"p99 {summary['p99_us']:.0f} µs, p99.9 {summary['p999_us']:.0f} µs, max {summary['max_us']:.0f} µs; "
         f"{summary['over_period']} over the {summary['period_us']:.0f} µs period"
         + (f" (its CPU time: p99.9 {summary['cpu_p999_us']:.0f} µs)" if "cpu_p999_us" in summary else "")
+        + (f"; {summary['statuses_skipped']} statuses skipped" if summary.get("statuses_skipped") else "")
+        + _success_rate_note(summary.get("control_command_success_rate_min"))
     )
+
+
+def _success_rate_note(rate: float | None) -> str:
+    """The robot's lowest control_command_success_rate, when it fell below 0.95."""
+    if rate is None or rate >= 0.95:
+        return ""
+    return f"; the robot's control_command_success_rate fell to {rate:.2f}"
 
 
 def write_timing(path: Path, summary: dict) -> None:

@@ -6,7 +6,8 @@ exerts on the work piece, world axes [N m, N]; the moment is about a stated poin
 
 - **Sensor** messages carry f = (fx, fy, fz) and M = (tx, ty, tz) in that convention,
   the moment about the sensor origin (the simulated station's table sensor publishes
-  exactly what it reads); ``timestamp`` in milliseconds, as the message defines it.
+  exactly what it reads); ``timestamp`` in milliseconds, as the message defines it
+  (read in place by :class:`nsdrake.driver.wire.ForceTorqueBuffer`).
 - **External joint torques**: the status's ``joint_torque_external`` is read as
   τ_ext = Jᵀ W_T, the joint torques with which the arm holds the wrench W_T it exerts
   at the tool point T (for the simulated driver: minus the generalized contact forces
@@ -21,12 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 from drake import lcmt_force_torque
-from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.lcm import _Serializer_
-
-from nsdrake.control.model import ControllerModel
-from nsdrake.control.systems._values import declare_value_cache
 
 
 def wrench_from_external_torques(J_spatial: np.ndarray, tau_ext: np.ndarray) -> np.ndarray:
@@ -61,7 +58,8 @@ class ForceTorqueSender(LeafSystem):
 
     ``wrench`` is [M; f] (6) [N m, N]; the message carries it with the context time
     in milliseconds. The message is Drake's C++ type (an ``LcmPublisherSystem`` made with
-    ``use_cpp_serializer=True`` takes it), as :class:`ForceTorqueReceiver` says why.
+    ``use_cpp_serializer=True`` takes it): a Python message held in a system's state is
+    deep-copied by Python's ``copy`` each time Drake copies that state.
     """
 
     def __init__(self):
@@ -78,85 +76,3 @@ class ForceTorqueSender(LeafSystem):
     def _calc(self, context, output):
         message = force_torque_message(self._wrench.Eval(context), context.get_time())
         self._serializer.Deserialize(message.encode(), output)
-
-
-class ForceTorqueReceiver(LeafSystem):
-    """The wrench of the latest lcmt_force_torque message (zero before the first).
-
-    .. pydrake_system::
-
-        name: ForceTorqueReceiver
-        input_ports:
-        - lcmt_force_torque
-        output_ports:
-        - wrench
-
-    ``wrench`` is [M; f] (6) [N m, N] as the message carries it. The message is Drake's
-    C++ type (an ``LcmSubscriberSystem`` made with ``use_cpp_serializer=True``), read here
-    through Drake's serializer (≈ 3 µs): a Python message held in a subscriber's state is
-    deep-copied by Python's ``copy`` each time Drake copies that state (≈ 12 µs a copy,
-    several a tick), a C++ one is copied in C++.
-    """
-
-    def __init__(self):
-        super().__init__()
-        self._serializer = _Serializer_[lcmt_force_torque]()
-        self._message = self.DeclareAbstractInputPort(
-            "lcmt_force_torque", self._serializer.CreateDefaultValue()
-        )
-        self.DeclareVectorOutputPort(
-            "wrench",
-            6,
-            self._calc,
-            prerequisites_of_calc={self.input_port_ticket(self._message.get_index())},
-        )
-
-    def _calc(self, context, output):
-        data = self._serializer.Serialize(self._message.EvalAbstract(context))
-        output.SetFromVector(wrench_of(lcmt_force_torque.decode(data)))
-
-
-class ExternalWrenchEstimator(LeafSystem):
-    """The contact wrench at the tool estimated from external joint torques,
-    W_T = (J Jᵀ)⁻¹ J τ_ext (:func:`wrench_from_external_torques`), J from the controller's
-    own model at the measured joint positions.
-
-    .. pydrake_system::
-
-        name: ExternalWrenchEstimator
-        input_ports:
-        - position_measured
-        - torque_external
-        output_ports:
-        - wrench
-
-    ``position_measured`` q (n) [rad] and ``torque_external`` τ_ext (n) [N m], the
-    status's; ``wrench`` is [M_T; f] (6) [N m, N], world axes, moment about the tool
-    point (build the controller with ``wrench_point=None``).
-    """
-
-    def __init__(self, *, model: ControllerModel):
-        super().__init__()
-        n = model.n
-        self._model = model
-        self._q = self.DeclareVectorInputPort("position_measured", n)
-        self._tau = self.DeclareVectorInputPort("torque_external", n)
-        self._scratch = declare_value_cache(self, "scratch model context", model.create_scratch)
-        deps = {self.input_port_ticket(p.get_index()) for p in (self._q, self._tau)}
-        self.DeclareVectorOutputPort("wrench", 6, self._calc, prerequisites_of_calc=deps)
-
-    def _calc(self, context, output):
-        model = self._model
-        plant_context = model.plant_context(
-            self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
-        )
-        model.plant.SetPositions(plant_context, self._q.Eval(context))
-        J = model.plant.CalcJacobianSpatialVelocity(
-            plant_context,
-            JacobianWrtVariable.kV,
-            model.arm.tool_frame,
-            np.zeros(3),
-            model.plant.world_frame(),
-            model.plant.world_frame(),
-        )
-        output.SetFromVector(wrench_from_external_torques(J, self._tau.Eval(context)))

@@ -189,12 +189,11 @@ def sampled_reach(arm: ArmModel, samples: int) -> tuple[np.ndarray, float]:
     return centre, farthest
 
 
-def add_reference(
-    builder: DiagramBuilder, scenario: Scenario, station: Station, wrench: OutputPort | None = None
-) -> SurfaceReference:
-    """The task reference the scenario's ``reference.path`` names, fed by the station's
-    measured wrench (or by ``wrench``: the controller side of ``nsdrake drive`` feeds it
-    the wrench it receives)."""
+def surface_path(scenario: Scenario, station: Station):
+    """The scenario's task path (a :class:`CircleOnSurface` or a :class:`SlideAndPress`)
+    and the contact detection's settings (task_rows, contact_threshold, period,
+    loss_time): what :class:`SurfaceReference` and the drive's plain reference
+    (:class:`nsdrake.experiment.reference.PlainSurfaceReference`) are built from."""
     r = scenario.reference
     common = {
         "task_rows": station.arm_model.rows,
@@ -235,6 +234,15 @@ def add_reference(
             centre=centre,
             reach=(1.0 - r.reach_margin) * reach,
         )
+    return path, common
+
+
+def add_reference(
+    builder: DiagramBuilder, scenario: Scenario, station: Station, wrench: OutputPort | None = None
+) -> SurfaceReference:
+    """The task reference the scenario's ``reference.path`` names, fed by the station's
+    measured wrench (or by ``wrench``)."""
+    path, common = surface_path(scenario, station)
     reference = builder.AddNamedSystem("reference", SurfaceReference(reference=path, **common))
     builder.Connect(wrench or station.ports.wrench, reference.GetInputPort("measured_wrench"))
     return reference

@@ -69,6 +69,11 @@ def driver_problems(driver: DriverConfig):
         number = isinstance(value, (int, float)) and not isinstance(value, bool)
         if not number or not math.isfinite(value) or value <= 0:
             yield name, f"must be a finite number > 0, got {value!r}"
+    if isinstance(driver.first_status_timeout, (int, float)) and driver.first_status_timeout > 600:
+        yield (
+            "first_status_timeout",
+            f"must be at most 600 s (a drive that waits longer hangs), got {driver.first_status_timeout!r}",
+        )
     if isinstance(driver.status_timeout_periods, (int, float)) and 0 < driver.status_timeout_periods < 1:
         yield (
             "status_timeout_periods",

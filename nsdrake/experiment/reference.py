@@ -391,3 +391,52 @@ class CircleOnSurface:
             xddot_d + sdd * du - (sd * sd / self.radius) * u,
             f_d,
         )
+
+
+class PlainSurfaceReference:
+    """:class:`nsdrake.experiment.reference_system.SurfaceReferenceSystem` as plain calls,
+    for a loop outside a Simulator (``nsdrake drive``): the same path and the same contact
+    detection (:func:`update_contact`), in the same order as Drake runs them.
+
+    Once per tick, with the time t_k of the tick and the wrench W_k measured at t_k:
+    :meth:`tick` first updates the contact state as the system's periodic update at the
+    previous tick's time t_j does (Drake runs it when it advances from t_j: it sees the
+    measurement of t_k, and the normal offset of x_d(t_j)), then returns (x_d, ẋ_d, ẍ_d,
+    f_d) at t_k. A tick that follows a skipped period (t_k − t_j of two periods or more)
+    updates once, at t_j: a missed period is not replayed. The first tick only evaluates.
+    """
+
+    def __init__(
+        self,
+        *,
+        reference: SlideAndPress | CircleOnSurface,
+        task_rows: np.ndarray,
+        contact_threshold: float,
+        period: float,
+        loss_time: float = 0.05,
+    ):
+        self.path, self._rows = reference, np.asarray(task_rows)
+        self._threshold, self._loss_time = contact_threshold, loss_time
+        self._offset0 = float(reference.x0 @ reference.normal)
+        self.reset()
+
+    def reset(self) -> None:
+        self.state, self.first = ContactState(), math.inf
+        self._t_previous, self._r_previous = None, 0.0
+
+    def tick(self, t: float, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(x_d, ẋ_d, ẍ_d, f_d) at ``t`` [s] after the contact update with ``wrench`` [M; f]
+        (6) [N m, N] (class docstring)."""
+        if self._t_previous is not None:
+            f_n = float(self.path.normal @ wrench[3:][self._rows])
+            new = update_contact(
+                self.state, self._t_previous, f_n, self._threshold, self._loss_time, self._r_previous
+            )
+            self.state, self.first = new, min(self.first, new.t_contact)
+        out = self.path.at(t, state=self.state, t_first=self.first)
+        self._t_previous, self._r_previous = t, float(out[0] @ self.path.normal) - self._offset0
+        return out
+
+    @property
+    def in_contact(self) -> bool:
+        return self.state.in_contact

@@ -14,7 +14,7 @@ from drake import lcmt_panda_command, lcmt_panda_status
 from pydrake.lcm import DrakeLcm
 
 from nsdrake.cli import main
-from nsdrake.driver.run import serve_simulated_driver
+from nsdrake.driver.serve import serve_simulated_driver
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.traces import Traces
 
@@ -65,7 +65,7 @@ def test_simulated_driver_writes_the_run_folder(tmp_path, capsys):
         ]
     )
     assert code == 1  # 0.05 s ends before contact: the contact figures fail honestly
-    for name in ("traces.csv", "metrics.json", "scenario.yaml", "timing.json", "report.html", "diagram.dot"):
+    for name in ("traces.csv", "metrics.json", "scenario.yaml", "timing.json", "report.html"):
         assert (out / name).is_file(), name
     traces = Traces.read_csv(out / "traces.csv")
     assert len(traces) == 51 and "cmd7" in traces and "f_n_measured" in traces
@@ -75,7 +75,7 @@ def test_simulated_driver_writes_the_run_folder(tmp_path, capsys):
     assert timing["gc_disabled"] is True
     printed = capsys.readouterr().out
     assert "nsdrake: timing: 51 ticks, status in to command out p50" in printed
-    assert "command_publisher" in (out / "diagram.dot").read_text()
+    assert timing["statuses_skipped"] == 0 and timing["periods"] == 50  # lockstep: every status answered
 
 
 @pytest.mark.parametrize(
@@ -96,6 +96,20 @@ def test_simulated_driver_writes_the_run_folder(tmp_path, capsys):
             'cannot open the LCM bus bogus://x: LCM provider "bogus"',
         ),
         (["sim-driver", "panda_wipe"], "the following arguments are required: --lcm"),
+        (["drive", "panda_wipe", "--lcm", ""], "--lcm: the URL is empty"),
+        (
+            ["drive", "panda_wipe", "--lcm", "memq://", "--realtime-rate", "0"],
+            "paces the simulated driver only",
+        ),
+        (
+            ["sim-driver", "fig3", "--lcm", "udpm://239.255.76.67:7667?ttl=0"],
+            "the Panda driver speaks 7 joints",
+        ),
+        (
+            ["sim-driver", "panda_wipe", "--lcm", "memq://"],
+            "another process cannot reach the simulated driver",
+        ),
+        (["sim-driver", "panda_wipe", "--lcm", "bogus://x", "--expire-sec", "0"], "--expire-sec must be"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
@@ -103,6 +117,22 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
     err = capsys.readouterr().err
     assert err.startswith("nsdrake: error: ") and err.count("\n") == 1 and words in err, err
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(
+    ("setting", "words"),
+    [
+        ("first_status_timeout: 1e9", "driver.first_status_timeout: must be at most 600 s"),
+        ("status_timeout_periods: 0.5", "driver.status_timeout_periods: must be >= 1"),
+    ],
+)
+def test_driver_timeouts_out_of_range_are_refused(tmp_path, capsys, setting, words):
+    """A first wait of 1e9 s (a drive that hangs for ever) and a silence bound under a period."""
+    config = tmp_path / "c.yaml"
+    config.write_text(f"driver: {{{setting}}}\n")
+    assert main(["drive", "panda_wipe", "--simulated-driver", "--config", str(config)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err, err
 
 
 def test_a_bad_driver_setting_is_refused(tmp_path, capsys):
@@ -113,23 +143,54 @@ def test_a_bad_driver_setting_is_refused(tmp_path, capsys):
     assert "driver.force_source: must be one of sensor, external_torque, got 'wrist'" in err
 
 
-def test_the_standalone_simulated_driver_pairs_commands_with_statuses():
-    """serve_simulated_driver on memq:// with a controller that answers each status at once
-    with a zero command (the robot holds still: the driver adds g): it steps once per
-    period, each step after the answer to its last status, for 0.1 s after the first."""
-    scenario = load_scenario("panda_wipe")
-    lcm = DrakeLcm("memq://")
-    statuses = []
+class AnsweringController:
+    """Answers each status on ``lcm`` at once with a zero torque command carrying its
+    utime, until ``stop_after`` statuses."""
 
-    def answer(data: bytes):
+    def __init__(self, lcm, stop_after: int = 10**9):
+        self.lcm, self.statuses, self.stop_after = lcm, [], stop_after
+        self._subscription = lcm.Subscribe("PANDA_STATUS", self._answer)
+
+    def _answer(self, data: bytes):
         status = lcmt_panda_status.decode(data)
-        statuses.append(status)
+        self.statuses.append(status)
+        if len(self.statuses) > self.stop_after:
+            return
         command = lcmt_panda_command()
         command.utime, command.control_mode_expected = status.utime, lcmt_panda_status.CONTROL_MODE_TORQUE
         command.num_joint_torque, command.joint_torque = 7, [0.0] * 7
-        lcm.Publish("PANDA_COMMAND", command.encode())
+        self.lcm.Publish("PANDA_COMMAND", command.encode())
 
-    subscription = lcm.Subscribe("PANDA_STATUS", answer)  # noqa: F841
-    served = serve_simulated_driver(scenario, lcm, duration=0.1)
-    assert served.steps == 100 and served.commands >= 100
+
+def test_the_standalone_simulated_driver_applies_each_command_one_period_late():
+    """nsdrake sim-driver's loop on memq:// with a controller that answers every status at
+    once with a zero command (the robot holds still: it adds g): 100 periods after the
+    first command, each applying a fresh command (in one process the answer to the status
+    just published is already in), statuses stamped on the wall clock
+    (utime) and the robot's clock (robot_utime, 1 ms apart), kMove."""
+    scenario = load_scenario("panda_wipe")
+    lcm = DrakeLcm("memq://")
+    controller = AnsweringController(lcm)
+    served = serve_simulated_driver(scenario, lcm, duration=0.1, low_pass_freq=1000.0)
+    assert served.periods == 100 and served.fresh == 100 and served.stale == served.expired == 0, served
+    assert served.fresh_fraction == 1.0 and "100 of them applied a fresh command (100.00%)" in served.line()
+    statuses = controller.statuses
+    assert np.all(np.diff([s.robot_utime for s in statuses]) == 1000)
+    assert abs(statuses[-1].utime - time.time() * 1e6) < 5e6 and statuses[-1].robot_mode == 2
+    assert statuses[-1].control_command_success_rate == 1.0
     assert np.max(np.abs(np.array(statuses[-1].joint_position) - np.array(statuses[0].joint_position))) < 1e-9
+
+
+def test_the_simulated_driver_falls_back_to_damping_when_commands_expire():
+    """The controller stops answering after 30 statuses: the driver applies its last
+    command while younger than expire_sec (20 ms of wall clock here), then damping (catches a driver
+    that applies a dead controller's last torque for ever, or drops it at once)."""
+    scenario = load_scenario("panda_wipe")
+    lcm = DrakeLcm("memq://")
+    AnsweringController(lcm, stop_after=30)
+    served = serve_simulated_driver(scenario, lcm, duration=0.1, expire_sec=0.02, low_pass_freq=1000.0)
+    assert served.periods == 100 and served.fresh == 31, served  # 30 answers, the last also a period on
+    assert served.commanded_periods == 30 and served.fresh_fraction == 1.0  # the controller's part: all fresh
+    # how many periods 20 ms of wall clock spans depends on the machine (a driver behind real
+    # time catches up faster): some, then damping to the end
+    assert served.stale >= 5 and served.expired >= 20 and served.expired == 100 - 31 - served.stale, served

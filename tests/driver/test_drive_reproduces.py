@@ -9,7 +9,10 @@ import dataclasses
 import numpy as np
 import pytest
 from drake import lcmt_panda_status
+from fake_bus import FakeBus
 
+from nsdrake.driver.controller_side import build_controller_side
+from nsdrake.driver.loop import ControllerLoop
 from nsdrake.driver.run import drive_traces, prepare, run_simulated
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.simulate import run
@@ -33,11 +36,12 @@ def assert_same_traces(direct, driven, rtol: float):
 
 
 def test_a_short_drive_reproduces_the_direct_simulation():
-    """Through the approach, first contact (1.265 s) and the force ramp. Catches a status
-    taken in the wrong order (Drake's ZeroOrderHold instead of the measurement hold: the
-    selector and the reference see it a period late), a time base that drifts a period
-    (the clock as a sum of periods), g removed and added with different models, a wrench
-    about the wrong point, a command answering an older status."""
+    """Through the approach, first contact (1.265 s) and the force ramp, every column (τ,
+    the reference, the diagnostics) to 1e-9. Catches the reference's contact update run
+    at the wrong instant (at t_k instead of the previous tick's t_j, as Drake's periodic
+    update runs it: contact declared a period early or late), a time base off by a period,
+    g removed and added with different models, a wrench about the wrong point, a command
+    answering an older status."""
     scenario = load_scenario("panda_wipe", duration=1.6)
     direct, _ = run(scenario)
     driven = run_simulated(scenario, realtime_rate=0.0)
@@ -112,7 +116,7 @@ def test_the_simulated_status_reports_the_command_and_the_torque_it_makes():
     driver that adds g to the plant but not to the status, or reports the wrong command."""
     drive = prepare(load_scenario("panda_wipe", duration=0.01), realtime_rate=0.0)
     statuses = []
-    drive.loop.lcm.Subscribe("PANDA_STATUS", lambda data: statuses.append(lcmt_panda_status.decode(data)))
+    drive.loop.bus.subscribe("PANDA_STATUS", lambda data: statuses.append(lcmt_panda_status.decode(data)))
     result = drive.run()
     assert result.failure is None
     traces = drive_traces(result)
@@ -146,3 +150,29 @@ def test_gravity_right_the_other_way_meets_the_bounds():
     traces = drive_traces(driven)
     metrics = compute_metrics(driven.scenario, driven.loop.drive.station, traces, None)
     assert not [m.name for m in metrics if m.passed is False]
+
+
+def test_a_recorded_status_sequence_gives_the_same_commands():
+    """The statuses (and force-torque messages) the simulated driver published in a
+    lockstep drive, replayed at 1 kHz to a fresh controller side on a fake bus: every
+    command's torques equal to 1e-9 of the largest (they are the same calls on the same
+    numbers: equal to the bit). Catches a loop whose output depends on anything but the
+    status stream (the driver's in-process state, the wall clock, a previous run)."""
+    scenario = load_scenario("panda_wipe", duration=1.4)
+    drive = prepare(scenario, realtime_rate=0.0)
+    recorded = []
+    for channel in ("PANDA_STATUS", "PANDA_FORCE_TORQUE"):
+        drive.loop.bus.subscribe(channel, lambda data, channel=channel: recorded.append((channel, data)))
+    result = drive.run()
+    assert result.failure is None
+    sent = drive_traces(result).block("cmd")
+    bus = FakeBus()
+    loop = ControllerLoop(build_controller_side(scenario), bus, clock=bus.clock)
+    k = -1
+    for channel, data in recorded:
+        k += channel == "PANDA_STATUS"
+        bus.at((k + 1) * 1e-3, channel, data)
+    loop.run(scenario.duration)
+    replayed = np.array([command.joint_torque for _, command in bus.sent])
+    assert replayed.shape == sent.shape == (1401, 7)
+    np.testing.assert_allclose(replayed, sent, rtol=0, atol=1e-9 * np.max(np.abs(sent)))

@@ -6,12 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
-from pydrake.lcm import DrakeLcm
 
 from nsdrake.control.actuator_limits import limited_torque
 from nsdrake.control.config import ActuatorLimitsConfig
 from nsdrake.control.controller import torque_limits
-from nsdrake.driver.controller_side import build_drive_diagram
+from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.panda import PandaLimitError, panda_actuator_limits
 from nsdrake.experiment.scenario import ScenarioError, load_scenario
 
@@ -47,7 +46,7 @@ def test_an_arm_that_is_not_a_panda_is_refused():
     with pytest.raises(PandaLimitError, match="the Panda driver speaks 7 joints; the scenario's arm has 4"):
         panda_actuator_limits(ActuatorLimitsConfig(), NAMES[:4])
     with pytest.raises(ScenarioError, match="speaks 7 joints"):
-        build_drive_diagram(load_scenario("fig3"), DrakeLcm("memq://"))
+        build_controller_side(load_scenario("fig3"))
 
 
 def test_the_drive_controller_applies_the_published_limits():
@@ -56,7 +55,7 @@ def test_the_drive_controller_applies_the_published_limits():
     the controller, e.g. a scenario without torque_rate)."""
     scenario = load_scenario("panda_wipe")
     scenario = dataclasses.replace(scenario, actuator_limits=ActuatorLimitsConfig())  # none given
-    drive = build_drive_diagram(scenario, DrakeLcm("memq://"))
+    drive = build_controller_side(scenario)
     controller = drive.controller
     np.testing.assert_array_equal(
         torque_limits(controller.config, controller.model), [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0]

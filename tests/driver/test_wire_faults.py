@@ -1,6 +1,9 @@
-"""Faults on the wire: each one stops the controller with one line, and nothing is sent
-after it (issue 17, item 2). A scripted driver publishes the statuses over memq:// and
-counts the commands that answer them."""
+"""Faults on the wire and the loop's timing rules (issue 27, items 2-4), on a fake clock:
+a scripted robot schedules its statuses (and force-torque messages) at chosen arrival
+times on a bus whose clock advances only as a wait would (tests/driver/fake_bus.py), so
+that each rule is tested at its boundary, deterministically. Each fault stops the
+controller with one line, and nothing is sent after it. (The same faults over real UDP
+between processes: tests/driver/test_udp.py.)"""
 
 from __future__ import annotations
 
@@ -9,207 +12,402 @@ import math
 
 import numpy as np
 import pytest
-from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
-from pydrake.lcm import DrakeLcm
+from drake import lcmt_panda_status
+from fake_bus import FakeBus, force_torque_bytes, status_bytes
 
-from nsdrake.driver.controller_side import build_drive_diagram
-from nsdrake.driver.faults import clock_steps, jump_problem, start_problem, status_problem
+from nsdrake.driver.controller_side import build_controller_side
+from nsdrake.driver.faults import clock_problem, elapsed_periods, jump_problem, start_problem
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError
+from nsdrake.driver.panda import POSITION_UPPER, VELOCITY_LIMIT, limit_problem
 from nsdrake.experiment.scenario import load_scenario
 
 NAMES = tuple(f"panda_joint{k}" for k in range(1, 8))
-
-
-class ScriptedDriver:
-    """Publishes statuses of a Panda at rest at q (1 kHz utime) and force-torque messages,
-    and records every command on the bus."""
-
-    def __init__(self, lcm: DrakeLcm, q0: np.ndarray, force_torque: bool = True):
-        self.lcm, self.q = lcm, np.array(q0, dtype=float)
-        self.utime = 1_700_000_000_000_000  # a wall clock's µs, as drake-franka-driver stamps them
-        self.force_torque = force_torque
-        self.commands: list[lcmt_panda_command] = []
-        self._sub = lcm.Subscribe("PANDA_COMMAND", self._on_command)
-
-    def _on_command(self, data: bytes) -> None:
-        self.commands.append(lcmt_panda_command.decode(data))
-
-    def publish(self, *, q=None, num_joints: int = 7, utime_step: int = 1000) -> int:
-        """One status (and force-torque message); returns its utime."""
-        self.utime += utime_step
-        q = self.q if q is None else np.asarray(q, dtype=float)
-        status = lcmt_panda_status()
-        status.utime, status.num_joints = self.utime, num_joints
-        for field in (
-            "joint_position",
-            "joint_position_desired",
-            "joint_velocity",
-            "joint_velocity_desired",
-            "joint_acceleration_desired",
-            "joint_torque",
-            "joint_torque_desired",
-            "joint_torque_external",
-        ):
-            setattr(status, field, list(q[:num_joints]) if field == "joint_position" else [0.0] * num_joints)
-        self.lcm.Publish("PANDA_STATUS", status.encode())
-        if self.force_torque:
-            self.lcm.Publish("PANDA_FORCE_TORQUE", lcmt_force_torque().encode())
-        return self.utime
-
-    def received(self) -> int:
-        self.lcm.HandleSubscriptions(0)
-        return len(self.commands)
+T = 1e-3
+UTIME0 = 1_700_000_000_000_000  # a wall clock's µs, as drake-franka-driver stamps them
 
 
 @pytest.fixture(scope="module")
-def scenario():
+def sides():
+    """The controller side of panda_wipe with the sensor and with the estimate (built once)."""
     s = load_scenario("panda_wipe", duration=1.0)
-    return dataclasses.replace(s, driver=dataclasses.replace(s.driver, first_status_timeout=0.3))
+    s = dataclasses.replace(s, driver=dataclasses.replace(s.driver, first_status_timeout=0.3))
+    external = dataclasses.replace(s, driver=dataclasses.replace(s.driver, force_source="external_torque"))
+    return {"sensor": build_controller_side(s), "external_torque": build_controller_side(external)}
 
 
-def start_loop(scenario, **driver_fields):
-    s = dataclasses.replace(scenario, driver=dataclasses.replace(scenario.driver, **driver_fields))
-    lcm = DrakeLcm("memq://")
-    loop = ControllerLoop(build_drive_diagram(s, lcm), lcm)
-    robot = ScriptedDriver(lcm, loop.drive.station.q0, force_torque=s.driver.force_source == "sensor")
-    return loop, robot
+class Robot:
+    """Schedules a Panda at rest at q0: status k arrives at ``arrival`` [s] with utime and
+    (``robot_clock``) robot_utime, and a force-torque message with it (``force_torque``)."""
+
+    def __init__(self, bus: FakeBus, q0, *, force_torque=True, robot_clock=True):
+        self.bus, self.q = bus, np.array(q0, dtype=float)
+        self.force_torque, self.robot_clock = force_torque, robot_clock
+        self.utime, self.robot_utime, self.arrival = UTIME0, 5_000_000, 0.0
+
+    def status(self, *, after=T, clock_step=1000, q=None, v=None, data=None, utime=None):
+        """The next status, ``after`` [s] after the previous one, its clocks ``clock_step``
+        [µs] on; returns its utime."""
+        self.arrival += after
+        self.utime += clock_step
+        self.robot_utime += clock_step
+        stamp = self.utime if utime is None else utime
+        if data is None:
+            data = status_bytes(
+                self.q if q is None else q,
+                utime=stamp,
+                robot_utime=self.robot_utime if self.robot_clock else 0,
+                v=v,
+            )
+        self.bus.at(self.arrival, "PANDA_STATUS", data)
+        if self.force_torque:
+            self.bus.at(self.arrival, "PANDA_FORCE_TORQUE", force_torque_bytes())
+        return stamp
 
 
-def run_until_fault(loop, robot, fault_status) -> DriveFaultError:
-    """Five good statuses answered one by one, then ``fault_status(robot)``: returns the
-    fault, after checking that no command answered the refused status or came later."""
-    robot.publish()
+def start_loop(sides, force_source="sensor", **robot):
+    bus = FakeBus()
+    loop = ControllerLoop(sides[force_source], bus, clock=bus.clock)
+    loop.side.reset()
+    robot = Robot(bus, loop.side.station.q0, force_torque=force_source == "sensor", **robot)
+    loop.ready()
+    return loop, robot, bus
+
+
+def run_until_fault(loop, robot, bus, fault) -> DriveFaultError:
+    """Five good statuses answered one by one, then ``fault(robot)`` and ticks until the
+    fault (at most 2: a faulty stream may begin with a status that is still fine): returns
+    it, after checking that nothing was sent after it."""
+    robot.status()
     loop.start()
     for _ in range(4):
-        robot.publish()
+        robot.status()
         loop.tick()
-    assert robot.received() == 5
-    fault_status(robot)
+    assert len(bus.sent) == 5
+    fault(robot)
     with pytest.raises(DriveFaultError) as info:
-        loop.tick()
+        for _ in range(2):
+            loop.tick()
+    sent = loop.commands
     for _ in range(3):  # the robot keeps talking; the stopped controller does not answer
-        robot.publish()
-    assert robot.received() == 5 and loop.commands == 5
+        robot.status()
+    bus.handle(10)
+    assert len(bus.sent) == sent and sent in (5, 6)
     message = str(info.value)
-    assert "\n" not in message and "stopped commanding after 5 command(s)" in message
+    assert "\n" not in message and f"stopped commanding after {sent} command(s)" in message
     return info.value
 
 
-def test_every_good_status_gets_one_command_with_its_utime(scenario):
-    """Catches a command that does not answer its status (a stale utime, PandaCommandSender's
-    context-time stamp, which a real driver drops as expired) or a second command per status."""
-    loop, robot = start_loop(scenario)
-    stamps = [robot.publish()]
+def test_every_good_status_gets_one_command_with_its_utime(sides):
+    """Catches a command that does not answer its status (a stale utime, which a real
+    driver drops as expired) or a second command per status."""
+    loop, robot, bus = start_loop(sides)
+    stamps = [robot.status()]
     loop.start()
     for _ in range(9):
-        stamps.append(robot.publish())
+        stamps.append(robot.status())
         loop.tick()
-    assert robot.received() == 10
-    assert [c.utime for c in robot.commands] == stamps
-    command = robot.commands[-1]
+    assert [c.utime for _, c in bus.sent] == stamps
+    command = bus.sent[-1][1]
     assert (command.num_joint_torque, command.num_joint_position, command.num_joint_velocity) == (7, 0, 0)
     assert command.control_mode_expected == lcmt_panda_status.CONTROL_MODE_TORQUE
-    assert loop.time == pytest.approx(9 * scenario.control_period, abs=1e-15)
-    wall, cpu = loop.times.seconds, loop.times.cpu_seconds  # each tick's, both clocks
-    assert wall.size == 10 and np.all(cpu > 0.0) and np.all(cpu <= wall + 1e-5)  # one thread: CPU ≤ wall
+    assert loop.time == pytest.approx(9 * T, abs=1e-15) and loop.clock_name == "robot_utime"
 
 
-def test_no_first_status_ends_without_sending(scenario):
-    loop, robot = start_loop(scenario)
+def test_the_newest_status_is_answered_and_the_others_counted_skipped(sides):
+    """Three statuses arrive while the controller computes (a 2.5 ms tick): the next tick
+    answers the newest (its utime, its q) and counts two skipped. Catches the oldest
+    queued status answered (DrakeLcm's one-message queue over UDP), or every queued one
+    answered in turn."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    bus.tick_cost = 2.5e-3
+    robot.status()
+    loop.tick()  # publishes at +2.5 ms: three more statuses arrived meanwhile
+    bus.tick_cost = 0.0
+    robot.status(after=0.5e-3)
+    robot.status(after=0.5e-3, q=robot.q + 1e-3)
+    newest = robot.status(after=0.5e-3, q=robot.q + 2e-3)
+    loop.tick()
+    assert bus.sent[-1][1].utime == newest and loop.skipped == 2
+    np.testing.assert_allclose(loop.recorder.rows[loop.recorder.count - 1, 1:8], robot.q + 2e-3)
+    assert loop.periods == 4  # the robot's clock: four periods since the first status, none replayed
+
+
+@pytest.mark.parametrize(("step_us", "periods"), [(1900, 2), (1400, 1), (2600, 3), (3000, 3)])
+def test_a_gap_is_counted_in_periods_to_the_nearest(sides, step_us, periods):
+    """A status 1.9 periods after the previous is two periods on (catches a gap counted as
+    one: the controller's clock falls behind the robot's), 1.4 is one, 2.6 and 3 (the
+    bound, accepted) are three."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    robot.status(after=step_us * 1e-6, clock_step=step_us)
+    loop.tick()
+    assert loop.periods == periods and loop.time == pytest.approx(periods * T, abs=1e-15)
+
+
+def test_the_clock_is_the_robot_s_re_anchored_every_tick(sides):
+    """utime from a PC clock with ±300 µs of jitter, robot_utime the robot's own 1 kHz:
+    after 500 statuses the controller's clock is the robot's, exactly (catches utime read
+    instead of robot_utime, and a sum of rounded gaps)."""
+    loop, robot, bus = start_loop(sides)
+    rng = np.random.default_rng(0)
+    robot.status()
+    loop.start()
+    for _ in range(500):
+        robot.status(utime=robot.utime + 1000 + int(rng.integers(-300, 301)))
+        loop.tick()
+    assert loop.time == pytest.approx(500 * T, abs=1e-12) and loop.skipped == 0
+
+
+def test_without_robot_utime_the_clock_is_utime_re_anchored(sides):
+    """No robot_utime: utime, re-anchored at the first status. Jitter of ±300 µs that
+    alternates (+300, −300) keeps the time on the period; a rounded-sum clock would too,
+    so also a run of 1400 µs gaps: 1.4 periods each, five of them are 7 periods (a sum of
+    rounded gaps says 5)."""
+    loop, robot, bus = start_loop(sides, robot_clock=False)
+    robot.status()
+    loop.start()
+    assert loop.clock_name == "utime"
+    for _ in range(5):
+        robot.status(after=1.4e-3, clock_step=1400)
+        loop.tick()
+    assert loop.periods == 7
+
+
+@pytest.mark.parametrize(
+    ("clock_step", "words"),
+    [
+        (0, "repeats the previous status's (a second publisher on the channel?)"),
+        (-1000, "went back 1000 µs"),
+        (500, "within the same control period: the stream is faster than the controller's period"),
+        (4000, "jumped 4.000 ms (4.0 periods)"),
+        (3 * 3600 * 10**6, "jumped 10800000.000 ms"),
+    ],
+    ids=["repeat", "backward", "2 kHz", "250 Hz", "3 h jump (NTP step)"],
+)
+def test_a_clock_that_is_not_the_robot_s_period_stops_the_controller(sides, clock_step, words):
+    loop, robot, bus = start_loop(sides)
+
+    def fault(r):
+        if clock_step == 500:  # a 2 kHz stream: two statuses in one period
+            r.status(after=0.5e-3, clock_step=500)
+            r.status(after=0.5e-3, clock_step=500)
+        else:
+            r.status(clock_step=clock_step)
+
+    error = run_until_fault(loop, robot, bus, fault)
+    assert error.problem.startswith("status refused: its robot_utime") and words in error.problem
+
+
+def test_a_slower_stream_is_told_from_lost_statuses(sides):
+    """driver.status_timeout_periods 5: a status two periods after the previous now and
+    then (one lost) is taken, nine in a row too; the tenth in a row at 250 Hz (4 periods
+    each, within the bound) stops the controller naming the stream's period (catches a
+    250 Hz stream run as a 1 kHz one that loses three statuses in four)."""
+    loop, robot, bus = start_loop(sides, **{})
+    loop.bound = 5 * T
+    loop.config = dataclasses.replace(loop.config, status_timeout_periods=5.0)
+    robot.status()
+    loop.start()
+    for _ in range(5):
+        robot.status(after=2e-3, clock_step=2000)
+        loop.tick()
+        robot.status()
+        loop.tick()
+    for _ in range(9):
+        robot.status(after=4e-3, clock_step=4000)
+        loop.tick()
+    robot.status(after=4e-3, clock_step=4000)
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    assert "10 statuses in a row came two periods or more apart (the last 4000 µs" in info.value.problem
+    assert "the stream's period is not the controller's 1000 µs" in info.value.problem
+
+
+def test_two_publishers_on_the_status_channel_are_named(sides):
+    """A second driver's statuses, on its own clock, between the first's: refused at the
+    first one whose clock goes back, named as a second publisher."""
+    loop, robot, bus = start_loop(sides)
+
+    def second(r):
+        r.status()
+        bus.at(r.arrival, "PANDA_STATUS", status_bytes(r.q, utime=1, robot_utime=1000))
+
+    error = run_until_fault(loop, robot, bus, second)
+    assert "went back" in error.problem and "a second publisher on the channel?" in error.problem
+
+
+def test_silence_is_declared_at_the_bound_on_the_wall_clock(sides):
+    """driver.status_timeout_periods 3: a status 3 ms after the last is answered, none for
+    just over 3 ms stops the controller (catches silence declared a period late, or
+    counted from the end of the controller's own tick)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    robot.status(after=3e-3, clock_step=3000)
+    loop.tick()
+    assert loop.commands == 2
+    bus.tick_cost = 2.5e-3  # a long tick: silence still counts from the status's arrival
+    robot.status()
+    loop.tick()
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    waited = bus.now - robot.arrival
+    assert 3e-3 < waited <= 3e-3 + 1e-5, waited
+    assert "no lcmt_panda_status on PANDA_STATUS for 3.0 ms" in info.value.problem
+
+
+def test_a_long_tick_skips_statuses_without_a_fault(sides):
+    """A 5 ms tick while the robot goes on at 1 kHz: the next tick answers the newest
+    status (arrived < 1 ms ago), four skipped, no silence (catches silence measured from
+    the tick's start, which the controller's own compute would trip)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    robot.status()
+    bus.tick_cost = 5e-3
+    loop.tick()
+    bus.tick_cost = 0.0
+    for _ in range(5):
+        robot.status()
+    loop.tick()
+    assert loop.skipped == 4 and loop.periods == 6
+
+
+def test_the_sensor_s_silence_is_elapsed_time_not_statuses(sides):
+    """Force-torque messages stop at t = 1 ms; statuses go on, the next two 2.5 ms and
+    1 ms later (one period on each, a late status is not a fault): at 3.5 ms the sensor
+    is silent 2.5 ms (< 3, taken), at 4.5 ms 3.5 ms: refused, though only two statuses
+    came (catches silence counted in statuses or periods)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    robot.status()
+    loop.tick()
+    robot.force_torque = False
+    robot.status(after=2.5e-3)
+    loop.tick()
+    robot.status()
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    assert "no lcmt_force_torque on PANDA_FORCE_TORQUE for 3.5 ms" in info.value.problem
+    assert loop.commands == 3
+
+
+@pytest.mark.parametrize(
+    ("fault", "words"),
+    [
+        (lambda r: r.status(data=b"\x00garbage"), "8 bytes that are not an lcmt_panda_status"),
+        (lambda r: r.status(q=np.where(np.arange(7) == 2, math.nan, r.q)), "joint_position[2] is nan"),
+        (lambda r: r.status(data=status_bytes(r.q[:6], utime=r.utime + 1, num_joints=6)), "it has 6 joints"),
+        (lambda r: r.status(q=r.q + np.where(np.arange(7) == 4, 0.05, 0.0)), "panda_joint5 moved 0.05 rad"),
+    ],
+    ids=["undecodable", "nan", "joint count", "jump"],
+)
+def test_a_refused_status_stops_the_controller(sides, fault, words):
+    loop, robot, bus = start_loop(sides)
+    error = run_until_fault(loop, robot, bus, fault)
+    assert error.problem.startswith("status refused: ") and words in error.problem, error.problem
+
+
+def test_a_joint_beyond_the_panda_s_limits_stops_the_controller(sides):
+    """Joint 6 at its published upper limit + 0.02 rad (margin 0.01): refused, reached in
+    steps the jump check allows (catches a position creeping past the limit)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    q = robot.q.copy()
+    target = POSITION_UPPER[5] + 0.02
+    with pytest.raises(DriveFaultError) as info:
+        while True:
+            q[5] = min(q[5] + 0.009, target)
+            robot.status(q=q)
+            loop.tick()
+    assert (
+        "panda_joint6 is at" in info.value.problem
+        and "above the Panda's limit 3.7525 rad" in info.value.problem
+    )
+    assert q[5] > POSITION_UPPER[5] + 0.01
+
+
+def test_limit_checks_at_their_margins():
+    q = np.array([0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0])
+    v = np.zeros(7)
+    assert limit_problem(q, v, NAMES) is None
+    q[3] = -0.0698 + 0.0099  # above joint 4's upper limit, within the margin
+    assert limit_problem(q, v, NAMES) is None
+    q[3] = -0.0698 + 0.0101
+    assert "panda_joint4" in limit_problem(q, v, NAMES)
+    q[3] = -1.0
+    v[6] = VELOCITY_LIMIT[6] * 1.049
+    assert limit_problem(q, v, NAMES) is None
+    v[6] = -VELOCITY_LIMIT[6] * 1.051
+    assert "panda_joint7 moves at -2.743 rad/s" in limit_problem(q, v, NAMES)
+
+
+def test_no_first_status_ends_without_sending(sides):
+    loop, robot, bus = start_loop(sides)
     with pytest.raises(DriveFaultError) as info:
         loop.start()
     assert str(info.value) == (
         "before the first command: no lcmt_panda_status on PANDA_STATUS within 0.3 s; nothing was sent; "
         "stopped commanding after 0 command(s)"
     )
-    assert robot.received() == 0
+    assert not bus.sent
 
 
-def test_first_status_outside_the_start_tolerance_is_refused(scenario):
-    loop, robot = start_loop(scenario)
-    q = robot.q.copy()
-    q[3] += 0.02  # start_tolerance 0.01 rad
-    robot.publish(q=q)
+def test_a_status_queued_before_the_controller_was_ready_is_not_answered(sides):
+    """A status far from the start pose waiting in the queue before ready(), then a good
+    one: the first status acted on is the one that arrived after ready (catches the
+    start-pose check run on a stale queued status, and its answer)."""
+    bus = FakeBus()
+    loop = ControllerLoop(sides["sensor"], bus, clock=bus.clock)
+    robot = Robot(bus, loop.side.station.q0)
+    robot.status(after=0.0, q=robot.q + 0.5)
+    bus.handle(0)  # delivered into the inbox before the controller is ready
+    loop.ready()
+    stamp = robot.status()
+    loop.start()
+    assert [c.utime for _, c in bus.sent] == [stamp]
+
+
+def test_without_force_torque_messages_the_line_names_the_sensor(sides):
+    """drake-franka-driver publishes no lcmt_force_torque: with force_source sensor the
+    start fails naming the silent channel and the statuses that did arrive."""
+    loop, robot, bus = start_loop(sides)
+    robot.force_torque = False
+    for _ in range(10):
+        robot.status()
     with pytest.raises(DriveFaultError) as info:
         loop.start()
-    words = "first status refused: panda_joint4 is at -2.3800 rad, 0.0200 rad from the scenario's start"
-    assert words in str(info.value)
-    robot.publish()
-    assert robot.received() == 0
+    assert "no lcmt_force_torque on PANDA_FORCE_TORQUE within 0.3 s although" in info.value.problem
+    assert "use driver.force_source: external_torque" in info.value.problem and not bus.sent
 
 
-def test_first_status_within_the_start_tolerance_is_taken(scenario):
-    """The other side of the tolerance: 0.009 rad off starts (catches a check that refuses all)."""
-    loop, robot = start_loop(scenario)
-    robot.publish(q=robot.q + 0.009)
-    loop.start()
-    assert robot.received() == 1
-
-
-@pytest.mark.parametrize("periods", [None, 20.0], ids=["default", "20 periods"])
-def test_silence_once_running_stops_the_controller(scenario, periods):
-    """The default wait is 3 periods (3 ms); 20 periods waits 20 ms, not 10 times more."""
-    loop, robot = start_loop(scenario, **({} if periods is None else {"status_timeout_periods": periods}))
-    fault = run_until_fault(loop, robot, lambda r: None)
-    assert "no lcmt_panda_status on PANDA_STATUS for" in fault.problem
-    expected = 3.0 if periods is None else periods
-    assert f"(driver.status_timeout_periods {expected:g} periods)" in fault.problem
-    waited_ms = float(fault.problem.split(" for ")[1].split(" ms")[0])
-    assert expected <= waited_ms < expected + 40.0
-
-
-@pytest.mark.parametrize(
-    ("fault", "words"),
-    [
-        (lambda r: r.publish(q=np.where(np.arange(7) == 2, math.nan, r.q)), "joint_position[2] is nan"),
-        (lambda r: r.publish(num_joints=6), "it has 6 joints, the arm has 7"),
-        (lambda r: r.publish(q=r.q + np.where(np.arange(7) == 4, 0.05, 0.0)), "panda_joint5 moved 0.05 rad"),
-        (lambda r: r.publish(utime_step=0), "did not advance"),
-    ],
-    ids=["nan", "joint count", "jump", "clock"],
-)
-def test_a_refused_status_stops_the_controller(scenario, fault, words):
-    loop, robot = start_loop(scenario)
-    error = run_until_fault(loop, robot, fault)
-    assert error.problem.startswith("status refused: ") and words in error.problem, error.problem
-
-
-def test_a_jump_within_the_elapsed_periods_is_taken(scenario):
-    """0.015 rad over two periods (a status lost in between) is within 0.01 rad per period:
-    catches a jump check that ignores the elapsed time."""
-    loop, robot = start_loop(scenario)
-    robot.publish()
-    loop.start()
-    robot.publish(q=robot.q + 0.015, utime_step=2000)
-    loop.tick()
-    assert robot.received() == 2 and loop.periods == 2
-
-
-def test_a_silent_force_torque_sensor_stops_the_controller(scenario):
-    loop, robot = start_loop(scenario)
-    robot.publish()
-    loop.start()
-    robot.force_torque = False
-    for _ in range(3):  # three statuses without a sensor message: still within 3 periods
-        robot.publish()
-        loop.tick()
-    assert robot.received() == 4
-    robot.publish()
+def test_first_status_outside_the_start_tolerance_is_refused(sides):
+    loop, robot, bus = start_loop(sides)
+    q = robot.q.copy()
+    q[3] += 0.02  # start_tolerance 0.01 rad
+    robot.status(q=q)
     with pytest.raises(DriveFaultError) as info:
-        loop.tick()
-    assert "no lcmt_force_torque on PANDA_FORCE_TORQUE for 4 periods" in str(info.value)
-    assert robot.received() == 4
+        loop.start()
+    assert (
+        "first status refused: panda_joint4 is at -2.3800 rad, 0.0200 rad from the scenario's start"
+        in str(info.value)
+    )
+    assert not bus.sent
 
 
-def test_the_estimated_wrench_needs_no_sensor(scenario):
+def test_the_estimated_wrench_needs_no_sensor(sides):
     """With force_source external_torque no lcmt_force_torque is awaited."""
-    loop, robot = start_loop(scenario, force_source="external_torque")
-    robot.force_torque = False
-    robot.publish()
+    loop, robot, bus = start_loop(sides, "external_torque")
+    robot.status()
     loop.start()
-    robot.publish()
+    robot.status()
     loop.tick()
-    assert robot.received() == 2
+    assert len(bus.sent) == 2
 
 
 def test_pure_checks():
@@ -218,12 +416,56 @@ def test_pure_checks():
     assert "panda_joint7" in start_problem(q0 + np.arange(7) * 0.002, q0, 0.01, NAMES)
     assert jump_problem(q0 + 0.02, q0, 0.01, 2, NAMES) is None
     assert jump_problem(q0 + 0.021, q0, 0.01, 2, NAMES) is not None
-    assert clock_steps(2000, 1000, 1e-3) == 1
-    assert clock_steps(3400, 1000, 1e-3) == 2  # 2.4 periods: the robot's clock jitters, it skipped one
-    assert clock_steps(1000, 1000, 1e-3) is None
-    status = lcmt_panda_status()
-    status.num_joints = 7
-    status.joint_position = status.joint_velocity = status.joint_torque_external = [0.0] * 7
-    assert status_problem(status, 7) is None
-    status.joint_velocity = [0.0] * 6 + [math.inf]
-    assert status_problem(status, 7) == "joint_velocity[6] is inf"
+    assert clock_problem(2000, 1000, 0, 1000, 3.0, "utime") is None
+    assert clock_problem(1500, 1300, 0, 1000, 3.0, "utime") is None  # 200 µs, but periods 1 → 2: jitter
+    assert "same control period" in clock_problem(1499, 1000, 0, 1000, 3.0, "utime")
+    assert clock_problem(4000, 1000, 0, 1000, 3.0, "utime") is None  # at the bound
+    assert "jumped" in clock_problem(4001, 1000, 0, 1000, 3.0, "utime")
+    assert elapsed_periods(10_499, 0, 1000) == 10 and elapsed_periods(10_500, 0, 1000) == 11
+
+
+def test_a_robot_out_of_kmove_stops_the_controller(sides):
+    """A status whose robot_mode is kReflex (4): the robot applies no torque command; the
+    controller stops naming the mode (catches robot_mode never read)."""
+    loop, robot, bus = start_loop(sides)
+
+    def reflex(r):
+        r.utime += 1000
+        r.robot_utime += 1000
+        r.arrival += T
+        message = lcmt_panda_status.decode(status_bytes(r.q, utime=r.utime, robot_utime=r.robot_utime))
+        message.robot_mode = 4
+        bus.at(r.arrival, "PANDA_STATUS", message.encode())
+        bus.at(r.arrival, "PANDA_FORCE_TORQUE", force_torque_bytes())
+
+    error = run_until_fault(loop, robot, bus, reflex)
+    assert "the robot is in mode kReflex (4), not kMove (2): it applies no torque command" in error.problem
+
+
+def test_the_robot_s_success_rate_is_reported_once_the_drive_has_run_its_window(sides):
+    """The rate libfranka reports is over its last 100 cycles: 0 in the first 100 ticks (no
+    command before the drive) is not counted, a later 0.9 is the minimum, named in the
+    timing line (catches control_command_success_rate never read, or read from the start)."""
+    from nsdrake.driver.timing import timing_line, timing_summary
+
+    loop, robot, bus = start_loop(sides)
+
+    def status_with_rate(rate):
+        robot.utime += 1000
+        robot.robot_utime += 1000
+        robot.arrival += T
+        message = lcmt_panda_status.decode(
+            status_bytes(robot.q, utime=robot.utime, robot_utime=robot.robot_utime)
+        )
+        message.control_command_success_rate = rate
+        bus.at(robot.arrival, "PANDA_STATUS", message.encode())
+        bus.at(robot.arrival, "PANDA_FORCE_TORQUE", force_torque_bytes())
+
+    status_with_rate(0.0)
+    loop.start()
+    for k in range(150):
+        status_with_rate(0.0 if k < 99 else 0.9 if k == 120 else 1.0)
+        loop.tick()
+    assert loop.success_rate_min == 0.9
+    summary = timing_summary(loop.times.seconds, T, control_command_success_rate_min=loop.success_rate_min)
+    assert "the robot's control_command_success_rate fell to 0.90" in timing_line(summary)

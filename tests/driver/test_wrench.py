@@ -14,11 +14,10 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import MultibodyForces
 from pydrake.systems.lcm import _Serializer_
 
-from nsdrake.control.model import ControllerModel
+from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.run import drive_traces, run_simulated
+from nsdrake.driver.wire import ForceTorqueBuffer
 from nsdrake.driver.wrench import (
-    ExternalWrenchEstimator,
-    ForceTorqueReceiver,
     ForceTorqueSender,
     force_torque_message,
     wrench_from_external_torques,
@@ -64,12 +63,11 @@ def test_the_estimator_recovers_a_wrench_applied_at_the_tool(seed):
         context, tool.GetFixedPoseInBodyFrame().translation(), F_env, plant.world_frame(), forces
     )
     tau_ext = -plant.CalcGeneralizedForces(context, forces)
-    model = ControllerModel.from_urdf(PANDA, tool_frame="tool", task_axes=("x", "y", "z"))
-    estimator = ExternalWrenchEstimator(model=model)
-    est_context = estimator.CreateDefaultContext()
-    estimator.GetInputPort("position_measured").FixValue(est_context, q)
-    estimator.GetInputPort("torque_external").FixValue(est_context, tau_ext)
-    W = estimator.GetOutputPort("wrench").Eval(est_context)
+    scenario = load_scenario("panda_wipe")
+    scenario = dataclasses.replace(
+        scenario, driver=dataclasses.replace(scenario.driver, force_source="external_torque")
+    )
+    W = build_controller_side(scenario).estimated_wrench(q, tau_ext)  # the drive's, on its own model
     np.testing.assert_allclose(W, -np.concatenate([F_env.rotational(), F_env.translational()]), atol=1e-9)
 
 
@@ -78,17 +76,18 @@ def test_force_torque_messages_round_trip():
     message = force_torque_message(W, 1.234)
     assert message.timestamp == 1234  # milliseconds, as lcmt_force_torque defines it
     np.testing.assert_array_equal(wrench_of(lcmt_force_torque.decode(message.encode())), W)
-    sender, receiver = ForceTorqueSender(), ForceTorqueReceiver()
-    sc, rc = sender.CreateDefaultContext(), receiver.CreateDefaultContext()
+    sender = ForceTorqueSender()
+    sc = sender.CreateDefaultContext()
     serializer = _Serializer_[lcmt_force_torque]()  # Drake's C++ message, as the LCM systems hold it
-    receiver.get_input_port().FixValue(rc, serializer.CreateDefaultValue())  # the subscriber's default
-    np.testing.assert_array_equal(receiver.GetOutputPort("wrench").Eval(rc), np.zeros(6))  # before a message
     sender.GetInputPort("wrench").FixValue(sc, W)
     sc.SetTime(1.234)
-    sent = sender.get_output_port().EvalAbstract(sc)
-    assert lcmt_force_torque.decode(serializer.Serialize(sent)).timestamp == 1234  # the context's time [ms]
-    receiver.get_input_port().FixValue(rc, sent)
-    np.testing.assert_array_equal(receiver.GetOutputPort("wrench").Eval(rc), W)
+    sent = serializer.Serialize(sender.get_output_port().EvalAbstract(sc))
+    assert lcmt_force_torque.decode(sent).timestamp == 1234  # the context's time [ms]
+    received = ForceTorqueBuffer()  # the controller side's in-place decoding
+    assert received.problem(sent) is None
+    received.load(sent)
+    np.testing.assert_array_equal(received.wrench, W)
+    assert "not an lcmt_force_torque" in received.problem(sent[:-1])
 
 
 def test_the_estimate_tracks_the_table_sensor_through_contact():

@@ -176,3 +176,43 @@ def test_hard_settings_finish_with_finite_bounded_traces(tmp_path, overlay):
     assert np.max(np.abs(traces.block("tau"))) < 100.0
     assert np.max(np.hypot(traces["x_d"], traces["y_d"])) <= 1.0 + 1e-9
     assert (tmp_path / "run" / "report.html").exists()
+
+
+def test_the_plain_reference_matches_the_system_through_contact_loss_and_return():
+    """PlainSurfaceReference (nsdrake drive's) against SurfaceReferenceSystem in a Simulator,
+    tick by tick over 1.2 s of a scripted normal force: none, contact at 0.3 s, a dip below
+    the threshold long enough to lose it at 0.6 s, contact again at 0.8 s. The system's
+    output at t_k follows its update at t_{k-1}, which sees the wrench of t_k; the plain
+    reference gets (t_k, W_k). Equal to 1e-12 at every tick, and the contact state too.
+    Catches the plain contact update at the wrong instant (t_k instead of t_{k-1}: contact,
+    loss and return a period early), or with the offset r of the wrong tick."""
+    from pydrake.systems.analysis import Simulator
+
+    from nsdrake.experiment.reference import PlainSurfaceReference
+    from nsdrake.experiment.reference_system import SurfaceReferenceSystem
+
+    settings = dict(
+        reference=reference(), task_rows=np.array([0, 1]), contact_threshold=THRESHOLD, period=PERIOD
+    )
+    system = SurfaceReferenceSystem(**settings)
+    plain = PlainSurfaceReference(**settings)
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    port = system.GetInputPort("measured_wrench")
+    seen = set()
+    for k in range(1200):
+        t = k * PERIOD
+        f_n = 5.0 if 0.3 <= t < 0.6 or t >= 0.8 else 0.1
+        wrench = np.array([0, 0, 0, 0, f_n, 0])
+        port.FixValue(context, wrench)
+        if k == 0:
+            simulator.Initialize()
+        else:
+            simulator.AdvanceTo(t)
+        expected = system.get_output_port().Eval(context)
+        x_d, xdot_d, xddot_d, f_d = plain.tick(t, wrench)
+        got = np.concatenate([x_d, xdot_d, xddot_d, [f_d, float(plain.in_contact)]])
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12, err_msg=f"t = {t}")
+        seen.add(plain.in_contact)
+    assert seen == {True, False} and math.isfinite(plain.state.t_contact)
+    assert plain.state.t_contact == pytest.approx(0.8, abs=2 * PERIOD)  # the second contact

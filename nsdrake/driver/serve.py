@@ -1,0 +1,216 @@
+"""``nsdrake sim-driver``: the simulated driver alone on a bus, free-running as
+drake-franka-driver runs a Panda in torque mode (its ``franka-driver/franka_driver.cc``,
+read, not run here). Each period k, on the driver's own clock at real time, whether or
+not commands come:
+
+1. the status of t_k is published, ``utime`` the wall clock [µs] (as the driver stamps
+   it: an NTP step moves it), ``robot_utime`` the robot's own clock (t_k), ``robot_mode``
+   2 (kMove, the mode that takes torque commands) and ``control_command_success_rate``
+   the fraction of the last 100 periods that applied a fresh command (the robot's figure
+   is its own, of the commands that reached it in time: an analogue);
+2. the commands that arrived are taken and the newest is applied over [t_k, t_{k+1}): the
+   one answering status k−1 when the controller answered within its period (a *fresh*
+   command: one period late, as the real driver's next callback applies it; in one
+   process over memq:// the answer to status k itself can be in already, also fresh),
+   else an older one (*stale*), until its ``utime`` lies more than ``expire_sec`` from the wall
+   clock; then (and before the first command) damping −k_d q̇ with the robot's gravity
+   compensation, k_d the driver's own (37.5, 50, 37.5, 25, 5, 3.75, 2.5 N m s/rad);
+3. optionally, as libfranka does with the driver's ``--low_pass_freq`` (30 Hz by
+   default; 1000 turns it off) and its rate limiter, the torque is low-pass filtered and
+   its rate limited to 1000 N m/s;
+4. the plant steps one period, then the driver waits for the wall clock (blocking on the
+   bus, never spinning: a spinning driver takes the CPU the controller needs).
+
+The station's diagram (:func:`nsdrake.driver.simulated_driver.build_simulated_driver`)
+runs on a private in-process bus; this loop forwards its statuses and sensor messages
+to the real bus, and feeds it the torque it chose.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from drake import lcmt_panda_command, lcmt_panda_status
+from pydrake.lcm import DrakeLcm, DrakeLcmInterface
+
+from nsdrake.driver.panda import NUM_JOINTS, TORQUE_RATE_LIMIT
+from nsdrake.driver.simulated_driver import SimulatedDriver
+from nsdrake.experiment.scenario import Scenario
+
+DAMPING = np.array([37.5, 50.0, 37.5, 25.0, 5.0, 3.75, 2.5])  # [N m s/rad] drake-franka-driver's k_d
+ROBOT_MODE_MOVE = 2  # lcmt_panda_status.kMove: the mode in which the robot takes torque commands
+NO_FILTER = 1000.0  # [Hz] libfranka's kMaxCutoffFrequency: at or above it the filter is off
+
+
+@dataclass
+class ServeResult:
+    periods: int = 0  # periods simulated after the first command
+    commands: int = 0  # commands received
+    fresh: int = 0  # periods (after the first command) that applied the command answering the previous status
+    stale: int = 0  # … that applied an older command, not yet expired
+    expired: int = 0  # … that fell back to damping (no command within expire_sec)
+    behind: int = 0  # periods the driver itself started late (its own step overran the period)
+    # periods, and fresh ones, up to the last command received (the controller's run; after
+    # it the driver damps until it is stopped, which is not the controller's doing)
+    commanded_periods: int = 0
+    commanded_fresh: int = 0
+    ages: dict[int, int] = field(default_factory=dict)  # periods between the applied command's status and now
+
+    @property
+    def fresh_fraction(self) -> float:
+        """Of the periods up to the last command received, those that applied a fresh one."""
+        return self.commanded_fresh / self.commanded_periods if self.commanded_periods else math.nan
+
+    def line(self) -> str:
+        return (
+            f"{self.commanded_periods} periods from the first command to the last, {self.commanded_fresh} "
+            f"of them applied a fresh command ({100 * self.fresh_fraction:.2f}%); in all "
+            f"{self.periods} periods after the first command, {self.commands} commands received; "
+            f"{self.fresh} applied a fresh command, {self.stale} a stale one, "
+            f"{self.expired} fell back to damping; the driver itself started {self.behind} periods late"
+        )
+
+
+def lowpass(previous: np.ndarray, value: np.ndarray, period: float, cutoff: float) -> np.ndarray:
+    """libfranka's first-order filter: y = g u + (1 − g) y_prev, g = T / (T + 1/(2π f_c))."""
+    if cutoff >= NO_FILTER:
+        return value
+    gain = period / (period + 1.0 / (2.0 * math.pi * cutoff))
+    return gain * value + (1.0 - gain) * previous
+
+
+def serve_simulated_driver(
+    scenario: Scenario,
+    lcm: DrakeLcmInterface,
+    *,
+    duration: float | None = None,
+    expire_sec: float = 0.05,
+    low_pass_freq: float = 30.0,
+    rate_limit: bool = True,
+    progress=None,
+    stop=None,
+    clock=time.perf_counter,
+    wall_utime=lambda: time.time_ns() // 1000,
+) -> ServeResult:
+    """The simulated driver on ``lcm`` (module docstring) for ``duration`` [s] (default the
+    scenario's) after the first command; ``stop``: a :class:`nsdrake.driver.stop.StopRequest`
+    that ends it at the next period."""
+    server = _Server(scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime)
+    duration = scenario.duration if duration is None else duration
+    period = server.period
+    server.driver.start()
+    next_time = clock()
+    while server.first is None or server.driver.time < server.first + duration - 0.5 * period:
+        if stop is not None and stop.requested:
+            break
+        server.publish_status()
+        server.step()
+        next_time += period
+        server.wait_until(next_time, clock)
+        if progress is not None and server.first is not None and server.result.periods % 1000 == 0:
+            progress((server.driver.time - server.first) / duration)
+    return server.result
+
+
+class _Server:
+    """One period of :func:`serve_simulated_driver` at a time (module docstring)."""
+
+    def __init__(self, scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime):
+        d = self.channels = scenario.driver
+        self.period, self.lcm = scenario.control_period, lcm
+        self.expire_us, self.low_pass_freq, self.rate_limit = expire_sec * 1e6, low_pass_freq, rate_limit
+        self.wall_utime = wall_utime
+        self.inner = DrakeLcm("memq://")  # the station's diagram talks here; this loop forwards
+        self.driver = SimulatedDriver(scenario, self.inner, adds_gravity=d.robot_adds_gravity)
+        self.plant = self.driver.built.station.plant
+        self.plant_context = self.plant.GetMyContextFromRoot(self.driver.context)
+        self.received: list[lcmt_panda_command] = []
+        self.outgoing: list[tuple[str, bytes]] = []
+        self._subscriptions = [
+            self.inner.Subscribe(
+                d.status_channel, lambda data: self.outgoing.append((d.status_channel, data))
+            ),
+            self.inner.Subscribe(
+                d.force_torque_channel, lambda data: self.outgoing.append((d.force_torque_channel, data))
+            ),
+            lcm.Subscribe(
+                d.command_channel, lambda data: self.received.append(lcmt_panda_command.decode(data))
+            ),
+        ]
+        self.result, self.recent = ServeResult(), []
+        self.command, self.applied = None, np.zeros(NUM_JOINTS)
+        self.published: list[int] = []  # utime of each status published
+        self.first = None
+
+    def publish_status(self) -> None:
+        """The status of t_k (the station's diagram published it on reaching t_k), stamped."""
+        d = self.channels
+        for channel, data in self.outgoing:
+            if channel == d.status_channel:
+                status = lcmt_panda_status.decode(data)
+                status.robot_utime = round(self.driver.time * 1e6)
+                status.utime = self.wall_utime()
+                status.robot_mode = ROBOT_MODE_MOVE
+                status.control_command_success_rate = float(np.mean(self.recent)) if self.recent else 1.0
+                self.published.append(status.utime)
+                data = status.encode()
+            self.lcm.Publish(channel, data)
+        self.outgoing.clear()
+
+    def step(self) -> None:
+        """The newest command unless expired (else damping), filtered and rate limited,
+        counted, and the plant stepped one period with it."""
+        self.lcm.HandleSubscriptions(0)
+        got_command = bool(self.received)
+        if got_command:
+            self.result.commands += len(self.received)
+            self.command = self.received[-1]
+            self.received.clear()
+            if self.first is None:
+                self.first = self.driver.time
+        if self.command is not None and abs(self.wall_utime() - self.command.utime) > self.expire_us:
+            self.command = None
+        v = self.plant.GetVelocities(self.plant_context)
+        wanted = np.asarray(self.command.joint_torque) if self.command is not None else -DAMPING * v
+        torque = lowpass(self.applied, wanted, self.period, self.low_pass_freq)
+        if self.rate_limit:
+            limit = TORQUE_RATE_LIMIT * self.period
+            torque = np.clip(torque, self.applied - limit, self.applied + limit)
+        self.applied = torque
+        if self.first is not None:
+            self._count(got_command)
+        self.driver.apply_torque(torque, utime=self.published[-1] if self.published else 0)
+        self.driver.advance()
+
+    def _count(self, got_command: bool) -> None:
+        result, command = self.result, self.command
+        result.periods += 1
+        if command is None:
+            result.expired += 1
+            self.recent.append(0.0)
+        else:
+            recent = self.published[-50:]
+            age = len(recent) - 1 - recent.index(command.utime) if command.utime in recent else -1
+            result.ages[age] = result.ages.get(age, 0) + 1
+            fresh = 0 <= age <= 1  # answers the status just published (in-process) or the one before
+            result.fresh += fresh
+            result.stale += not fresh
+            self.recent.append(float(fresh))
+        del self.recent[:-100]
+        if got_command:
+            result.commanded_periods, result.commanded_fresh = result.periods, result.fresh
+
+    def wait_until(self, when: float, clock) -> None:
+        """Until the wall clock reaches ``when``, blocking on the bus (never spinning)."""
+        remaining = when - clock()
+        if remaining < 0:
+            self.result.behind += 1
+        while remaining > 0:
+            if remaining > 1e-3:
+                self.lcm.HandleSubscriptions(int(remaining * 1e3))  # until a message or the time
+            else:
+                time.sleep(remaining)
+            remaining = when - clock()

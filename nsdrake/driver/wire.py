@@ -1,0 +1,123 @@
+"""Drake's Panda LCM messages read and written in place: each message's bytes copied into
+one preallocated buffer, its fields read and written through numpy views of that buffer,
+so that a tick allocates no message object (``lcmt_panda_status.decode`` builds eight
+Python lists of floats, ≈ 7 µs).
+
+The layouts are LCM's encoding of Drake's types (``drake/lcmtypes/lcmt_panda_*.lcm``):
+an 8-byte type fingerprint, then the fields in order, big-endian. For 7 joints:
+
+- ``lcmt_panda_status`` (486 bytes): utime int64 @8, num_joints int32 @16, eight double[7]
+  arrays @20 (joint_position, _desired, joint_velocity, _desired,
+  joint_acceleration_desired, joint_torque, joint_torque_desired,
+  joint_torque_external), control_command_success_rate double @468, robot_mode int8
+  @476, robot_utime int64 @477, control_mode int8 @485;
+- ``lcmt_panda_command`` (85 bytes in torque mode): utime int64 @8, num_joint_position
+  int32 = 0 @16, num_joint_velocity int32 = 0 @20, num_joint_torque int32 = 7 @24,
+  joint_torque double[7] @28, control_mode_expected int8 @84;
+- ``lcmt_force_torque`` (64 bytes): timestamp int64 @8 [ms], fx fy fz tx ty tz @16.
+
+tests/driver/test_wire.py checks every field against Drake's own ``decode``/``encode``.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
+
+from nsdrake.driver.panda import NUM_JOINTS
+
+_N = NUM_JOINTS
+STATUS_SIZE = 8 + 12 + 8 * 8 * _N + 18
+COMMAND_SIZE = 8 + 8 + 12 + 8 * _N + 1
+FORCE_TORQUE_SIZE = 8 + 8 + 48
+STATUS_ARRAYS = (
+    "joint_position", "joint_position_desired", "joint_velocity", "joint_velocity_desired",
+    "joint_acceleration_desired", "joint_torque", "joint_torque_desired", "joint_torque_external",
+)  # fmt: skip
+_TAIL = 20 + 8 * 8 * _N  # control_command_success_rate's offset
+
+
+def _fingerprint(message_type) -> bytes:
+    return message_type._get_packed_fingerprint()
+
+
+class StatusBuffer:
+    """The latest ``lcmt_panda_status`` of 7 joints, decoded in place: :meth:`load` copies
+    the bytes in (or says why they are not such a status); the fields are views."""
+
+    def __init__(self):
+        self.buffer = bytearray(STATUS_SIZE)
+        self._fingerprint = _fingerprint(lcmt_panda_status)
+        arrays = np.ndarray((8, _N), ">f8", buffer=self.buffer, offset=20)
+        self.q, self.v, self.tau_ext = arrays[0], arrays[2], arrays[7]
+
+    def problem(self, data: bytes) -> str | None:
+        """Why ``data`` is not an lcmt_panda_status of 7 joints (None: it is one)."""
+        if len(data) < 20 or data[:8] != self._fingerprint:
+            return f"{len(data)} bytes that are not an lcmt_panda_status (its LCM type fingerprint differs)"
+        (joints,) = struct.unpack_from(">i", data, 16)
+        if joints != _N:
+            return f"it has {joints} joints, the arm has {_N}"
+        if len(data) != STATUS_SIZE:
+            return f"{len(data)} bytes, an lcmt_panda_status of {_N} joints has {STATUS_SIZE}"
+        return None
+
+    def load(self, data: bytes) -> None:
+        """Copies ``data`` (checked by :meth:`problem`) in."""
+        self.buffer[:] = data
+
+    @staticmethod
+    def utime(data: bytes) -> int:
+        return struct.unpack_from(">q", data, 8)[0]
+
+    @staticmethod
+    def robot_utime(data: bytes) -> int:
+        return struct.unpack_from(">q", data, _TAIL + 9)[0]
+
+    @property
+    def success_rate(self) -> float:
+        return struct.unpack_from(">d", self.buffer, _TAIL)[0]
+
+    @property
+    def robot_mode(self) -> int:
+        return struct.unpack_from(">b", self.buffer, _TAIL + 8)[0]
+
+
+class ForceTorqueBuffer:
+    """The latest ``lcmt_force_torque``, decoded in place; :attr:`wrench` is [M; f] (6)
+    [N m, N] (the message's tx ty tz, fx fy fz), a view."""
+
+    def __init__(self):
+        self.buffer = bytearray(FORCE_TORQUE_SIZE)
+        self._fingerprint = _fingerprint(lcmt_force_torque)
+        values = np.ndarray((6,), ">f8", buffer=self.buffer, offset=16)
+        self.wrench = values[[3, 4, 5, 0, 1, 2]]  # refreshed by load()
+        self._values = values
+
+    def problem(self, data: bytes) -> str | None:
+        if len(data) != FORCE_TORQUE_SIZE or data[:8] != self._fingerprint:
+            return f"{len(data)} bytes that are not an lcmt_force_torque"
+        return None
+
+    def load(self, data: bytes) -> None:
+        self.buffer[:] = data
+        self.wrench[:3], self.wrench[3:] = self._values[3:], self._values[:3]
+
+
+class CommandBuffer:
+    """One ``lcmt_panda_command`` in torque mode, encoded in place: :meth:`set` writes the
+    utime and the torques into the preallocated bytes (:attr:`buffer`)."""
+
+    def __init__(self):
+        self.buffer = bytearray(COMMAND_SIZE)
+        self.buffer[:8] = _fingerprint(lcmt_panda_command)
+        struct.pack_into(">iii", self.buffer, 16, 0, 0, _N)
+        struct.pack_into(">b", self.buffer, COMMAND_SIZE - 1, lcmt_panda_status.CONTROL_MODE_TORQUE)
+        self.torque = np.ndarray((_N,), ">f8", buffer=self.buffer, offset=28)
+
+    def set(self, utime: int, torque: np.ndarray) -> bytearray:
+        struct.pack_into(">q", self.buffer, 8, utime)
+        self.torque[:] = torque
+        return self.buffer

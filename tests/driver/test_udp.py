@@ -1,0 +1,165 @@
+"""The drive over a real transport (issue 27, item 6): both sides as separate processes
+talking UDP multicast inside a private network namespace (tests/driver/netns.py; skipped
+with the reason where one cannot be made, required in CI)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import without_notices
+from netns import URL, require_namespace, run_in_namespace
+
+from nsdrake.experiment.traces import Traces
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+FAULTS = {  # injected by tests/driver/bad_driver.py; the words of the controller's one line
+    "undecodable": "status refused: 24 bytes that are not an lcmt_panda_status",
+    "nan": "status refused: joint_position[0] is nan",
+    "position_limit": "status refused: panda_joint6 is at",
+    "velocity_limit": "status refused: panda_joint1 moves at 3 rad/s, beyond the Panda's limit 2.175 rad/s",
+    "two_publishers": "(a second publisher on the channel?)",
+    "silence": "no lcmt_panda_status on PANDA_STATUS for ",
+    "jump": "its robot_utime jumped 10800001.000 ms",
+    "backward": "its robot_utime went back",
+    "2khz": "the stream is faster than the controller's period of 1000 µs",
+    "250hz": "the stream's period is not the controller's 1000 µs",
+    "sensor_silence": "no lcmt_force_torque on PANDA_FORCE_TORQUE for ",
+    "no_sensor": "before the first command: no lcmt_force_torque on PANDA_FORCE_TORQUE within 3 s although",
+}
+
+
+def python_in_namespace(args: str) -> str:
+    return f"PYTHONPATH={ROOT}:{HERE} {sys.executable} {args}"
+
+
+def test_every_wire_fault_over_udp_is_one_line_and_nothing_after(tmp_path):
+    """Each fault of issue 27's items 3-4 injected by a driver process that misbehaves
+    (tests/driver/bad_driver.py) over UDP, against the controller side in another
+    process: it stops with its one line, the robot received no command after it (every
+    command it got was counted before the fault; it listens 0.4 s more), and the run
+    folder keeps what was computed (traces for the 100 commands sent before)."""
+    require_namespace()
+    script = python_in_namespace(f"{HERE / 'udp_fault_runner.py'} '{URL}' out {','.join(FAULTS)}")
+    result = run_in_namespace(script, cwd=tmp_path, timeout=600)
+    reports = [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
+    assert [r["fault"] for r in reports] == list(FAULTS), result.stderr[-2000:]
+    for r in reports:
+        fault, failure = r["fault"], r["failure"]
+        assert failure is not None and "\n" not in failure and FAULTS[fault] in failure, (fault, failure)
+        assert f"stopped commanding after {r['commands']} command(s)" in failure
+        if "silence" in fault:  # declared past the 200 ms bound; how far past is the OS's (the
+            # boundary itself is tested on a fake clock in test_wire_faults.py)
+            waited = float(failure.split(" for ")[1].split(" ms")[0])
+            assert 200.0 <= waited < 300.0, failure  # printed to 0.1 ms
+        assert r["driver"]["commands"] == r["commands"], r  # nothing reached the robot after the fault
+        if fault == "no_sensor":
+            assert r["commands"] == 0 and "traces.csv" not in r["files"] and "timing.json" in r["files"]
+            continue
+        assert r["driver"]["injected"] and r["commands"] >= 100, r
+        rows = len(Traces.read_csv(tmp_path / "out" / fault / "traces.csv"))
+        assert rows == r["commands"], (fault, rows)
+        metrics = json.loads((tmp_path / "out" / fault / "metrics.json").read_text())
+        assert metrics["status"] == "failed" and metrics["failure"] == failure
+
+
+def pair_script(duration: float, out: str, config: str | None = None) -> str:
+    """nsdrake sim-driver and nsdrake drive, two processes on the namespace's bus, as the
+    README's recipe runs them (the driver's filter off, commands expire after 50 ms). The
+    driver serves 1 s longer than the drive: it counts from the first command it
+    receives, the drive from the first status after it was ready."""
+    config = f" --config {config}" if config else ""
+    driver = python_in_namespace(
+        f"-m nsdrake sim-driver panda_wipe --lcm '{URL}' --duration {duration + 1.0:g}{config} "
+        "--low-pass-freq 1000 --expire-sec 0.05"
+    )
+    drive = python_in_namespace(
+        f"-m nsdrake drive panda_wipe --lcm '{URL}' --duration {duration:g}{config} --out {out}"
+    )
+    return (
+        f"{driver} > driver.out 2> driver.err &\n{drive} > drive.out 2> drive.err\necho $? > drive.rc\nwait\n"
+    )
+
+
+def test_a_drive_over_udp_between_two_processes(tmp_path):
+    """nsdrake drive against nsdrake sim-driver over UDP, free-running at 1 kHz for 1.5 s
+    (through first contact, 1.265 s): the whole drive ends without a fault, on the robot's
+    clock (robot_utime; it ends at the first status at or after 1.5 s of it), one trace
+    row per command, and the tool reached the table. Catches a drive that cannot run over
+    UDP between processes at all (a bus that drops statuses, DrakeLcm's one-message queue
+    answering stale ones), the clock read from utime. (Which status is answered, and the
+    timing rules, are tested at their boundaries in test_wire_faults.py.) The silence bound
+    is 200 periods here: the simulated driver is a Python simulation that a shared machine
+    stalls for ms (README)."""
+    require_namespace()
+    (tmp_path / "c.yaml").write_text("driver: {status_timeout_periods: 200}\n")
+    result = run_in_namespace(pair_script(1.5, "out", "c.yaml"), cwd=tmp_path, timeout=600)
+    err = without_notices((tmp_path / "drive.err").read_text())
+    assert result.returncode == 0, result.stderr
+    timing = json.loads((tmp_path / "out" / "timing.json").read_text())
+    assert "failure" not in timing, (timing.get("failure"), err)
+    # the robot's clock, to the period: the drive ends at the first status at or after 1.5 s
+    # (a tick that skipped periods at the end may land a few periods past it)
+    assert 1500 <= timing["periods"] <= 1500 + 200
+    assert timing["clock"] == "robot_utime"
+    traces = Traces.read_csv(tmp_path / "out" / "traces.csv")
+    assert len(traces) == timing["commands"]
+    assert traces["t"][-1] == pytest.approx(timing["periods"] * 1e-3, abs=1e-9)
+    assert float(traces["f_n"].max()) > 2.0  # it reached the table: the run is a real one
+
+
+@pytest.mark.slow
+def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
+    """Issue 27's acceptance: 20 s of panda_wipe over UDP between the two processes,
+    free-running at 1 kHz real time with the default bounds: the drive ends without a
+    fault, every bound met, the controller's clock on the robot's (20 000 periods), and
+    at least 99% of the simulated driver's periods applied a fresh command. This needs
+    both processes to keep real time: on a machine loaded beyond its cores it is skipped,
+    saying so (measured here at load 10-11: README, "On a real arm")."""
+    require_namespace()
+    load, cores = os.getloadavg()[0], os.cpu_count() or 1
+    if load > 0.75 * cores:
+        pytest.skip(f"load average {load:.1f} on {cores} cores: the machine cannot keep two 1 kHz loops")
+    result = run_in_namespace(pair_script(20.0, "out"), cwd=tmp_path, timeout=900)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "drive.rc").read_text().strip() == "0", (tmp_path / "drive.err").read_text()
+    timing = json.loads((tmp_path / "out" / "timing.json").read_text())
+    assert "failure" not in timing and 20000 <= timing["periods"] <= 20003
+    line = (tmp_path / "driver.out").read_text().splitlines()[-1]
+    fresh = float(line.split("of them applied a fresh command (")[1].split("%")[0])
+    assert fresh >= 99.0, line
+
+
+def test_a_unicast_udpm_address_is_refused_in_one_line(tmp_path):
+    """`--lcm udpm://10.1.2.3:7667` (a unicast address: LCM cannot join it as a multicast
+    group) ends at once with one line and exit 2, before any folder (issue 24, item 4: it
+    was accepted and failed 5 s later as "no status"). Inside the namespace: a udpm URL
+    is never opened outside one."""
+    require_namespace()
+    drive = python_in_namespace("-m nsdrake drive panda_wipe --lcm 'udpm://10.1.2.3:7667?ttl=0' --out out")
+    result = run_in_namespace(f"{drive}\necho $? > rc\n", cwd=tmp_path, timeout=300)
+    assert (tmp_path / "rc").read_text().strip() == "2", result.stderr
+    err = without_notices(result.stderr)
+    assert err.count("\n") == 1 and "cannot open the LCM bus udpm://10.1.2.3:7667?ttl=0" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_ctrl_c_stops_the_simulated_driver_with_130(tmp_path):
+    """`nsdrake sim-driver` serving on UDP, no controller: SIGINT ends it at the next
+    period with one line and exit 130 (issue 24, item 3: it exited 1)."""
+    require_namespace()
+    driver = python_in_namespace(f"-m nsdrake sim-driver panda_wipe --lcm '{URL}'")
+    script = (
+        f"{driver} > out 2> err &\n"
+        "pid=$!\n"
+        "for i in $(seq 600); do grep -q serving out && break; sleep 0.2; done\n"
+        "sleep 1; kill -INT $pid; wait $pid; echo $? > rc\n"
+    )
+    run_in_namespace(script, cwd=tmp_path, timeout=300)
+    assert (tmp_path / "rc").read_text().strip() == "130"
+    err = without_notices((tmp_path / "err").read_text())
+    assert err == "nsdrake: simulated driver interrupted (Ctrl-C)\n", err
