@@ -24,7 +24,8 @@ import hashlib
 import sys
 from pathlib import Path
 
-from numba.core import event
+from numba.core import config, event
+from numba.core.caching import _CacheLocator
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
@@ -45,12 +46,22 @@ def fingerprint(sources: list[Path], package: Path = PACKAGE) -> str:
     return digest.hexdigest()
 
 
+def cache_folder(source: Path) -> Path:
+    """Where numba keeps the cached kernels of ``source``: ``__pycache__`` beside it, or
+    with NUMBA_CACHE_DIR set, the folder numba derives from the source's folder there."""
+    if not config.CACHE_DIR:
+        return source.parent / "__pycache__"
+    return Path(config.CACHE_DIR) / _CacheLocator.get_suitable_cache_subpath(str(source))
+
+
 def refresh_cache(package: Path = PACKAGE) -> bool:
     """Deletes nsdrake's cached kernels if any kernel source changed since they were
     compiled (module docstring); True if it did. A read-only install keeps its cache (it
-    cannot have been edited in place)."""
+    cannot have been edited in place). The stamp lives with the cache it describes
+    (:func:`cache_folder`), so that a run with another NUMBA_CACHE_DIR neither deletes
+    nor vouches for the default cache."""
     sources = kernel_sources(package)
-    stamp = package / "__pycache__" / STAMP
+    stamp = cache_folder(package / "__init__.py") / STAMP
     now = fingerprint(sources, package)
     try:
         if stamp.read_text() == now:
@@ -59,9 +70,9 @@ def refresh_cache(package: Path = PACKAGE) -> bool:
         pass
     try:
         for path in sources:
-            for cached in (path.parent / "__pycache__").glob(f"{path.stem}.*.nb[ic]"):
+            for cached in cache_folder(path).glob(f"{path.stem}.*.nb[ic]"):
                 cached.unlink(missing_ok=True)
-        stamp.parent.mkdir(exist_ok=True)
+        stamp.parent.mkdir(parents=True, exist_ok=True)
         stamp.write_text(now)
     except OSError:
         return False
@@ -69,24 +80,35 @@ def refresh_cache(package: Path = PACKAGE) -> bool:
 
 
 class _CompileNotice(event.Listener):
-    """Prints :data:`NOTICE` on stderr when the first nsdrake kernel starts compiling."""
+    """Prints :data:`NOTICE` on stderr when the first nsdrake kernel starts compiling, and
+    counts the compiles under way (numba nests them: a kernel compiles its callees)."""
 
     def __init__(self):
         self.printed = False
+        self.depth = 0
 
     def on_start(self, ev):
+        self.depth += 1
         if self.printed:
             return
         module = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "") or ""
         if module.startswith("nsdrake."):
             self.printed = True
-            print(NOTICE, file=sys.stderr, flush=True)
+            sys.stderr.write(NOTICE + "\n")  # one write: workers compiling at once print whole lines
+            sys.stderr.flush()
 
     def on_end(self, ev):
-        pass
+        self.depth = max(0, self.depth - 1)
 
 
 _notice = _CompileNotice()
+
+
+def compiling() -> bool:
+    """Whether numba is compiling a kernel in this process now (after :func:`announce_compiling`).
+    An exception raised into the compiler, e.g. KeyboardInterrupt by a signal handler, can
+    land in a finalizer, where Python prints it and drops it."""
+    return _notice.depth > 0
 
 
 def announce_compiling() -> None:

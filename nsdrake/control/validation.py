@@ -425,19 +425,25 @@ def _criteria_problems(crit, sel) -> Iterator[tuple[str, str]]:
     if any(p for _, p in checks + selector):
         return
     influence = crit.joint_limits.influence
-    if sel.q_lim > 0 and influence < sel.q_lim + sel.q_band:
+    if sel.q_lim > 0 and _below(influence, sel.q_lim + sel.q_band):
         yield (
             f"{where}.joint_limits.influence",
             f"{influence} rad must be >= selector.q_lim + q_band = {sel.q_lim + sel.q_band:g} rad, or "
             "joint-limit avoidance would have no gradient when it takes level 2",
         )
     distance = crit.obstacle.influence_distance
-    if distance < sel.d_lim + sel.d_band:
+    if _below(distance, sel.d_lim + sel.d_band):
         yield (
             f"{where}.obstacle.influence_distance",
             f"{distance} m must be >= selector.d_lim + d_band = {sel.d_lim + sel.d_band:g} m, or obstacle "
             "avoidance would have no gradient when it takes level 2",
         )
+
+
+def _below(value: float, bound: float) -> bool:
+    """value < bound beyond rounding: the sum of two decimals a user wrote (0.05 + 0.01 is
+    0.060000000000000005 in binary) is not above the same total written as one number."""
+    return value < bound and not math.isclose(value, bound, rel_tol=1e-12)
 
 
 def validate_config(config, name: str = "config") -> None:

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from nsdrake.control.dynamics import ArmModel
+from nsdrake.control.kernels import compiling
 from nsdrake.experiment.output import declare, record_written
 from nsdrake.experiment.scenario import (
     Scenario,
@@ -492,38 +493,67 @@ class _Task:
 
 
 FAULT_VARIABLE = "NSDRAKE_TEST_FAULT"
+SIMULATING_VARIABLE = "NSDRAKE_TEST_SIMULATING"
 
 
 def _injected_fault(index: int) -> None:
     """Test hook: with NSDRAKE_TEST_FAULT=INDEX:KIND in the environment, variant INDEX dies
     as a segfault would, leaving no result (exit), raises (raise), hangs until interrupted
-    (hang), or hangs deaf to Ctrl-C (hang_hard: only a kill ends it). The tests use it to
+    (hang), or hangs deaf to Ctrl-C (hang_hard: only a kill ends it); several variants
+    take a comma-separated list (0:hang,1:raise). A hanging variant says so in the folder
+    of NSDRAKE_TEST_SIMULATING (file INDEX.hanging), when that is set. The tests use it to
     check that ``nsdrake compare`` survives such a variant; unset, it does nothing."""
-    spec = os.environ.get(FAULT_VARIABLE, "")
-    if spec.partition(":")[0] != str(index):
+    faults = dict(entry.partition(":")[::2] for entry in os.environ.get(FAULT_VARIABLE, "").split(","))
+    kind = faults.get(str(index))
+    if kind is None:
         return
-    kind = spec.partition(":")[2]
     if kind == "exit":
         os._exit(70)
     if kind in ("hang", "hang_hard"):
         if kind == "hang_hard":
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if os.environ.get(SIMULATING_VARIABLE):
+            (Path(os.environ[SIMULATING_VARIABLE]) / f"{index}.hanging").touch()
         while True:
             time.sleep(1.0)
     raise RuntimeError(f"{FAULT_VARIABLE} asked variant {index} to fail")
 
 
-def _run_variant(task: _Task) -> tuple[str, object]:
+def _simulated_time_file(task: _Task, duration: float) -> Callable[[float], None]:
+    """Test hook: with NSDRAKE_TEST_SIMULATING=DIR in the environment, variant INDEX keeps
+    the time it has simulated [s] in DIR/INDEX, rewritten a hundred times per run, so that
+    a test can wait until a variant is simulating (not for an amount of time or CPU, which
+    depends on the machine and on whether the kernels were compiled). Unset: does nothing."""
+    folder = os.environ.get(SIMULATING_VARIABLE)
+    path = Path(folder) / str(task.index) if folder else None
+
+    def simulated(fraction: float) -> None:
+        if path is not None:
+            partial = path.with_suffix(".partial")
+            partial.write_text(f"{fraction * duration!r}\n")
+            partial.replace(path)  # whole, never half-written
+
+    return simulated
+
+
+def _run_variant(task: _Task, progress: Callable[[float], None] | None = None) -> tuple[str, object]:
     """Simulates one variant, writes its traces and measures them (from the file):
     ("ok", row), or ("interrupted", t) when Ctrl-C stopped it (its traces so far are
-    written)."""
+    written). ``progress`` is called with the fraction simulated, a hundred times per run."""
     from nsdrake.experiment.simulate import DivergenceError, RunInterrupted, run
 
     _injected_fault(task.index)
     scenario = variant_scenario(task.family, task.index, task.config, task.duration)
+    test_hook = _simulated_time_file(task, scenario.duration)
+
+    def simulated(fraction: float) -> None:
+        if progress is not None:
+            progress(fraction)
+        test_hook(fraction)
+
     diverged = None
-    try:
-        traces, built = run(scenario, auto_structure="fused")  # the same traces, cheaper
+    try:  # the same traces as the named systems', cheaper
+        traces, built = run(scenario, auto_structure="fused", progress=simulated)
     except DivergenceError as e:  # a row that says so, with what it measured up to then
         traces, built, diverged = e.traces, e.built, f"{e.t:.4g} s: {e.reason}"
     except RunInterrupted as e:
@@ -551,25 +581,53 @@ def _failure(e: BaseException) -> str:
     return f"failed: {type(e).__name__}: {_cut(e, 200)}"
 
 
+class _WorkerState:
+    """What a worker's SIGINT handler needs to know: whether the run has simulated (its first
+    hundredth), and whether it was interrupted."""
+
+    simulating = False
+    interrupted = False
+
+
 def _interrupt_once(signum, frame) -> None:
-    """A worker's SIGINT handler: the first one interrupts (the run keeps its traces), any
-    later one is ignored, so that the traces and the report reach the parent."""
+    """A worker's SIGINT handler. Before the run has simulated anything there is nothing
+    to keep: the handler does nothing, and the command, which stops a worker that has not
+    reported simulating by killing it (:meth:`_Pool.stop`), ends it at once, wherever it is
+    (importing, building, compiling the kernels: an exception raised there can take
+    minutes to surface, or none, if a finalizer swallows it). Once it simulates, the first
+    SIGINT interrupts the run (which keeps its traces), any later one is ignored, so that
+    the traces and the report reach the parent; inside a compile the interruption waits
+    for the run's next hundredth."""
+    if not _WorkerState.simulating:
+        return
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    raise KeyboardInterrupt
+    _WorkerState.interrupted = True
+    if not compiling():
+        raise KeyboardInterrupt
 
 
 def _variant_process(task: _Task, conn) -> None:
-    """Worker process: one variant; sends ("ok", row), ("interrupted", t) or ("failed",
-    reason), then exits. It starts with SIGINT blocked (:func:`start_quietly`), so that a
-    Ctrl-C during its start-up waits for the handler instead of a traceback."""
+    """Worker process: one variant; sends ("simulating", None) once its run has simulated
+    a hundredth, then ("ok", row), ("interrupted", t) or ("failed", reason), and exits.
+    It starts with SIGINT ignored (:func:`start_quietly`), so that a Ctrl-C during its
+    start-up is not a traceback, and installs its handler first thing."""
     signal.signal(signal.SIGINT, _interrupt_once)
+
+    def simulated(fraction: float) -> None:
+        if not _WorkerState.simulating:
+            conn.send(("simulating", None))  # before the flag: a SIGINT meanwhile is a no-op
+            _WorkerState.simulating = True
+        if _WorkerState.interrupted:  # the handler's exception waited for a compile to end
+            raise KeyboardInterrupt
+
     try:
-        if hasattr(signal, "pthread_sigmask"):
+        if hasattr(signal, "pthread_sigmask"):  # a later worker inherits the start's blocked mask
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-        message = _run_variant(task)
+        message = _run_variant(task, simulated)
     except BaseException as e:  # every failure, an interruption outside the run included, is the row's
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         message = ("interrupted", None) if isinstance(e, KeyboardInterrupt) else ("failed", _failure(e))
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the report is sent whole
     conn.send(message)
     conn.close()
 
@@ -595,16 +653,21 @@ def _timed_out_row(timeout: float, t: float | None) -> dict:
 
 
 def start_quietly(process) -> None:
-    """Starts ``process`` with SIGINT blocked (its mask is inherited): a Ctrl-C that lands
-    while it starts up is held until it has installed its handler, and this process gets
-    it as soon as the start returns."""
+    """Starts ``process`` with SIGINT ignored: an ignored signal stays ignored across exec,
+    and Python keeps it so, so a Ctrl-C that lands while the worker imports is not a
+    traceback (blocking it is not enough: measured in /proc, the first worker began with
+    an empty signal mask, the second with the block inherited, which the worker lifts).
+    This process holds SIGINT blocked meanwhile and gets a Ctrl-C that landed as soon as
+    the start returns (Linux keeps a blocked signal pending though it is ignored)."""
     if not hasattr(signal, "pthread_sigmask"):
         process.start()
         return
     signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         process.start()
     finally:
+        signal.signal(signal.SIGINT, handler)
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
@@ -613,15 +676,15 @@ class _Worker:
     index: int
     process: object  # multiprocessing.Process
     deadline: float  # [s, monotonic] when it is stopped (SIGINT), or killed once stopped
-    stopped: str | None = None  # why it was sent SIGINT: "timeout" or "interrupt"
+    stopped: str | None = None  # why it was stopped: "timeout" or "interrupt"
+    simulating: bool = False  # it reported that its run simulates: it has traces to keep
 
 
 class _Pool:
     """Variants in processes of their own, ``jobs`` at a time. A worker reports through a
     pipe; one that dies without reporting (segfault, os._exit, killed) closes its pipe, so
     the wait always ends and the variant is reported as crashed. A worker still running
-    after ``timeout`` is sent SIGINT (it writes its traces so far) and killed STOP_GRACE
-    later if it has not reported."""
+    after ``timeout`` is stopped (:meth:`stop`)."""
 
     def __init__(self, jobs: int, timeout: float, done: Callable[[int, dict], None]):
         self.ctx = multiprocessing.get_context("spawn")
@@ -641,7 +704,7 @@ class _Pool:
         soonest = min(w.deadline for w in self.running.values())
         ready = multiprocessing.connection.wait(list(self.running), timeout=max(0.0, soonest - now))
         for receive in ready:
-            self._finish(receive)
+            self._read(receive)
         now = time.monotonic()
         for receive, w in list(self.running.items()):
             if w.deadline > now:
@@ -653,16 +716,36 @@ class _Pool:
                 self._finish(receive)
 
     def stop(self, w: _Worker, why: str) -> None:
+        """A worker whose run simulates is sent SIGINT: it writes its traces so far and
+        reports, or is killed STOP_GRACE later. One that has not reported simulating has
+        nothing to keep (it is starting up, building or compiling) and is killed at once."""
         w.stopped, w.deadline = why, time.monotonic() + STOP_GRACE
-        if w.process.is_alive():
+        if not w.process.is_alive():
+            return
+        if w.simulating:
             os.kill(w.process.pid, signal.SIGINT)
+        else:
+            w.process.kill()
 
-    def _finish(self, receive) -> None:
-        w = self.running.pop(receive)
+    def _read(self, receive) -> None:
+        """The worker's next message: a report finishes it; "simulating" is noted."""
         try:
-            status, value = receive.recv() if receive.poll() else ("crashed", None)
+            message = receive.recv()
         except (EOFError, OSError):
-            status, value = "crashed", None
+            message = ("crashed", None)
+        if message[0] == "simulating":
+            self.running[receive].simulating = True
+        else:
+            self._finish(receive, message)
+
+    def _finish(self, receive, message: tuple[str, object] | None = None) -> None:
+        w = self.running.pop(receive)
+        while message is None or message[0] == "simulating":  # what a killed worker sent before
+            try:
+                message = receive.recv() if receive.poll() else ("crashed", None)
+            except (EOFError, OSError):
+                message = ("crashed", None)
+        status, value = message
         receive.close()
         w.process.join()
         if w.stopped == "timeout" and status != "ok":

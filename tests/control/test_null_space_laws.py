@@ -215,6 +215,41 @@ def test_stage_kinematic_law_uses_the_moore_penrose_projector():
         )
 
 
+ARM4_JOINTS = ("joint1", "joint2", "joint3", "joint4")
+
+
+@pytest.mark.parametrize(
+    "weight, w",
+    [({"joint2": 3.0}, [1.0, 3.0, 1.0, 1.0]), ({}, [1.0, 1.0, 1.0, 1.0])],
+    ids=["one joint weighted", "no weight given"],
+)
+def test_posture_criterion_pulls_an_unweighted_joint_with_weight_one(weight, w):
+    """The paper's law with the posture criterion (source: posture): q̇_dⁿ = K N H⁻¹ W (q − q_d)
+    (Eq. 30, W = diag(w)) at seeded states of the paper's arm, a joint missing from
+    ``posture.weight`` weighing 1 as the configuration says, against N and H⁻¹ formed here
+    from the plant's terms (1e-9 relative). Catches a missing joint weighing 0 (not pulled
+    towards q_d at all), or the weight given to the wrong joint."""
+    model = ControllerModel.from_urdf(
+        str(models_dir() / "arm4.urdf"), tool_frame="tool", task_axes=("x", "y")
+    )
+    q_d = dict(zip(ARM4_JOINTS, [0.5, 1.1, 0.8, 0.3], strict=True))
+    posture = PostureConfig(q_d=q_d, weight=weight, gain=-0.2)
+    config = ControllerConfig(desired_null_space=DesiredNullSpaceConfig(source="posture", posture=posture))
+    config.desired_null_space.criteria.obstacle.gain = 0.0  # the URDF alone knows no obstacles
+    config.impedance.max_task_inertia = np.inf  # N from the exact J̄
+    step = ControllerStep(controller_model=model, normal=[0.0, 1.0], config=config)
+    arm = model.arm
+    for q, v in random_states(4, 6, seed=8):
+        step.reset()
+        T = terms(arm, q, v)
+        step.step(0.0, q, v, np.zeros(6), T.x, np.zeros(2), np.zeros(2), 0.0)
+        H_inv = np.linalg.inv(T.H)
+        N = np.eye(4) - dynamically_consistent_inverse(T.J, H_inv) @ T.J
+        expected = -0.2 * N @ H_inv @ (np.asarray(w) * (q - list(q_d.values())))
+        got = step.result.desired_null_space_velocity
+        assert np.linalg.norm(got - expected) <= 1e-9 * np.linalg.norm(expected)
+
+
 # --- configuration --------------------------------------------------------------------------
 
 

@@ -21,11 +21,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import fig3_with
+from drake_reference import plant_terms
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
+from reference_math import task_space_inertia
 
 from nsdrake import ControllerModel, ControllerStep, NullSpaceImpedanceController
 from nsdrake.control.orientation import rotation_to_quaternion
@@ -136,12 +138,15 @@ def test_panda_pose_task_with_obstacles_three_ways():
 
 
 def test_actuator_limits_three_ways(tmp_path):
-    """fig3 with torque and torque-rate limits that bind from the start: τ₀ scaled and the
-    task torque clipped, the rate window around the stored previous τ."""
-    limits = "actuator_limits: {torque: {joint1: 6.0, joint2: 4.0, joint3: 3.0, joint4: 1.5}, torque_rate: {joint1: 200.0, joint2: 200.0, joint3: 100.0, joint4: 50.0}}\n"  # noqa: E501
+    """fig3 with torque and torque-rate limits that bind from the start (its first 0.3 s
+    use up to 0.44 N m and 21 N m/s on joint 1 unlimited): τ₀ scaled (0 < s < 1) and the
+    task torque clipped, the rate window around the stored previous τ. (Before issue 29
+    looser limits seemed to bind here: the old limiter's chatter dropped τ₀ whenever
+    |τ₀_j| exceeded one period's rate step.)"""
+    limits = "actuator_limits: {torque: {joint1: 0.3, joint2: 4.0, joint3: 0.15, joint4: 1.5}, torque_rate: {joint1: 10.0, joint2: 200.0, joint3: 8.0, joint4: 50.0}}\n"  # noqa: E501
     named = assert_three_ways_agree(fig3_with(tmp_path, limits, duration=0.3))
     s, clipped = named["saturation"]
-    assert np.min(s) < 0.5 and np.max(clipped) >= 1  # both limits bind
+    assert np.any((s > 0.0) & (s < 1.0)) and np.max(clipped) >= 1  # both limits bind
 
 
 @pytest.mark.slow
@@ -216,3 +221,125 @@ def test_null_space_laws_three_ways(tmp_path, law):
     posture criterion's q̇_dⁿ run the same in all three ways (ν and eⁿ nan for the PD laws)."""
     named = assert_three_ways_agree(fig3_with(tmp_path, law, duration=0.3))
     assert np.max(np.abs(named["generalized_force"])) > 0.0
+
+
+def test_a_force_step_changes_tau_in_all_three_ways():
+    """A step of the desired force f_d at a fixed state, as a user's own diagram sees it when
+    its force source changes: the named systems, the fused system and ControllerStep give
+    the same τ before and after the step (1e-12 relative), and the task torque moves by
+    Jᵀ Λ n K_f Δf_d from plain plant calls (1e-9 relative; Eq. 7 with Eq. 8's force term).
+    Catches f_d missing from a stage's prerequisites of calculation (the named
+    ImpedanceController's cached task torque then outlives the step: the closed-loop runs
+    above cannot see it, since the state changes at every tick and recomputes it anyway)."""
+    model = ControllerModel.from_urdf(
+        str(models_dir() / "arm4.urdf"), tool_frame="tool", task_axes=("x", "y")
+    )
+    config = assembly.controller_config(load_scenario("fig3"))
+    config.impedance.max_task_inertia = np.inf  # Λ uncapped: the plain plant calls' Λ
+    config.desired_null_space.criteria.obstacle.gain = 0.0  # the URDF alone knows no obstacles
+    normal = np.array([0.0, 1.0])
+    q, v = np.array([0.4, 0.9, 1.0, 0.6]), np.array([0.1, -0.2, 0.3, -0.1])
+    T = plant_terms(model.arm, q, v)
+    inputs = {
+        "estimated_state": np.concatenate([q, v]),
+        "measured_wrench": np.array([0.0, 0.0, 0.0, 0.0, 2.0, 0.0]),
+        "desired_position": T["x"] + [0.01, 0.0],
+        "desired_velocity": np.zeros(2),
+        "desired_acceleration": np.zeros(2),
+    }
+    forces = (5.0, 15.0)
+
+    def diagram_taus(fused: bool) -> list[tuple[np.ndarray, np.ndarray]]:
+        controller = NullSpaceImpedanceController(
+            controller_model=model, normal=normal, config=config, fused=fused
+        )
+        context = controller.CreateDefaultContext()
+        for name, value in inputs.items():
+            controller.GetInputPort(name).FixValue(context, value)
+        out = []
+        for f_d in forces:  # the same context: only the force input changes
+            controller.GetInputPort("desired_force").FixValue(context, [f_d])
+            out.append(
+                tuple(
+                    controller.GetOutputPort(p).Eval(context).copy()
+                    for p in ("generalized_force", "task_torque")
+                )
+            )
+        return out
+
+    step = ControllerStep(controller_model=model, normal=normal, config=config)
+    plain = []
+    for f_d in forces:
+        step.reset()
+        w = inputs["measured_wrench"]
+        result = step.step(0.0, q, v, w, inputs["desired_position"], np.zeros(2), np.zeros(2), f_d)
+        plain.append((result.tau.copy(), result.task_torque.copy()))
+    J = T["J"]
+    Lambda = task_space_inertia(J, np.linalg.inv(T["H"]))
+    expected = J.T @ Lambda @ normal * config.impedance.K_f * (forces[1] - forces[0])
+    assert np.allclose(plain[1][1] - plain[0][1], expected, rtol=0, atol=1e-9 * np.linalg.norm(expected))
+    for fused in (False, True):
+        for (tau, task), (tau_plain, task_plain) in zip(diagram_taus(fused), plain, strict=True):
+            assert np.max(np.abs(tau - tau_plain)) <= EXACT * np.max(np.abs(tau_plain)), fused
+            assert np.max(np.abs(task - task_plain)) <= EXACT * np.max(np.abs(task_plain)), fused
+
+
+def test_a_change_of_any_input_changes_tau_in_all_three_ways():
+    """Each input of the controller changed at a fixed state, after τ was evaluated: the
+    named systems and the fused system give ControllerStep's τ for the new inputs (1e-12
+    relative), and τ did change. Catches any input missing from a stage's prerequisites of
+    calculation (the f_d of issue 28's mistake 1 is one; the state, the references, the
+    measured wrench and the given q̇_dⁿ are the others), which only a change at a fixed
+    state shows."""
+    model = ControllerModel.from_urdf(
+        str(models_dir() / "arm4.urdf"), tool_frame="tool", task_axes=("x", "y")
+    )
+    config = assembly.controller_config(load_scenario("fig3"))
+    config.desired_null_space.criteria.obstacle.gain = 0.0  # the URDF alone knows no obstacles
+    normal = np.array([0.0, 1.0])
+    q, v = np.array([0.4, 0.9, 1.0, 0.6]), np.array([0.1, -0.2, 0.3, -0.1])
+    base = {
+        "estimated_state": np.concatenate([q, v]),
+        "measured_wrench": np.array([0.0, 0.0, 0.0, 0.0, 2.0, 0.0]),
+        "desired_position": plant_terms(model.arm, q, v)["x"] + [0.01, 0.0],
+        "desired_velocity": np.zeros(2),
+        "desired_acceleration": np.zeros(2),
+        "desired_force": np.array([5.0]),
+        "desired_null_space_velocity": np.array([0.1, -0.1, 0.05, 0.0]),
+    }
+    changes = {
+        "estimated_state": np.concatenate([q + 0.01, v]),
+        "measured_wrench": np.array([0.1, 0.0, 0.3, 1.0, 4.0, 0.0]),
+        "desired_position": base["desired_position"] + [0.0, 0.005],
+        "desired_velocity": np.array([0.02, -0.01]),
+        "desired_acceleration": np.array([0.3, 0.1]),
+        "desired_force": np.array([15.0]),
+        "desired_null_space_velocity": np.array([-0.1, 0.2, 0.0, 0.1]),
+    }
+    step = ControllerStep(controller_model=model, normal=normal, config=config)
+
+    def plain(inputs: dict) -> np.ndarray:
+        step.reset()
+        x = inputs["estimated_state"]
+        refs = (inputs[n] for n in ("desired_position", "desired_velocity", "desired_acceleration"))
+        qns = inputs["desired_null_space_velocity"]
+        out = step.step(0.0, x[:4], x[4:], inputs["measured_wrench"], *refs, inputs["desired_force"][0],
+                        desired_null_space_velocity=qns)  # fmt: skip
+        return out.tau.copy()
+
+    before = plain(base)
+    for fused in (False, True):
+        controller = NullSpaceImpedanceController(
+            controller_model=model, normal=normal, config=config, fused=fused
+        )
+        for name, value in changes.items():
+            context = controller.CreateDefaultContext()
+            for port, fixed in base.items():
+                controller.GetInputPort(port).FixValue(context, fixed)
+            tau = controller.GetOutputPort("generalized_force").Eval(context)
+            assert np.max(np.abs(tau - before)) <= EXACT * np.max(np.abs(before))
+            controller.GetInputPort(name).FixValue(context, value)
+            tau = controller.GetOutputPort("generalized_force").Eval(context)
+            after = plain(base | {name: value})
+            assert np.max(np.abs(after - before)) > 1e-6 * np.max(np.abs(before)), name  # the change acts
+            assert np.max(np.abs(tau - after)) <= EXACT * np.max(np.abs(after)), (name, fused)

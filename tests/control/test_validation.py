@@ -21,6 +21,7 @@ from pydrake.math import RigidTransform
 from nsdrake import ControllerConfig, ControllerConfigError, ControllerModel, NullSpaceImpedanceController
 from nsdrake.control.config import ImpedanceConfig
 from nsdrake.control.model import ModelMismatchError, Obstacle, PinocchioDynamics, check_agreement
+from nsdrake.control.validation import config_problems
 from nsdrake.experiment.scenario import ScenarioError
 from nsdrake.station.models import models_dir
 
@@ -196,6 +197,50 @@ def test_the_scenario_reader_and_the_python_api_state_the_same_problem(
     with pytest.raises(ScenarioError) as info:
         fig3_with(tmp_path, overlay)
     assert str(info.value).endswith(f": {scenario_field}: {problem}"), str(info.value)
+
+
+# Fields of desired_null_space inside one criterion's hysteresis band: beyond its level-2
+# threshold (d_lim 0.05 m by default, q_lim here), short of threshold + band.
+IN_BAND = [
+    (
+        {"criteria__obstacle__influence_distance": 0.055},
+        "obstacle.influence_distance",
+        "d_lim + d_band = 0.06 m",
+    ),
+    (
+        {"selector__q_lim": 0.1, "selector__q_band": 0.2, "criteria__joint_limits__influence": 0.25},
+        "joint_limits.influence",
+        "q_lim + q_band = 0.3 rad",
+    ),
+]
+
+
+@pytest.mark.parametrize(("fields", "where", "rule"), IN_BAND, ids=["obstacle", "joint limits"])
+def test_an_influence_inside_the_hysteresis_band_is_refused(fields, where, rule):
+    """A criterion that took level 2 keeps it until its distance passes threshold + band; an
+    influence distance short of that leaves it on level 2 with no gradient in between.
+    Catches the check comparing the influence with the threshold alone, forgetting the band
+    (issue 28, mistake 3: the existing case, 0.01 m, is below d_lim too)."""
+    message = refusal(lambda: ControllerConfig(desired_null_space=desired(**fields)))
+    assert message.startswith(f"ControllerConfig.desired_null_space.criteria.{where}: ") and rule in message
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [
+        {"criteria__obstacle__influence_distance": 0.06},  # d_lim 0.05 + d_band 0.01
+        {"selector__q_lim": 0.1, "selector__q_band": 0.2, "criteria__joint_limits__influence": 0.3},
+    ],
+    ids=["obstacle", "joint limits"],
+)
+def test_an_influence_at_the_end_of_the_band_is_accepted(fields):
+    """The rule's boundary: an influence equal to threshold + band, written as the user
+    writes decimals. Catches the sum compared in binary (0.05 + 0.01 = 0.060000000000000005
+    > 0.06), which refused it with "0.06 m must be >= … = 0.06 m"."""
+    assert not any(
+        "influence" in where
+        for where, _ in config_problems(ControllerConfig(desired_null_space=desired(**fields)))
+    )
 
 
 # --- the controller's own arguments --------------------------------------------------------

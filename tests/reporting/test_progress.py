@@ -41,6 +41,27 @@ def test_a_log_gets_one_line_per_interval_with_simulated_time_and_real_time_fact
     assert all(line.startswith("panda_wipe: ") for line in lines)
 
 
+def test_after_a_long_gap_the_next_line_is_one_interval_away():
+    """A run that reports nothing for minutes (a slow step, a machine under load): one line
+    when it reports again, then the next only one interval later, by the heartbeat as by the
+    reports. Catches the next line scheduled from the previous schedule instead of from now,
+    which after a gap of k intervals gives the log a burst of k lines, one per report."""
+    log, clock = io.StringIO(), Clock()
+    progress = Progress("panda_wipe", 1.0, simulated=56.0, stream=log, clock=clock)
+    clock.now += LOG_INTERVAL
+    progress(0.1)
+    clock.now += 9.5 * LOG_INTERVAL  # the gap
+    progress(0.2)
+    assert len(log.getvalue().splitlines()) == 2
+    for k in range(1, 20):  # reports and beats every 0.05 interval, up to 0.95 of it
+        clock.now += 0.05 * LOG_INTERVAL
+        progress(0.2 + 0.01 * k) if k % 2 else progress.beat()
+    assert len(log.getvalue().splitlines()) == 2
+    clock.now += 0.05 * LOG_INTERVAL
+    progress.beat()
+    assert len(log.getvalue().splitlines()) == 3
+
+
 def test_a_terminal_gets_a_bar_and_no_log_line():
     tty, clock = Terminal(), Clock()
     progress = Progress("fig3", 1.0, stream=tty, clock=clock)

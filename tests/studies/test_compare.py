@@ -188,7 +188,7 @@ def test_a_crashing_variant_is_a_failed_row_and_the_others_finish(
     monkeypatch.setenv("NSDRAKE_TEST_FAULT", f"1:{fault}")  # read by the worker processes too
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)  # draw the progress bar
     out = tmp_path / "lyap"
-    with deadline(180):
+    with deadline(900):  # a guard against a hang: a cold kernel cache at load takes minutes
         code = main(["compare", "lyapunov", "--duration", "0.2", "--out", str(out), "--jobs", jobs])
     assert code == 1
     with (out / "table.csv").open() as f:
@@ -256,6 +256,31 @@ def test_a_hung_variant_is_stopped_at_its_time_limit_and_the_others_finish(
         assert rows[name]["error"] == "" and float(rows[name]["nu_final"]) > 0
     err = capsys.readouterr().err
     assert f"nsdrake: variant 'no Coriolis compensation' {reason}" in err and "1 of 3 variants failed" in err
+
+
+def test_a_variant_that_starts_late_gets_the_whole_time_limit(tmp_path, monkeypatch):
+    """--variant-timeout counts from each variant's start: the first variant hangs until its
+    limit stops it, so the second starts after the comparison has run for longer than the
+    limit, and still gets its own limit (here it starts, imports nsdrake and raises, which
+    takes a few seconds of its 10). Catches the limit counted from the comparison's start,
+    which stops the second variant as soon as it starts, though the flag promised it 10 s
+    (issue 28, mistake 5)."""
+    monkeypatch.setenv("NSDRAKE_TEST_FAULT", "0:hang,1:raise")  # read by the worker processes
+    (tmp_path / "late").mkdir()
+    with deadline(900):  # a guard against a hang: a cold kernel cache at load takes minutes
+        result = run_family(
+            subset("lyapunov", 0, 1),
+            tmp_path / "late",
+            duration=0.05,
+            jobs=1,
+            isolate=True,
+            variant_timeout=10.0,
+        )
+    errors = [row["error"] for row in result.rows]
+    assert errors == [
+        "failed: timed out after 10 s (--variant-timeout)",
+        "failed: RuntimeError: NSDRAKE_TEST_FAULT asked variant 1 to fail",
+    ]
 
 
 @pytest.mark.parametrize("value", ["0", "-3", "soon", "nan"])
