@@ -58,16 +58,22 @@ class NullSpaceConfig:
     # Feed forward q̈_dⁿ, the backward difference of q̇_dⁿ over one control period [-].
     acceleration_feedforward: bool = True
     # The null-space law (nsdrake.control.null_space_laws): paper (Eq. 21, the velocity law
-    # above), kinematic_posture_pd ((I − Jᵀ(Jᵀ)⁺)(K_ns(q_d − q) − 2√K_ns q̇)) or
-    # dynamically_consistent_posture_pd ((I − Jᵀ J̄ᵀ) H (K_ns(q_d − q) − D_ns q̇)); the posture
+    # above), kinematic_posture_pd ((I − Jᵀ(Jᵀ)⁺_λ)(K_ns(q_d − q) − D_ns q̇)),
+    # dynamically_consistent_posture_pd ((I − Jᵀ J̄ᵀ) H (K_ns(q_d − q) − D_ns q̇)) or
+    # dynamically_consistent_torque_pd ((I − Jᵀ J̄ᵀ)(K_ns(q_d − q) − D_ns q̇)); the posture
     # laws take q_d from desired_null_space.posture and ignore q̇_dⁿ [-].
     law: str = "paper"
-    # K_ns of the posture laws: [N m/rad] for kinematic_posture_pd (a joint stiffness),
-    # [1/s²] for dynamically_consistent_posture_pd (multiplied by H); 0 with the paper's law.
+    # K_ns of the posture laws: [N m/rad] for kinematic_posture_pd and
+    # dynamically_consistent_torque_pd (a joint stiffness), [1/s²] for
+    # dynamically_consistent_posture_pd (multiplied by H); 0 with the paper's law.
     posture_stiffness: float = 0.0
-    # D_ns of dynamically_consistent_posture_pd [1/s]; 0 otherwise (the kinematic law's
-    # damping is 2√K_ns, its form).
+    # D_ns of the posture laws: [N m s/rad] (kinematic_posture_pd, dynamically_consistent_torque_pd;
+    # the Cartesian impedance examples use 2√K_ns), [1/s] (dynamically_consistent_posture_pd);
+    # 0 with the paper's law.
     posture_damping: float = 0.0
+    # λ of kinematic_posture_pd's damped inverse (Jᵀ)⁺_λ = (J Jᵀ + λ² I)⁻¹ J; 0: the
+    # Moore–Penrose inverse; franka_ros's example uses 0.2 [-, J's units]. 0 for the other laws.
+    projector_damping: float = 0.0
 
 
 @dataclass

@@ -38,7 +38,7 @@ OBSTACLE_WIDTH = (
     16  # per obstacle: kind (0 box, 1 sphere), R_WO (9, row-major), p_WO (3), half sizes or radius (3)
 )
 MODES = 5  # nsdrake.control.priority.Mode
-POSTURE_SCALARS = 7  # the null-space law's code, K_ns, D_ns and the posture objective's scalars
+POSTURE_SCALARS = 8  # the null-space law's code, K_ns, D_ns, λ and the posture objective's scalars
 
 TermsView = namedtuple(
     "TermsView",
@@ -66,7 +66,7 @@ PlanView = namedtuple(
         "K_n", "period", "task_velocity_compensation", "coriolis_compensation", "feedforward",
         "tau_max", "rate_max",
         # the null-space law (nsdrake.control.null_space_laws) and the posture objective
-        "law", "posture_stiffness", "posture_damping", "posture_source", "posture_gain",
+        "law", "posture_stiffness", "posture_damping", "projector_damping", "posture_source", "posture_gain",
         "posture_offset_time", "posture_ramp_time", "q_d", "posture_offset", "posture_weight",
     ),
 )  # fmt: skip
@@ -182,7 +182,7 @@ def plan_views(buf, dims) -> PlanView:
     ns, o = _take(buf, o, 5)  # K_n, period, task velocity, Coriolis, feedforward
     tau_max, o = _take(buf, o, n)
     rate_max, o = _take(buf, o, n)
-    # law, K_ns, D_ns, posture source, K of Eq. 30, offset time, offset ramp time
+    # law, K_ns, D_ns, λ, posture source, K of Eq. 30, offset time, offset ramp time
     law, o = _take(buf, o, POSTURE_SCALARS)
     q_d, o = _take(buf, o, n)
     posture_offset, o = _take(buf, o, n)
@@ -197,7 +197,7 @@ def plan_views(buf, dims) -> PlanView:
         e[3] != 0.0, direction, sweep_wave,
         ns[0], ns[1], ns[2] != 0.0, ns[3] != 0.0, ns[4] != 0.0,
         tau_max, rate_max,
-        int(law[0]), law[1], law[2], law[3] != 0.0, law[4], law[5], law[6],
+        int(law[0]), law[1], law[2], law[3], law[4] != 0.0, law[5], law[6], law[7],
         q_d, posture_offset, posture_weight,
     )  # fmt: skip
 

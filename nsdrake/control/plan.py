@@ -87,13 +87,14 @@ def speed_limits(config: ControllerConfig, model: ControllerModel) -> np.ndarray
 
 def posture_constants(config: ControllerConfig, joints: Sequence[str]) -> list:
     """The plan's null-space law and posture objective (:func:`nsdrake.control.layout.plan_views`):
-    [law code, K_ns, D_ns, posture source, K of Eq. 30, offset time, ramp time], then q_d,
+    [law code, K_ns, D_ns, λ, posture source, K of Eq. 30, offset time, ramp time], then q_d,
     the offset and the weight per joint (velocity order; q_d 0 where none is given, which
     only a controller that does not use it may have)."""
     ns, d = config.null_space, config.desired_null_space
     p = d.posture
     return [
-        [LAWS[ns.law], ns.posture_stiffness, ns.posture_damping, d.source == "posture", p.gain,
+        [LAWS[ns.law], ns.posture_stiffness, ns.posture_damping, ns.projector_damping,
+         d.source == "posture", p.gain,
          p.offset_time, p.offset_ramp_time],
         [p.q_d.get(j, 0.0) for j in joints], [p.offset.get(j, 0.0) for j in joints],
         [p.weight.get(j, 1.0) for j in joints],

@@ -78,9 +78,11 @@ from nsdrake.control.layout import index_views, plan_views, terms_views, tick_vi
 from nsdrake.control.model import symmetric_and_inverse
 from nsdrake.control.null_space import _null_space_law
 from nsdrake.control.null_space_laws import (
+    DYNAMICALLY_CONSISTENT_POSTURE_PD,
     KINEMATIC_POSTURE_PD,
     PAPER,
     dynamically_consistent_posture_torque,
+    dynamically_consistent_torque_pd,
     kinematic_posture_torque,
     posture_target,
 )
@@ -471,10 +473,16 @@ def _posture_law(T, P, t, out):
     n = T.q.shape[0]
     q_d = posture_target(P.q_d, P.posture_offset, t, P.posture_offset_time, P.posture_ramp_time)
     if P.law == KINEMATIC_POSTURE_PD:
-        out[:n] = kinematic_posture_torque(T.J, T.q, T.v, q_d, P.posture_stiffness)
-    else:
+        out[:n] = kinematic_posture_torque(
+            T.J, T.q, T.v, q_d, P.posture_stiffness, P.posture_damping, P.projector_damping
+        )
+    elif P.law == DYNAMICALLY_CONSISTENT_POSTURE_PD:
         out[:n] = dynamically_consistent_posture_torque(
             T.H, T.H_inv, T.J, T.q, T.v, q_d, P.posture_stiffness, P.posture_damping
+        )
+    else:
+        out[:n] = dynamically_consistent_torque_pd(
+            T.H_inv, T.J, T.q, T.v, q_d, P.posture_stiffness, P.posture_damping
         )
     out[n:] = np.nan
 

@@ -38,7 +38,12 @@ from nsdrake.control.layout import input_fault
 from nsdrake.control.pseudo_inverse import GeneralizedInverse, PseudoInverseKind
 
 NULL_SPACE_SOURCES = ("criteria", "sweep", "posture")
-NULL_SPACE_LAWS = ("paper", "kinematic_posture_pd", "dynamically_consistent_posture_pd")
+NULL_SPACE_LAWS = (
+    "paper",
+    "kinematic_posture_pd",
+    "dynamically_consistent_posture_pd",
+    "dynamically_consistent_torque_pd",
+)
 SHOW_LENGTH = 80  # [characters] longest echo of a user's value in an error message
 # [m/s²] the largest gravity a model may have: 100 g (Earth's 9.81, Jupiter's 24.8; an arm
 # in a centrifuge test at most some tens of g). Beyond it the model terms are dominated by
@@ -268,23 +273,23 @@ def _null_space_problems(ns) -> Iterator[tuple[str, str]]:
 
 
 def _law_problems(ns) -> list[tuple[str, str | None]]:
-    """The null-space law and its posture gains: K_ns > 0 for a posture law, D_ns > 0 for
-    the dynamically consistent one, both 0 where the law does not use them."""
-    missing = [n for n in ("law", "posture_stiffness", "posture_damping") if not hasattr(ns, n)]
+    """The null-space law and its posture gains: K_ns > 0 and D_ns > 0 for a posture law,
+    λ ≥ 0 for the kinematic one, each 0 where the law does not use it."""
+    fields = ("posture_stiffness", "posture_damping", "projector_damping")
+    missing = [n for n in ("law", *fields) if not hasattr(ns, n)]
     if missing:
         return [(missing[0], "missing")]
     law = choice_problem(ns.law, NULL_SPACE_LAWS)
     if law:
         return [("law", law)]
-    uses = {
-        "paper": (),
-        "kinematic_posture_pd": ("posture_stiffness",),
-        "dynamically_consistent_posture_pd": ("posture_stiffness", "posture_damping"),
-    }[ns.law]
+    pd = ("posture_stiffness", "posture_damping")
+    uses = {"paper": (), "kinematic_posture_pd": (*pd, "projector_damping")}.get(ns.law, pd)
     out = []
-    for name in ("posture_stiffness", "posture_damping"):
+    for name in fields:
         value = getattr(ns, name)
-        if name in uses:
+        if name == "projector_damping" and name in uses:
+            out.append((name, non_negative_problem(value)))
+        elif name in uses:
             out.append((name, positive_problem(value)))
         elif not is_number(value) or value != 0:
             out.append((name, f"must be 0: the law {ns.law} does not use it, got {show(value)}"))

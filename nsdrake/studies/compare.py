@@ -457,6 +457,14 @@ def measure_null_space_laws(traces: Traces, ctx: RunFacts) -> dict:
     return law_figures(traces, ctx)
 
 
+def measure_null_space_bandwidth(traces: Traces, ctx: RunFacts) -> dict:
+    """Issue 25: one law at one null-space bandwidth (:mod:`nsdrake.studies.null_space_laws`),
+    the law's row with the bandwidth it was tuned for (its slowest pole)."""
+    from nsdrake.studies.null_space_laws import law_figures
+
+    return law_figures(traces, ctx)
+
+
 MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
     "contact_force_into_null_space": measure_contact_force_into_null_space,
     "null_space_motion_into_task": measure_null_space_motion_into_task,
@@ -465,6 +473,7 @@ MEASURES: dict[str, Callable[[Traces, RunFacts], dict]] = {
     "realism": measure_realism,
     "gradient_projection": measure_gradient_projection,
     "null_space_laws": measure_null_space_laws,
+    "null_space_bandwidth": measure_null_space_bandwidth,
 }
 
 
@@ -552,7 +561,10 @@ def _run_variant(task: _Task, progress: Callable[[float], None] | None = None) -
         e.traces.write_csv(task.folder / "traces.csv")
         return "interrupted", e.t
     task.folder.mkdir(parents=True, exist_ok=True)
-    if task.family.measure == "null_space_laws":  # its per-row figures, kept with the traces
+    if task.family.measure in (
+        "null_space_laws",
+        "null_space_bandwidth",
+    ):  # per-row figures, kept with the traces
         from nsdrake.studies.null_space_laws import law_columns
 
         traces = law_columns(traces, scenario, built.station.arm_model)
@@ -854,7 +866,7 @@ def run_family(
 
 
 # The files a comparison writes beside its variants' traces (declared before any is written).
-COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png", "laws.png")
+COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png", "laws.png", "bandwidth.png")
 
 
 def _run_family(family, out, folders, config, duration, jobs, isolate, progress, timeout) -> FamilyResult:
@@ -892,6 +904,10 @@ def _run_family(family, out, folders, config, duration, jobs, isolate, progress,
 
             ran_rows = [row for row in table if "error" not in row]
             plot_laws(out / "laws.png", family, ran_rows, [Traces.read_csv(f / "traces.csv") for _, f in ran])
+        if family.measure == "null_space_bandwidth":
+            from nsdrake.studies.null_space_laws import plot_bandwidth
+
+            plot_bandwidth(out / "bandwidth.png", family, [row for row in table if "error" not in row])
     return FamilyResult(family=family, rows=table, out=out)
 
 

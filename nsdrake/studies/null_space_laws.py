@@ -1,23 +1,34 @@
-"""Issue 19: which null-space law? The figures of ``nsdrake compare null_space_laws``.
+"""Issues 19 and 25: which null-space law? The figures of ``nsdrake compare null_space_laws``
+and ``nsdrake compare null_space_bandwidth``.
 
-The family (``families/null_space_laws.yaml``) runs each law of
-:mod:`nsdrake.control.null_space_laws` on each task with the same task impedance and the
-same secondary objective, a posture q_d. Its gains are matched here (:func:`matched_gains`)
-so that every law has the same null-space natural frequency ω = K_n / 2 (critical damping
-for the paper's velocity loop of gain K_n), with h_n the null-space inertia at the start
-posture (:func:`null_space_inertia`):
+The families run each law of :mod:`nsdrake.control.null_space_laws` on each task with the
+same task impedance and the same secondary objective, a posture q_d. Each law is tuned by
+one written rule (:func:`tuned_gains`), as its users tune it: stable at the control period
+and about critically damped, for a null-space bandwidth ω [rad/s], the rate of the slowest
+pole of the posture's return, equal for every law.
 
-- paper, J̄ (Eq. 30 on p = ½‖q − q_d‖², W = I): ω² = K_n |K| / h_n, so K = −ω² h_n / K_n;
-- paper, J⁺ (no H⁻¹ in Eq. 28's step): ω² = K_n |K|, so K = −ω² / K_n;
-- dynamically consistent posture PD (acceleration units): K_ns = ω², D_ns = 2 ω = K_n;
-- kinematic posture PD (torque units): K_ns = ω² h_n [N m/rad]; its damping is 2 √K_ns by
-  its form, a damping ratio ζ = 1 / √h_n (h_n in kg m²), not 1.
+The rule comes from the null-space loop with the task held: in coordinates s of J's null
+space (q − q* = Z s, Z an orthonormal basis), Zᵀ H Z s̈ = Zᵀ τ₀, since Zᵀ Jᵀ = 0; with
+M_n = Zᵀ H Z (its eigenvalues μ_i, the null-space inertias, :func:`null_space_masses`) and q_d
+on the self-motion (q* − q_d ∈ range Z):
 
-With a one-dimensional null space (the Panda's pose task) h_n = zᵀ H z, z the unit
-null-space direction, and the match is exact at the start posture; with more (fig3's arm,
-two) h_n is the geometric mean of the eigenvalues of Zᵀ H Z, and the laws' stiffness
-differs by direction (the PD law in acceleration units is the same in every direction,
-the others scale with the inverse null-space inertia).
+- kinematic posture PD and dynamically consistent torque PD: Zᵀ (I − Jᵀ (Jᵀ)⁺_λ) = Zᵀ and
+  Zᵀ (I − Jᵀ J̄ᵀ) = Zᵀ, so μ s̈ + D_ns ṡ + K_ns s = 0 per direction; the rule
+  K_ns = ω² h_n, D_ns = 2 ω h_n gives a double pole at −ω where μ = h_n (λ does not enter:
+  it changes what τ₀ does to the task, not to s);
+- dynamically consistent posture PD (multiplied by H): s̈ + D_ns ṡ + K_ns s = 0 in every
+  direction; the rule K_ns = ω², D_ns = 2 ω;
+- the paper's law (Eq. 21 with Eq. 30 on p = ½‖q − q_d‖²): (I − J̄ J) H⁻¹ = Z M_n⁻¹ Zᵀ, so
+  q̇_dⁿ = K Z M_n⁻¹ s and the commanded ṡ_d = −a s with a = |K|/μ (through J⁺: a = |K|); the
+  velocity loop with its feedforward q̈_dⁿ gives s̈ = s̈_d + K_n (ṡ_d − ṡ), poles −a and −K_n.
+  The rule a = ω, K_n = 2 ω: K = −ω h_n (K = −ω with J⁺), poles −ω and −2ω, a damping ratio
+  (a + K_n)/(2 √(a K_n)) = 3/(2√2) = 1.06.
+
+h_n is the geometric mean of the μ_i at the start posture (the Panda's pose task leaves one
+direction, fig3's position task two): where the μ_i differ the rule is exact for none and
+the damping ratio spans a range, reported per row (:func:`null_space_loop`) with the
+discrete-time pole radius ρ_T of the sampled loop at the control period T (the torque held
+over each period; ρ_T < 1 is stable; a sampled damper alone diverges once T D/μ > 2).
 
 The figures (:func:`law_figures`), from the traces and the arm's model only, the same
 for every law:
@@ -26,8 +37,10 @@ for every law:
   (from first contact + :data:`~nsdrake.reporting.metrics.SETTLE_TIME` to the end);
 - the task disturbance by the null space, J H⁻¹ τ₀ (τ₀ the applied null-space torque,
   logged: ``report.null_space_torque``), its translational part [m/s²];
-- the elbow's drift: the posture error ‖(I − J⁺ J)(q − q_d(t))‖, the part of q − q_d the
-  self-motion can remove (orthogonal projector, the same metric for every law);
+- the posture error, the part of q − q_d(t) the self-motion can remove, in two metrics:
+  joint space ‖(I − J⁺ J) e‖ (orthogonal projector) [rad], and the inertia metric
+  ‖(I − J̄ J) e‖_H / √h_n (the H-orthogonal projector, scaled to rad by the start's h_n);
+  the laws that settle in joint space bring the first to zero, the H-weighted PD the second;
 - after a push (``push``): the largest tool position error, and the time from the push's
   start until the posture's deviation from where the push found it stays within 5% of
   its peak;
@@ -49,24 +62,121 @@ from nsdrake.reporting.metrics import SETTLE_TIME, first_contact_index
 RETURN_SHARE = 0.05  # the posture has returned once its deviation stays within this share of its peak
 
 
-def null_space_inertia(arm, q: np.ndarray) -> float:
-    """h_n at q: the geometric mean of the eigenvalues of Zᵀ H Z, Z an orthonormal basis of
-    the null space of J (module docstring) [kg m²]."""
+def null_space_masses(arm, q: np.ndarray) -> np.ndarray:
+    """The eigenvalues μ_i of M_n = Zᵀ H Z at q, Z an orthonormal basis of the null space of J
+    (module docstring), ascending [kg m²]."""
     terms = arm.terms(arm.plant.CreateDefaultContext(), q, np.zeros(arm.n), coriolis=False)
     _, _, Vt = np.linalg.svd(terms.J)
     Z = Vt[terms.J.shape[0] :].T
-    return float(np.linalg.det(Z.T @ terms.H @ Z) ** (1.0 / Z.shape[1]))
+    return np.linalg.eigvalsh(Z.T @ terms.H @ Z)
 
 
-def matched_gains(h_n: float, K_n: float) -> dict[str, dict]:
-    """The gains of each law for the natural frequency ω = K_n / 2 (module docstring), by
-    the family's law names."""
-    omega2 = (K_n / 2.0) ** 2
+def null_space_inertia(arm, q: np.ndarray) -> float:
+    """h_n at q: the geometric mean of the μ_i (:func:`null_space_masses`) [kg m²]."""
+    mu = null_space_masses(arm, q)
+    return float(np.exp(np.mean(np.log(mu))))
+
+
+# The rows of the families, by key: (law, pseudo-inverse or λ) as the configuration writes them.
+LAW_KEYS = (
+    "paper",
+    "paper_moore_penrose",
+    "kinematic_posture_pd",
+    "kinematic_posture_pd_damped",
+    "dynamically_consistent_posture_pd",
+    "dynamically_consistent_torque_pd",
+)
+FRANKA_ROS_LAMBDA = 0.2  # λ of franka_ros's Cartesian impedance example's damped (Jᵀ)⁺
+
+
+def tuned_gains(law: str, omega: float, h_n: float) -> dict[str, float]:
+    """The rule (module docstring): the gains of ``law`` (one of :data:`LAW_KEYS`) for the
+    null-space bandwidth ω [rad/s] at the null-space inertia h_n [kg m²], by configuration
+    field: ``gain`` (Eq. 30's K), ``K_n``, ``posture_stiffness``, ``posture_damping``,
+    ``projector_damping``."""
+    if law == "paper":
+        return {"gain": -omega * h_n, "K_n": 2.0 * omega}
+    if law == "paper_moore_penrose":
+        return {"gain": -omega, "K_n": 2.0 * omega}
+    if law == "dynamically_consistent_posture_pd":
+        return {"posture_stiffness": omega**2, "posture_damping": 2.0 * omega}
+    torque = {"posture_stiffness": omega**2 * h_n, "posture_damping": 2.0 * omega * h_n}
+    if law == "kinematic_posture_pd_damped":
+        return {**torque, "projector_damping": FRANKA_ROS_LAMBDA}
+    if law in ("kinematic_posture_pd", "dynamically_consistent_torque_pd"):
+        return torque
+    raise ValueError(f"unknown law {law!r}; the laws are {', '.join(LAW_KEYS)}")
+
+
+def law_key(null_space, posture) -> str:
+    """The :data:`LAW_KEYS` entry of a configuration (``null_space``, ``desired_null_space.posture``)."""
+    if null_space.law == "paper":
+        return "paper" if null_space.pseudo_inverse == "dynamically_consistent" else "paper_moore_penrose"
+    if null_space.law == "kinematic_posture_pd" and null_space.projector_damping > 0:
+        return "kinematic_posture_pd_damped"
+    return null_space.law
+
+
+def _sampled_loop(law: str, gains: dict, mu: float, T: float) -> np.ndarray:
+    """The transition matrix over one period T of the null-space loop along a direction of
+    inertia μ (module docstring), the acceleration held over the period: state (s, ṡ) for
+    the PD laws, (s, ṡ, ṡ_d of the previous period) for the paper's (its feedforward q̈_dⁿ
+    is the backward difference of q̇_dⁿ)."""
+    step = np.array([[1.0, T], [0.0, 1.0]])
+    hold = np.array([T * T / 2.0, T])
+    if law.startswith("paper"):
+        a = abs(gains["gain"]) / (mu if law == "paper" else 1.0)
+        K_n = gains["K_n"]
+        # acc_k = (ṡ_d,k − ṡ_d,k−1)/T + K_n (ṡ_d,k − ṡ_k), ṡ_d,k = −a s_k
+        acc = np.array([-a / T - K_n * a, -K_n, -1.0 / T])
+        A = np.zeros((3, 3))
+        A[:2, :2] = step
+        A[:2, :] += np.outer(hold, acc)
+        A[2, 0] = -a
+        return A
+    K, D = gains["posture_stiffness"], gains["posture_damping"]
+    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
+    return step + np.outer(hold, [-K * scale, -D * scale])
+
+
+def _continuous_poles(law: str, gains: dict, mu: float) -> np.ndarray:
+    """The null-space loop's poles along a direction of inertia μ (module docstring)."""
+    if law.startswith("paper"):
+        a = abs(gains["gain"]) / (mu if law == "paper" else 1.0)
+        return np.array([-a, -gains["K_n"]], dtype=complex)
+    K, D = gains["posture_stiffness"], gains["posture_damping"]
+    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
+    return np.roots([1.0, D * scale, K * scale]).astype(complex)
+
+
+def damping_ratio(poles: np.ndarray) -> float:
+    """ζ of a pair of poles: −(p₁ + p₂) / (2 √(p₁ p₂)) (1 for a double pole, > 1 real)."""
+    p1, p2 = poles
+    return float((-(p1 + p2) / (2.0 * np.sqrt(p1 * p2))).real)
+
+
+def null_space_loop(law: str, gains: dict, masses: np.ndarray, period: float) -> dict:
+    """The row's loop figures over the null-space directions of inertias ``masses``: the
+    damping ratios' range, the slowest pole's rate [rad/s] and the largest discrete-time
+    pole radius ρ_T at the control period (< 1: stable; module docstring)."""
+    zetas, slow, rho = [], math.inf, 0.0
+    for mu in masses:
+        poles = _continuous_poles(law, gains, float(mu))
+        zetas.append(damping_ratio(poles))
+        slow = min(slow, float(np.min(-poles.real)))
+        rho = max(rho, float(np.max(np.abs(np.linalg.eigvals(_sampled_loop(law, gains, float(mu), period))))))
+    return {"zeta_min": min(zetas), "zeta_max": max(zetas), "slowest_pole": slow, "pole_radius": rho}
+
+
+def row_gains(scenario) -> dict[str, float]:
+    """The gains :func:`tuned_gains` names, as ``scenario`` sets them."""
+    ns = scenario.null_space
     return {
-        "paper": {"gain": -omega2 * h_n / K_n},
-        "paper_moore_penrose": {"gain": -omega2 / K_n},
-        "kinematic_posture_pd": {"posture_stiffness": omega2 * h_n},
-        "dynamically_consistent_posture_pd": {"posture_stiffness": omega2, "posture_damping": K_n},
+        "gain": scenario.desired_null_space.posture.gain,
+        "K_n": ns.K_n,
+        "posture_stiffness": ns.posture_stiffness,
+        "posture_damping": ns.posture_damping,
+        "projector_damping": ns.projector_damping,
     }
 
 
@@ -113,9 +223,12 @@ def _pose_error(arm, dp: np.ndarray, R_err: np.ndarray) -> np.ndarray:
 def law_columns(traces: Traces, scenario, arm) -> Traces:
     """The traces with the figures' per-row signals added: ``task_disturbance`` ‖(J H⁻¹ τ₀)
     translational‖ [m/s²], ``task_disturbance_rot`` (rotational rows, [rad/s²]; 0 without)
-    ``posture_error`` ‖(I − J⁺ J)(q − q_d(t))‖ [rad] (module docstring) and, with a push,
+    ``posture_error`` ‖(I − J⁺ J)(q − q_d(t))‖ [rad], ``posture_error_H`` ‖(I − J̄ J)(q −
+    q_d(t))‖_H / √h_n, h_n at the first row's q [rad] (module docstring) and, with a push,
     ``posture_deviation`` ‖(I − J⁺ J)(q − q_push)‖ from the posture q_push at its start
-    [rad] (0 without)."""
+    [rad] (0 without), and ``posture_lag_predicted`` ‖Zᵀ H J⁺ ẋ‖ / |K| [rad], ẋ = J q̇: the
+    posture error the paper's law through J̄ keeps while the tool moves (:func:`posture_lag`;
+    nan for the other laws)."""
     q, tau0 = traces.block("q"), traces.block("tau0_")
     t = traces["t"]
     p = scenario.desired_null_space.posture
@@ -125,32 +238,68 @@ def law_columns(traces: Traces, scenario, arm) -> Traces:
     q_push = q[min(int(np.searchsorted(t, push.start_time)), len(t) - 1)] if push.enabled else None
     context = arm.plant.CreateDefaultContext()
     zero = np.zeros(arm.n)
-    out = np.zeros((len(traces), 4))
+    h_n = null_space_inertia(arm, q[0])
+    v = traces.block("v")
+    jbar = (
+        scenario.null_space.law == "paper" and scenario.null_space.pseudo_inverse == "dynamically_consistent"
+    )
+    out = np.zeros((len(traces), 6))
     for k in range(len(traces)):
         terms = arm.terms(context, q[k], zero, coriolis=False)
+        H_inv_Jt = terms.H_inv @ terms.J.T
         a = terms.J @ (terms.H_inv @ tau0[k])
         J_pinv = np.linalg.pinv(terms.J)
         e = q[k] - posture_target(q_d0, offset, t[k], p.offset_time, p.offset_ramp_time)
         d = q[k] - q_push if push.enabled else zero
         null_e, null_d = e - J_pinv @ (terms.J @ e), d - J_pinv @ (terms.J @ d)
+        null_e_H = e - H_inv_Jt @ np.linalg.solve(terms.J @ H_inv_Jt, terms.J @ e)  # (I − J̄ J) e
         out[k] = (
             np.linalg.norm(a[: arm.m_t]),
             np.linalg.norm(a[arm.m_t :]),
             *np.linalg.norm([null_e, null_d], axis=1),
+            math.sqrt(max(0.0, null_e_H @ terms.H @ null_e_H) / h_n),
+            posture_lag(terms, v[k], p.gain) if jbar else math.nan,
         )
     columns = {name: traces[name] for name in traces.names}
     for i, name in enumerate(
-        ("task_disturbance", "task_disturbance_rot", "posture_error", "posture_deviation")
+        (
+            "task_disturbance",
+            "task_disturbance_rot",
+            "posture_error",
+            "posture_deviation",
+            "posture_error_H",
+            "posture_lag_predicted",
+        )
     ):
         columns[name] = out[:, i]
     return Traces(columns)
 
 
-def law_name(scenario) -> str:
-    ns = scenario.null_space
-    if ns.law == "paper":
-        return "paper" if ns.pseudo_inverse == "dynamically_consistent" else f"paper ({ns.pseudo_inverse})"
-    return ns.law
+def posture_lag(terms, v: np.ndarray, K: float) -> float:
+    """The posture error the paper's law through J̄ holds while the tool moves at ẋ = J q̇:
+    ‖Zᵀ H J⁺ ẋ‖ / |K| [rad]. J̄'s null-space velocity (I − J̄ J) q̇ = q̇ − J̄ ẋ contains
+    (I − J̄ J) J⁺ ẋ = Z M_n⁻¹ Zᵀ H J⁺ ẋ, part of the tool's own motion; the velocity loop
+    makes it equal q̇_dⁿ = K Z M_n⁻¹ Zᵀ (q − q_d), so in the quasi-static limit (ṡ ≪)
+    Zᵀ (q − q_d) = Zᵀ H J⁺ ẋ / K: the inertia M_n cancels. Through J⁺, (I − J⁺ J) J⁺ = 0 and
+    the term vanishes."""
+    J = terms.J
+    Z = np.linalg.svd(J)[2][J.shape[0] :].T
+    return float(np.linalg.norm(Z.T @ terms.H @ np.linalg.pinv(J) @ (J @ v)) / abs(K))
+
+
+def loop_figures(scenario, arm) -> dict:
+    """The row's null-space loop at the start posture, from its own gains and period
+    (:func:`null_space_loop`): what the table reports as its damping ratio and margin."""
+    key = law_key(scenario.null_space, scenario.desired_null_space.posture)
+    q0 = np.array([scenario.arm.initial_positions[j] for j in arm.joint_names])
+    masses = null_space_masses(arm, q0)
+    loop = null_space_loop(key, row_gains(scenario), masses, scenario.control_period)
+    zeta = (
+        f"{loop['zeta_min']:.3g}"
+        if loop["zeta_max"] - loop["zeta_min"] < 5e-4 * loop["zeta_max"]
+        else f"{loop['zeta_min']:.3g}–{loop['zeta_max']:.3g}"
+    )
+    return {"damping_ratio": zeta, "slowest_pole": loop["slowest_pole"], "pole_radius_T": loop["pole_radius"]}
 
 
 def _rms(x) -> float:
@@ -162,7 +311,7 @@ def law_figures(traces: Traces, ctx) -> dict:
     """One row of the table (module docstring)."""
     s = ctx.scenario
     t = traces["t"]
-    row: dict = {"law": law_name(s)}
+    row: dict = {"law": law_key(s.null_space, s.desired_null_space.posture), **loop_figures(s, ctx.arm)}
     k0 = first_contact_index(traces, s.reference.contact_threshold)
     if k0 is None or t[-1] < t[k0] + SETTLE_TIME:
         return {**row, "note": "no contact window (no contact, or the run ends within 0.5 s of it)"}
@@ -180,6 +329,11 @@ def law_figures(traces: Traces, ctx) -> dict:
         "task_disturbance_peak": float(traces["task_disturbance"][window].max()),
         "posture_error_rms": _rms(traces["posture_error"][window]),
         "posture_error_end": float(traces["posture_error"][-1]),
+        "posture_error_H_rms": _rms(traces["posture_error_H"][window]),
+        "posture_error_H_end": float(traces["posture_error_H"][-1]),
+        "posture_lag_predicted_rms": _rms(traces["posture_lag_predicted"][window])
+        if np.isfinite(traces["posture_lag_predicted"][window]).all()
+        else "",
         "tau0_rms": _rms(np.linalg.norm(traces.block("tau0_")[window], axis=1)),
         "nu_rms": _rms(traces["nu"][window]) if np.isfinite(traces["nu"][window]).all() else "",
     }
@@ -247,5 +401,37 @@ def plot_laws(path, family, rows: list[dict], traces: list[Traces]) -> None:
     axes[2, 0].set_ylabel(r"posture error $\|(I - J^+J)(q - q_d)\|$ [rad]")
     axes[0, 0].legend(fontsize=7, loc="best")
     fig.suptitle(f"{family.name}: force, task disturbance by the null space, elbow drift", fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_bandwidth(path, family, rows: list[dict]) -> None:
+    """Per law (a variant is named "ω rad/s / LAW"), against the bandwidth (the row's slowest
+    pole): the task disturbance ‖J H⁻¹ τ₀‖ RMS, the orientation error RMS and the posture
+    error RMS in joint space and in the inertia metric."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = (
+        ("task_disturbance_rms", r"$\|J H^{-1} \tau_0\|$ RMS [m/s²]"),
+        ("orientation_error_rms", "orientation error RMS [rad]"),
+        ("posture_error_rms", "posture error RMS, joint space [rad]"),
+        ("posture_error_H_rms", "posture error RMS, inertia metric [rad]"),
+    )
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), constrained_layout=True)
+    laws = list(dict.fromkeys(row["variant"].partition(" / ")[2] for row in rows))
+    for law in laws:
+        mine = [row for row in rows if row["variant"].partition(" / ")[2] == law and "force_error_rms" in row]
+        omega = [float(row["variant"].split(" rad/s")[0]) for row in mine]
+        for ax, (key, _) in zip(axes, panels, strict=True):
+            ax.loglog(omega, [max(float(row[key]), 1e-18) for row in mine], "o-", lw=1, ms=4, label=law)
+    for ax, (_, label) in zip(axes, panels, strict=True):
+        ax.set_xlabel("null-space bandwidth ω [rad/s]")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", lw=0.3)
+    axes[0].legend(fontsize=7, loc="best")
+    fig.suptitle(f"{family.name}: task disturbance and posture error against the bandwidth", fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -7,7 +7,12 @@ formed here with NumPy (tests/reference_math.py), not by the functions under tes
 - dynamically consistent posture PD: J H⁻¹ τ₀ = 0 (no task acceleration), and τ₀ equals
   (I − Jᵀ J̄ᵀ) H (K_ns (q_d − q) − D_ns q̇);
 - kinematic posture PD: (Jᵀ)⁺ τ₀ = 0 (no task force), while J H⁻¹ τ₀ is not zero (the
-  task acceleration the comparison measures), and τ₀ equals (I − Jᵀ(Jᵀ)⁺)(K (q_d − q) − 2√K q̇);
+  task acceleration the comparison measures), and τ₀ equals (I − Jᵀ(Jᵀ)⁺)(K (q_d − q) − D q̇);
+  with franka_ros's damped inverse (λ = 0.2) τ₀ equals the projector built from the SVD of
+  Jᵀ with the singular values σ/(σ² + λ²), and leaves λ²/(σ² + λ²) of τ_p along each left
+  singular vector of Jᵀ;
+- dynamically consistent torque PD (mjctrl's form, no H): J H⁻¹ τ₀ = 0, and τ₀ equals
+  (I − Jᵀ J̄ᵀ)(K (q_d − q) − D q̇);
 - the paper's law with the posture criterion: J H⁻¹ τ₀ = 0 (Eq. 11).
 
 The same properties through the controller's stage (ControllerStep, the code all three
@@ -30,6 +35,7 @@ from nsdrake.control.config import DesiredNullSpaceConfig, NullSpaceConfig, Post
 from nsdrake.control.criteria.posture import posture_criterion
 from nsdrake.control.null_space_laws import (
     dynamically_consistent_posture_torque,
+    dynamically_consistent_torque_pd,
     kinematic_posture_torque,
     posture_target,
 )
@@ -77,14 +83,52 @@ def test_kinematic_posture_pd_exerts_no_task_force_but_accelerates_the_task(arm)
     for q, v in states(arm, 12, seed=4):
         T = terms(arm, q, v)
         q_d = q + rng.uniform(-0.5, 0.5, arm.n)
-        K = 10.0
-        tau0 = kinematic_posture_torque(T.J, q, v, q_d, K)
-        tau_p = K * (q_d - q) - 2.0 * np.sqrt(K) * v
+        K, D = 10.0, 0.7
+        tau0 = kinematic_posture_torque(T.J, q, v, q_d, K, D, 0.0)
+        tau_p = K * (q_d - q) - D * v
         Jt_pinv = np.linalg.pinv(T.J.T)
         assert np.linalg.norm(tau0 - (tau_p - T.J.T @ (Jt_pinv @ tau_p))) <= 1e-9 * np.linalg.norm(tau_p)
         assert np.linalg.norm(Jt_pinv @ tau0) <= ZERO * np.linalg.norm(Jt_pinv @ tau_p)
         accelerations.append(np.linalg.norm(T.J @ T.H_inv @ tau0) / np.linalg.norm(T.J @ T.H_inv @ tau_p))
     assert min(accelerations) > 1e-3  # τ₀ moves the task at every state: not a DC projector
+
+
+@pytest.mark.parametrize("arm", arms(), ids=["panda", "arm4"])
+def test_damped_kinematic_projector_is_franka_ros_svd_form(arm):
+    """τ₀ with λ = 0.2 against (I − Jᵀ M)τ_p, M = V diag(σ/(σ² + λ²)) Uᵀ from the SVD
+    Jᵀ = U Σ Vᵀ (the damped pseudo-inverse as franka_ros's example forms it), to 1e-9;
+    and the share of τ_p left along Jᵀ's i-th left singular vector u_i is λ²/(σ_i² + λ²).
+    Catches λ entering unsquared, the damping on the wrong side of J, or λ ignored."""
+    lam, K, D = 0.2, 10.0, 0.7
+    rng = np.random.default_rng(8)
+    for q, v in states(arm, 8, seed=9):
+        T = terms(arm, q, v)
+        q_d = q + rng.uniform(-0.5, 0.5, arm.n)
+        tau_p = K * (q_d - q) - D * v
+        U, sigma, Vt = np.linalg.svd(T.J.T, full_matrices=False)
+        M = Vt.T @ np.diag(sigma / (sigma**2 + lam**2)) @ U.T
+        tau0 = kinematic_posture_torque(T.J, q, v, q_d, K, D, lam)
+        expected = tau_p - T.J.T @ (M @ tau_p)
+        assert np.linalg.norm(tau0 - expected) <= 1e-9 * np.linalg.norm(tau_p)
+        np.testing.assert_allclose(
+            U.T @ tau0, lam**2 / (sigma**2 + lam**2) * (U.T @ tau_p), rtol=1e-8, atol=1e-12
+        )
+
+
+@pytest.mark.parametrize("arm", arms(), ids=["panda", "arm4"])
+def test_dynamically_consistent_torque_pd_is_the_projected_torque_pd(arm):
+    """τ₀ = (I − Jᵀ J̄ᵀ)(K (q_d − q) − D q̇) with J̄ formed here, to 1e-9, and J H⁻¹ τ₀ = 0.
+    Catches an H left in (the other form) or the Euclidean projector in its place."""
+    rng = np.random.default_rng(10)
+    for q, v in states(arm, 12, seed=11):
+        T = terms(arm, q, v)
+        q_d = q + rng.uniform(-0.5, 0.5, arm.n)
+        tau_p = 12.0 * (q_d - q) - 0.9 * v
+        tau0 = dynamically_consistent_torque_pd(T.H_inv, T.J, q, v, q_d, 12.0, 0.9)
+        J_bar = dynamically_consistent_inverse(T.J, T.H_inv)
+        expected = (np.eye(arm.n) - T.J.T @ J_bar.T) @ tau_p
+        assert np.linalg.norm(tau0 - expected) <= 1e-9 * np.linalg.norm(tau_p)
+        assert np.linalg.norm(T.J @ T.H_inv @ tau0) <= ZERO * np.linalg.norm(T.J @ T.H_inv @ tau_p)
 
 
 def test_posture_criterion_gradient_matches_finite_differences():
@@ -150,6 +194,7 @@ def stage_torques(step: ControllerStep, count: int, seed: int):
 @pytest.mark.parametrize(
     "law, gains",
     [("dynamically_consistent_posture_pd", {"posture_stiffness": 400.0, "posture_damping": 40.0}),
+     ("dynamically_consistent_torque_pd", {"posture_stiffness": 10.0, "posture_damping": 1.0}),
      ("paper", {})],
 )  # fmt: skip
 def test_stage_dynamically_consistent_laws_cause_no_task_acceleration(law, gains):
@@ -160,7 +205,8 @@ def test_stage_dynamically_consistent_laws_cause_no_task_acceleration(law, gains
 
 
 def test_stage_kinematic_law_uses_the_moore_penrose_projector():
-    for T, tau0 in stage_torques(panda_step("kinematic_posture_pd", posture_stiffness=10.0), 8, seed=7):
+    step = panda_step("kinematic_posture_pd", posture_stiffness=10.0, posture_damping=1.0)
+    for T, tau0 in stage_torques(step, 8, seed=7):
         Jt_pinv = np.linalg.pinv(T.J.T)
         scale = np.linalg.norm(Jt_pinv) * np.linalg.norm(tau0)
         assert np.linalg.norm(Jt_pinv @ tau0) <= ZERO * scale
@@ -213,10 +259,14 @@ def test_posture_criterion_pulls_an_unweighted_joint_with_weight_one(weight, w):
         ({"law": "khatib"}, "null_space.law"),
         ({"law": "paper", "posture_stiffness": 3.0}, "null_space.posture_stiffness"),
         ({"law": "kinematic_posture_pd"}, "null_space.posture_stiffness"),
-        ({"law": "kinematic_posture_pd", "posture_stiffness": 3.0, "posture_damping": 1.0},
-         "null_space.posture_damping"),
+        ({"law": "kinematic_posture_pd", "posture_stiffness": 3.0}, "null_space.posture_damping"),
+        ({"law": "kinematic_posture_pd", "posture_stiffness": 3.0, "posture_damping": 1.0,
+          "projector_damping": -0.1}, "null_space.projector_damping"),
         ({"law": "dynamically_consistent_posture_pd", "posture_stiffness": 3.0},
          "null_space.posture_damping"),
+        ({"law": "dynamically_consistent_torque_pd", "posture_stiffness": 3.0, "posture_damping": 1.0,
+          "projector_damping": 0.2}, "null_space.projector_damping"),
+        ({"law": "paper", "projector_damping": 0.2}, "null_space.projector_damping"),
     ],
 )  # fmt: skip
 def test_law_fields_are_checked(change, where):

@@ -198,13 +198,22 @@ FIG3_POSTURE = "{q_d: {joint1: 0.401, joint2: 0.972, joint3: 1.012, joint4: 0.61
     "law",
     [
         f"desired_null_space: {{source: posture, posture: {FIG3_POSTURE}, gain: -0.1224}}}}",
-        "null_space: {law: kinematic_posture_pd, posture_stiffness: 0.3}\n"
+        "null_space: {law: kinematic_posture_pd, posture_stiffness: 0.3, posture_damping: 0.03, "
+        "projector_damping: 0.2}\n"
         f"desired_null_space: {{posture: {FIG3_POSTURE}}}}}",
         "null_space: {law: dynamically_consistent_posture_pd, posture_stiffness: 2500.0, "
         "posture_damping: 100.0}\n"
         f"desired_null_space: {{posture: {FIG3_POSTURE}}}}}",
+        "null_space: {law: dynamically_consistent_torque_pd, posture_stiffness: 12.2, "
+        "posture_damping: 0.49}\n"
+        f"desired_null_space: {{posture: {FIG3_POSTURE}}}}}",
     ],
-    ids=["paper with the posture criterion", "kinematic posture PD", "dynamically consistent posture PD"],
+    ids=[
+        "paper with the posture criterion",
+        "kinematic posture PD, damped inverse",
+        "dynamically consistent posture PD",
+        "dynamically consistent torque PD",
+    ],
 )
 def test_null_space_laws_three_ways(tmp_path, law):
     """fig3's first 0.3 s with each null-space law of issue 19 and a posture q_d(t) that

@@ -67,7 +67,7 @@ def refused(tmp_path, capsys, config_text: str, *extra: str) -> str:
             r"desired_null_space\.posture\.gain: must be 0: nothing uses it",
         ),
         (
-            f"null_space: {{law: kinematic_posture_pd, posture_stiffness: 10.0}}\n"
+            f"null_space: {{law: kinematic_posture_pd, posture_stiffness: 10.0, posture_damping: 0.5}}\n"
             f"desired_null_space: {{posture: {{q_d: {FIG3_Q_D}, gain: -0.1}}}}",
             r"desired_null_space\.posture\.gain: must be 0: nothing uses it \(desired_null_space\.source is "
             r"criteria and null_space\.law is kinematic_posture_pd\)",
@@ -105,6 +105,7 @@ def test_the_posture_settings_a_controller_uses_are_taken():
     )
     law = ControllerConfig()
     law.null_space.law, law.null_space.posture_stiffness = "kinematic_posture_pd", 10.0
+    law.null_space.posture_damping = 0.5  # a kinematic PD's damping is given (issue 25), not 2√K_ns
     law.desired_null_space.posture = dataclasses.replace(
         law.desired_null_space.posture, q_d=q_d, offset={"joint4": -0.5}, offset_time=1.0
     )

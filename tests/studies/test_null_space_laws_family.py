@@ -12,51 +12,183 @@ import math
 
 import numpy as np
 import pytest
+from conftest import panda_arm, paper_arm
+from reference_math import dynamically_consistent_inverse
+from scipy.signal import cont2discrete
 
+from nsdrake.control.null_space_laws import (
+    dynamically_consistent_posture_torque,
+    dynamically_consistent_torque_pd,
+    kinematic_posture_torque,
+)
 from nsdrake.experiment.diagram import build_diagram
 from nsdrake.experiment.scenario import ScenarioError
 from nsdrake.studies.compare import load_family, run_family, variant_scenario
-from nsdrake.studies.null_space_laws import matched_gains, null_space_inertia
-
-LAWS = ("paper", "paper, Moore-Penrose", "kinematic posture PD", "dynamically consistent posture PD")
-KEY = dict(
-    zip(
-        LAWS,
-        ("paper", "paper_moore_penrose", "kinematic_posture_pd", "dynamically_consistent_posture_pd"),
-        strict=True,
-    )
+from nsdrake.studies.null_space_laws import (
+    LAW_KEYS,
+    _continuous_poles,
+    damping_ratio,
+    law_key,
+    null_space_inertia,
+    null_space_loop,
+    null_space_masses,
+    row_gains,
+    tuned_gains,
 )
+
+LAWS = (
+    "paper",
+    "paper, Moore-Penrose",
+    "kinematic PD",
+    "kinematic PD, damped inverse",
+    "dyn. consistent PD (H)",
+    "dyn. consistent PD (torque)",
+)
+TASKS = ["panda_wipe", "panda_self_motion", "panda_off_path", "fig3", "push", "push, no rate limit"]
 
 
 def test_every_task_runs_every_law():
     family = load_family("null_space_laws")
     names = [v.name.split(" / ") for v in family.variants]
     tasks = list(dict.fromkeys(task for task, _ in names))
-    assert tasks == ["panda_wipe", "panda_self_motion", "fig3", "push"]
+    assert tasks == TASKS
     assert sorted(map(tuple, names)) == sorted((t, law) for t in tasks for law in LAWS)
 
 
-def test_the_gains_match_one_null_space_natural_frequency():
-    """Each variant's gains are matched_gains(h_n at the start posture, K_n) to the 4
-    significant digits the family file writes, and every law has the same q_d."""
-    family = load_family("null_space_laws")
+def _bandwidth(family_name: str, variant) -> float:
+    if family_name == "null_space_bandwidth":
+        return float(variant.name.split(" rad/s")[0])
+    return 50.0 if variant.scenario == "fig3" else 20.0  # the scenarios' K_n / 2
+
+
+@pytest.mark.parametrize("name", ["null_space_laws", "null_space_bandwidth"])
+def test_the_gains_follow_the_tuning_rule(name):
+    """Each variant's gains are tuned_gains(its law, its bandwidth, h_n at the start posture)
+    to the 4 significant digits the family file writes, and every law has the same q_d: the
+    start posture. Catches a family file edited by hand or written from another rule."""
+    family = load_family(name)
     inertia = {}
     for i, variant in enumerate(family.variants):
         s = variant_scenario(family, i, None, 0.01)
         if variant.scenario not in inertia:
             station = build_diagram(s).station
             inertia[variant.scenario] = null_space_inertia(station.arm_model, station.q0)
-            assert s.desired_null_space.posture.q_d == dict(s.arm.initial_positions)
-        expected = matched_gains(inertia[variant.scenario], s.null_space.K_n)[
-            KEY[variant.name.split(" / ")[1]]
-        ]
-        given = {
-            "gain": s.desired_null_space.posture.gain,
-            "posture_stiffness": s.null_space.posture_stiffness,
-            "posture_damping": s.null_space.posture_damping,
-        }
-        for name, value in expected.items():
-            assert given[name] == pytest.approx(value, rel=5e-4), (variant.name, name)
+        assert s.desired_null_space.posture.q_d == pytest.approx(dict(s.arm.initial_positions), abs=5e-4)
+        key = law_key(s.null_space, s.desired_null_space.posture)
+        given = row_gains(s)
+        for field, value in tuned_gains(key, _bandwidth(name, variant), inertia[variant.scenario]).items():
+            assert given[field] == pytest.approx(value, rel=5e-4), (variant.name, field)
+
+
+def _constrained_poles(arm, q_star, torque, eps=1e-6) -> np.ndarray:
+    """The poles of the null-space motion with the task held exactly: q = q* + Z s, q̇ = Z ṡ,
+    s̈ = Zᵀ (I − J̄ J) H⁻¹ τ₀(q, q̇) (the constrained acceleration), linearised by central
+    differences at s = ṡ = 0; ``torque(T, q, v)`` gives τ₀ with the terms T at q."""
+    context = arm.plant.CreateDefaultContext()
+    J = arm.terms(context, q_star, np.zeros(arm.n), coriolis=False).J
+    Z = np.linalg.svd(J)[2][J.shape[0] :].T
+    r = Z.shape[1]
+
+    def sdd(x):
+        q, v = q_star + Z @ x[:r], Z @ x[r:]
+        T = arm.terms(context, q, v, coriolis=False)
+        J_bar = dynamically_consistent_inverse(T.J, T.H_inv)
+        return Z.T @ ((np.eye(arm.n) - J_bar @ T.J) @ (T.H_inv @ torque(T, q, v)))
+
+    B = np.column_stack([(sdd(eps * e) - sdd(-eps * e)) / (2 * eps) for e in np.eye(2 * r)])
+    A = np.block([[np.zeros((r, r)), np.eye(r)], [B]])
+    return np.sort_complex(np.linalg.eigvals(A))
+
+
+def _paper_torque(K, K_n):
+    """Eq. 21 with Eq. 30's step on p = ½‖q − q_d‖² through J̄, written here in continuous
+    time: τ₀ = H N̄ (q̈_dⁿ + K_n (q̇_dⁿ − q̇)), q̇_dⁿ = K N̄ H⁻¹ (q − q_d), q̈_dⁿ = K N̄ H⁻¹ q̇ (its
+    derivative where q = q_d, where the linearisation is taken)."""
+
+    def torque(T, q, v, q_d):
+        N_bar = np.eye(len(q)) - dynamically_consistent_inverse(T.J, T.H_inv) @ T.J
+        qdot = K * N_bar @ T.H_inv @ (q - q_d)
+        qddot = K * N_bar @ T.H_inv @ v
+        return T.H @ N_bar @ (qddot + K_n * (qdot - v))
+
+    return torque
+
+
+@pytest.mark.parametrize("arm_name", ["panda", "arm4"])
+@pytest.mark.parametrize("law", ["paper", *LAW_KEYS[2:]])
+def test_the_rules_poles_are_the_closed_loop_poles(arm_name, law):
+    """The poles the rule predicts per null-space direction (:func:`_continuous_poles`, with
+    μ_i the eigenvalues of Zᵀ H Z), hence its damping ratios, against the eigenvalues of the
+    linearised null-space motion under each law's torque (the shipped law functions; the
+    paper's law written above), on the Panda (one direction) and on fig3's arm (two), to
+    1e-4. Catches a rule with the wrong inertia (h_n where H cancels, or none where it does
+    not), a paper's-law pole without the feedforward's zero, or 2√K-style damping."""
+    arm = panda_arm() if arm_name == "panda" else paper_arm()
+    q_star = (
+        np.array([0.0, 0.182, 0.0, -2.4, 0.0, 2.582, 0.785])
+        if arm_name == "panda"
+        else np.array([0.401, 0.972, 1.012, 0.614])
+    )
+    omega = 20.0
+    masses = null_space_masses(arm, q_star)
+    h_n = null_space_inertia(arm, q_star)
+    g = tuned_gains(law, omega, h_n)
+    K, D = g.get("posture_stiffness"), g.get("posture_damping")
+    lam = g.get("projector_damping", 0.0)
+    torque = {
+        "paper": lambda T, q, v: _paper_torque(g.get("gain"), g.get("K_n"))(T, q, v, q_star),
+        "kinematic_posture_pd": lambda T, q, v: kinematic_posture_torque(T.J, q, v, q_star, K, D, 0.0),
+        "kinematic_posture_pd_damped": lambda T, q, v: kinematic_posture_torque(T.J, q, v, q_star, K, D, lam),
+        "dynamically_consistent_posture_pd": lambda T, q, v: dynamically_consistent_posture_torque(
+            T.H, T.H_inv, T.J, q, v, q_star, K, D
+        ),
+        "dynamically_consistent_torque_pd": lambda T, q, v: dynamically_consistent_torque_pd(
+            T.H_inv, T.J, q, v, q_star, K, D
+        ),
+    }[law]
+    measured = _constrained_poles(arm, q_star, torque)
+    predicted = np.sort_complex(np.concatenate([_continuous_poles(law, g, mu) for mu in masses]))
+    np.testing.assert_allclose(measured, predicted, rtol=1e-4, atol=1e-4 * omega)
+    if len(masses) == 1:  # one direction: the rule's design point
+        assert damping_ratio(predicted) == pytest.approx(
+            1.0 if law != "paper" else 3 / (2 * np.sqrt(2)), rel=1e-9
+        )
+        assert float(np.min(-predicted.real)) == pytest.approx(omega, rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    "law", ["paper", "paper_moore_penrose", "kinematic_posture_pd", "dynamically_consistent_posture_pd"]
+)
+@pytest.mark.parametrize(
+    "omega, mu, T", [(20.0, 0.026, 0.001), (50.0, 0.0018, 0.002), (400.0, 0.0018, 0.004)]
+)
+def test_the_discrete_pole_radius_is_the_sampled_loops(law, omega, mu, T):
+    """ρ_T of :func:`null_space_loop` against the sampled loop built with SciPy: the plant
+    s̈ = u/μ discretised with a zero-order hold (cont2discrete), the law's torque computed
+    from the samples (the paper's with its backward-difference feedforward, one more
+    state), to 1e-9. The last case is unstable for some laws (ρ > 1), so the test also
+    sees the radius cross 1. Catches a hold formula off by the T²/2 term or a feedforward
+    that uses the current instead of the previous sample."""
+    h_n = 0.026
+    g = tuned_gains(law, omega, h_n)
+    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu  # what τ₀ does per unit
+    Ad, Bd, *_ = cont2discrete(
+        (np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), np.zeros((2, 1))),
+        T,
+        method="zoh",
+    )
+    if law.startswith("paper"):
+        a = abs(g["gain"]) / (mu if law == "paper" else 1.0)
+        # state (s, ṡ, ṡ_d previous); u = (ṡ_d − ṡ_d,prev)/T + K_n (ṡ_d − ṡ), ṡ_d = −a s
+        F = np.array([[-a / T - g["K_n"] * a, -g["K_n"], -1.0 / T]])
+        A = np.zeros((3, 3))
+        A[:2, :] = np.hstack([Ad, np.zeros((2, 1))]) + Bd @ F
+        A[2, 0] = -a
+    else:
+        A = Ad + Bd @ (scale * np.array([[-g["posture_stiffness"], -g["posture_damping"]]]))
+    expected = np.max(np.abs(np.linalg.eigvals(A)))
+    got = null_space_loop(law, g, np.array([mu]), T)["pole_radius"]
+    assert got == pytest.approx(expected, rel=1e-9)
 
 
 def test_the_moved_posture_keeps_the_tool_where_it_was():
@@ -90,17 +222,67 @@ def test_a_variant_with_an_unknown_scenario_is_refused(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_short_family_dynamically_consistent_laws_leave_the_task_alone(tmp_path):
-    """panda_wipe to 2 s (contact at 1.27 s, a 0.23 s window): the three dynamically
+    """panda_wipe to 2 s (contact at 1.27 s, a 0.23 s window): the four dynamically
     consistent rows' J H⁻¹ τ₀ is rounding (< 1e-9 m/s²), the kinematic projector's is not
-    (3.6e-3 m/s² measured); ν exists for the paper's law only."""
+    (either inverse); ν exists for the paper's law only; every row is stable at its period."""
     family = load_family("null_space_laws")
-    family = dataclasses.replace(family, variants=family.variants[:4])
+    family = dataclasses.replace(family, variants=family.variants[:6])
     result = run_family(family, tmp_path, duration=2.0)
     rows = {row["variant"].split(" / ")[1]: row for row in result.rows}
     assert not result.failures
-    for law in ("paper", "paper, Moore-Penrose", "dynamically consistent posture PD"):
+    for law in ("paper", "paper, Moore-Penrose", "dyn. consistent PD (H)", "dyn. consistent PD (torque)"):
         assert rows[law]["task_disturbance_peak"] < 1e-9
-    assert rows["kinematic posture PD"]["task_disturbance_peak"] > 1e-4
-    assert math.isfinite(rows["paper"]["nu_rms"]) and rows["kinematic posture PD"]["nu_rms"] == ""
+    for law in ("kinematic PD", "kinematic PD, damped inverse"):
+        assert rows[law]["task_disturbance_peak"] > 1e-4
+    for row in rows.values():
+        assert row["pole_radius_T"] < 1.0
+    assert math.isfinite(rows["paper"]["nu_rms"]) and rows["kinematic PD"]["nu_rms"] == ""
     for name in ("table.md", "table.csv", "laws.png"):
         assert (tmp_path / name).stat().st_size > 0
+
+
+@pytest.mark.parametrize("arm_name", ["panda", "arm4"])
+def test_posture_lag_is_the_share_of_the_tool_motion_in_j_bars_null_space(arm_name):
+    """posture_lag's premise, at seeded random states: (I − J̄ J) J⁺ ẋ = Z M_n⁻¹ Zᵀ H J⁺ ẋ
+    (J̄ formed here), so the quasi-static s solving M_n⁻¹ Zᵀ H J⁺ ẋ = K M_n⁻¹ s is
+    Zᵀ H J⁺ ẋ / K, whose norm posture_lag returns; and through J⁺ the same term
+    (I − J⁺ J) J⁺ ẋ is zero. Catches a lag with M_n left in, or H left out."""
+    from models import random_states
+
+    from nsdrake.studies.null_space_laws import posture_lag
+
+    arm = panda_arm() if arm_name == "panda" else paper_arm()
+    context = arm.plant.CreateDefaultContext()
+    K = -0.5
+    for q, v in random_states(arm.n, 6, seed=12):
+        T = arm.terms(context, q, v, coriolis=False)
+        J_pinv, xdot = np.linalg.pinv(T.J), T.J @ v
+        Z = np.linalg.svd(T.J)[2][T.J.shape[0] :].T
+        M = Z.T @ T.H @ Z
+        N_bar = np.eye(arm.n) - dynamically_consistent_inverse(T.J, T.H_inv) @ T.J
+        lhs = N_bar @ J_pinv @ xdot
+        np.testing.assert_allclose(
+            lhs, Z @ np.linalg.solve(M, Z.T @ T.H @ J_pinv @ xdot), atol=1e-10 * np.linalg.norm(lhs)
+        )
+        s = np.linalg.solve(K * np.linalg.inv(M), np.linalg.solve(M, Z.T @ T.H @ J_pinv @ xdot))
+        assert posture_lag(T, v, K) == pytest.approx(np.linalg.norm(s), rel=1e-9)
+        assert np.linalg.norm((np.eye(arm.n) - J_pinv @ T.J) @ J_pinv @ xdot) < 1e-10 * np.linalg.norm(xdot)
+
+
+def test_the_off_path_posture_is_off_the_self_motion():
+    """panda_off_path's q_d offset has no part the self-motion can remove at the start
+    posture (‖Z Zᵀ Δ‖ < 1e-9 ‖Δ‖), but a part the H-weighted PD's equilibrium sees
+    (‖Zᵀ H Δ‖ > 1e-3 ‖H Δ‖): the row where the joint-space laws stay and the H-weighted PD
+    moves. Catches an "off-path" offset that the self-motion can in fact reach."""
+    family = load_family("null_space_laws")
+    index = [v.name for v in family.variants].index("panda_off_path / paper")
+    s = variant_scenario(family, index, None, 0.01)
+    arm = panda_arm()
+    p = s.desired_null_space.posture
+    q_d = np.array([p.q_d[j] for j in arm.joint_names])
+    offset = np.array([p.offset.get(j, 0.0) for j in arm.joint_names])
+    T = arm.terms(arm.plant.CreateDefaultContext(), q_d, np.zeros(arm.n), coriolis=False)
+    Z = np.linalg.svd(T.J)[2][T.J.shape[0] :].T
+    assert np.linalg.norm(offset) == pytest.approx(0.3)
+    assert np.linalg.norm(Z @ (Z.T @ offset)) < 1e-9 * np.linalg.norm(offset)
+    assert np.linalg.norm(Z.T @ T.H @ offset) > 1e-3 * np.linalg.norm(T.H @ offset)

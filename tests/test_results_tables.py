@@ -1,0 +1,119 @@
+"""Every result table in the README and the docs pages is the table a command wrote (issue 25).
+
+docs/results/FAMILY/ holds ``command`` (``nsdrake compare FAMILY …``) and the ``table.md``
+it wrote, unedited (scripts/regenerate_results.py re-runs the command and reports which
+tables changed). The built site renders that file (the ``nsdrake-results`` directive); the
+page's source (what GitHub shows) copies its rows after a marker line
+``<!-- table: docs/results/FAMILY/table.md -->``. These tests read files only (no
+simulation): they fail when a copy differs from its file by one character, when a marker
+names a missing file, and when a results folder's table is copied nowhere.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = ["README.md", *sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md"))]
+MARKER = re.compile(r"^<!-- table: (docs/results/[^ ]+/table\.md) -->$")
+
+
+def table_lines(text: str) -> list[str]:
+    """The lines of the first markdown table in ``text`` (header, separator, rows)."""
+    lines = text.splitlines()
+    start = next((i for i, line in enumerate(lines) if line.startswith("|")), len(lines))
+    end = start
+    while end < len(lines) and lines[end].startswith("|"):
+        end += 1
+    return lines[start:end]
+
+
+def readme_copies(readme: str) -> dict[str, list[str]]:
+    """Marker path -> the table lines right after the marker."""
+    lines = readme.splitlines()
+    copies = {}
+    for i, line in enumerate(lines):
+        m = MARKER.match(line)
+        if m:
+            copies[m.group(1)] = (
+                table_lines("\n".join(lines[i + 1 :]))
+                if lines[i + 1 : i + 2] and lines[i + 1].startswith("|")
+                else []
+            )
+    return copies
+
+
+def differences(readme: str, root: Path) -> list[str]:
+    """One line per copied table that is not its file's table, or per file not copied."""
+    problems = []
+    copies = readme_copies(readme)
+    for path, copy in copies.items():
+        file = root / path
+        if not file.exists():
+            problems.append(f"{path}: a page names it, but it does not exist")
+            continue
+        expected = table_lines(file.read_text())
+        if copy != expected:
+            first = next(
+                (k for k, (a, b) in enumerate(zip(copy, expected, strict=False)) if a != b),
+                min(len(copy), len(expected)),
+            )
+            problems.append(f"{path}: the page's copy differs from line {first + 1} of its table")
+    for file in sorted((root / "docs" / "results").glob("*/table.md")):
+        path = file.relative_to(root).as_posix()
+        if path not in copies:
+            problems.append(f"{path}: not copied into any page (no marker)")
+    return problems
+
+
+def pages_text() -> str:
+    """README.md and the docs pages, one after the other."""
+    return "\n".join((ROOT / page).read_text() for page in PAGES)
+
+
+def test_every_copied_table_is_its_file():
+    """The copies in README.md and docs/*.md against docs/results/*/table.md, line by line.
+    Catches a table edited in a page only, or regenerated without copying it over."""
+    assert differences(pages_text(), ROOT) == []
+
+
+def test_a_changed_digit_is_caught():
+    """The check itself fails on pages whose copy differs by one digit, and on pages that
+    leave a results table out: it is not a test that cannot fail."""
+    readme = pages_text()
+    path = next(iter(readme_copies(readme)))
+    row = table_lines((ROOT / path).read_text())[2]
+    changed = row.replace("0", "9", 1) if "0" in row else row + " x"
+    found = differences(readme.replace(row, changed, 1), ROOT)
+    assert found[0].startswith(f"{path}: the page's copy differs")
+    dropped = readme.replace(f"<!-- table: {path} -->", "", 1)
+    assert f"{path}: not copied into any page (no marker)" in differences(dropped, ROOT)
+
+
+@pytest.mark.parametrize("folder", sorted(p.name for p in (ROOT / "docs" / "results").glob("*/")))
+def test_every_results_folder_names_its_command(folder):
+    """Each results folder's ``command`` is ``nsdrake compare FOLDER …`` (the script
+    re-runs it), and its table's title is that family."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        from regenerate_results import read_command
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    assert read_command(folder)[:2] == ["compare", folder]
+    assert (ROOT / "docs" / "results" / folder / "table.md").read_text().startswith(f"# {folder}\n")
+
+
+def test_the_regenerate_script_refuses_an_unknown_family():
+    """``--family`` names a folder with a command, or ``all``: anything else is one line, exit 2."""
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "regenerate_results.py"), "--family", "no_such_family"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2
+    assert done.stdout.startswith("--family: no docs/results/no_such_family/command")
