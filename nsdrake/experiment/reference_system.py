@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
 from nsdrake.control.validation import positive_problem, show
@@ -16,6 +16,7 @@ from nsdrake.experiment.reference import (
     TaskReferenceError,
     update_contact,
 )
+from nsdrake.leaf_system import LeafSystem
 
 
 def reference_problem(reference, task_rows, contact_threshold, period, loss_time) -> tuple[str, str] | None:

@@ -4,10 +4,10 @@ a task without a force axis."""
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
 
 from nsdrake.control.systems._values import check_inputs
 from nsdrake.control.validation import ControllerInputError, entry_names
+from nsdrake.leaf_system import LeafSystem
 
 
 class NullSpaceVelocitySource(LeafSystem):

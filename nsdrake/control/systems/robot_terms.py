@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
 from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.systems._values import (
@@ -13,6 +12,7 @@ from nsdrake.control.systems._values import (
     declare_value_cache,
     scratch,
 )
+from nsdrake.leaf_system import LeafSystem
 
 
 class RobotTermsSystem(LeafSystem):
