@@ -20,7 +20,7 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.multibody.tree import BodyIndex
 
-from nsdrake.leaf_system import LeafSystem
+from nsdrake.control.leaf_system import LeafSystem
 
 
 @dataclass

@@ -8,6 +8,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.validation import positive_problem, show
 from nsdrake.experiment.reference import (
     CircleOnSurface,
@@ -16,7 +17,6 @@ from nsdrake.experiment.reference import (
     TaskReferenceError,
     update_contact,
 )
-from nsdrake.leaf_system import LeafSystem
 
 
 def reference_problem(reference, task_rows, contact_threshold, period, loss_time) -> tuple[str, str] | None:

@@ -6,7 +6,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 
-from nsdrake.leaf_system import LeafSystem
+from nsdrake.control.leaf_system import LeafSystem
 
 
 class ContactMonitor(LeafSystem):

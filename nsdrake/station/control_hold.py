@@ -7,7 +7,7 @@ import math
 import numpy as np
 from pydrake.systems.framework import BasicVector
 
-from nsdrake.leaf_system import LeafSystem
+from nsdrake.control.leaf_system import LeafSystem
 
 
 class ControlHold(LeafSystem):

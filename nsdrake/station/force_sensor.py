@@ -9,7 +9,7 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint
 
-from nsdrake.leaf_system import LeafSystem
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.station.config import StationError
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nsdrake.leaf_system import LeafSystem
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.station.friction import friction_torque
 
 

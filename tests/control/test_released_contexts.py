@@ -1,4 +1,4 @@
-"""A refused input keeps no borrowed Drake context alive (nsdrake.leaf_system).
+"""A refused input keeps no borrowed Drake context alive (nsdrake.control.leaf_system).
 
 Drake lends a system's callback its context as a Python wrapper of a C++ object Drake owns.
 An exception leaving the callback holds the callback's frames in its traceback, and so the
@@ -107,7 +107,7 @@ def contexts_in(error: BaseException) -> list[str]:
 def test_a_refusal_from_an_output_port_holds_no_context(fused):
     """Eval of generalized_force with a NaN state: the ControllerInputError's traceback
     still runs through nsdrake's callback (its lines are kept) but no frame holds a
-    context. Fails if a callback is declared without nsdrake.leaf_system's release."""
+    context. Fails if a callback is declared without nsdrake.control.leaf_system's release."""
     controller = NullSpaceImpedanceController(
         controller_model=ARM, config=ControllerConfig(period=T), fused=fused
     )

@@ -10,9 +10,9 @@ from __future__ import annotations
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import ValueProducer
 
+from nsdrake.control.leaf_system import LeafSystem, released_on_error
 from nsdrake.control.plan import ControllerPlan, StageBuffers
 from nsdrake.control.validation import ControllerInputError, inputs_problem
-from nsdrake.leaf_system import LeafSystem, released_on_error
 
 
 class TermsValue:

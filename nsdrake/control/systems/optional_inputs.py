@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.systems._values import check_inputs
 from nsdrake.control.validation import ControllerInputError, entry_names
-from nsdrake.leaf_system import LeafSystem
 
 
 class NullSpaceVelocitySource(LeafSystem):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pydrake.common.value import AbstractValue
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.systems._values import (
     ScratchValue,
@@ -12,7 +13,6 @@ from nsdrake.control.systems._values import (
     declare_value_cache,
     scratch,
 )
-from nsdrake.leaf_system import LeafSystem
 
 
 class RobotTermsSystem(LeafSystem):
