@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 from drake import lcmt_force_torque
-from pydrake.systems.framework import LeafSystem
 from pydrake.systems.lcm import _Serializer_
+
+from nsdrake.control.leaf_system import LeafSystem
 
 
 def wrench_from_external_torques(J_spatial: np.ndarray, tau_ext: np.ndarray) -> np.ndarray:

@@ -19,7 +19,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.framework import LeafSystem
+
+from nsdrake.control.leaf_system import LeafSystem
 
 
 @dataclass

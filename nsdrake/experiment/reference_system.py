@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.validation import positive_problem, show
 from nsdrake.experiment.reference import (
     CircleOnSurface,

@@ -5,7 +5,8 @@ from __future__ import annotations
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.framework import LeafSystem
+
+from nsdrake.control.leaf_system import LeafSystem
 
 
 class ContactMonitor(LeafSystem):

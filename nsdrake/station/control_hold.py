@@ -5,7 +5,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
+
+from nsdrake.control.leaf_system import LeafSystem
 
 
 class ControlHold(LeafSystem):

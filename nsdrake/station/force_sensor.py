@@ -8,8 +8,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Joint
-from pydrake.systems.framework import LeafSystem
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.station.config import StationError
 
 

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.station.friction import friction_torque
 
 

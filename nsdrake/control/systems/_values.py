@@ -8,8 +8,9 @@ copy is (numbers copied, model scratch made anew, never shared between contexts)
 from __future__ import annotations
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem, ValueProducer
+from pydrake.systems.framework import ValueProducer
 
+from nsdrake.control.leaf_system import LeafSystem, released_on_error
 from nsdrake.control.plan import ControllerPlan, StageBuffers
 from nsdrake.control.validation import ControllerInputError, inputs_problem
 
@@ -44,7 +45,7 @@ def declare_value_cache(system, description: str, create, calc=None, prerequisit
     else:
         producer = ValueProducer(
             allocate=lambda: AbstractValue.Make(create()),
-            calc=lambda context, value: calc(context, value.get_mutable_value()),
+            calc=released_on_error(lambda context, value: calc(context, value.get_mutable_value())),
         )
     return system.DeclareCacheEntry(
         description=description, value_producer=producer, prerequisites_of_calc=prerequisites

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from nsdrake.control.layout import tick_parts
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.plan import ControllerPlan, StageBuffers
 from nsdrake.control.stages import COMMIT, DESIRED, SELECTION, STORE, TICK, commands_size, initial_state
 from nsdrake.control.systems._values import check_inputs, declare_value_cache

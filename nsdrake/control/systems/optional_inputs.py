@@ -4,8 +4,8 @@ a task without a force axis."""
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.systems._values import check_inputs
 from nsdrake.control.validation import ControllerInputError, entry_names
 

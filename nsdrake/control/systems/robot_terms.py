@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
+from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.systems._values import (
     ScratchValue,
