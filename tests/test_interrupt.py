@@ -9,6 +9,7 @@ import csv
 import json
 import os
 import pty
+import re
 import select
 import signal
 import subprocess
@@ -244,7 +245,11 @@ def test_a_variant_stopped_while_it_imports_prints_no_traceback(tmp_path):
     with (out / "table.csv").open() as f:
         rows = [row["error"] for row in csv.DictReader(f)]
     stopped = [row for row in rows if row]
-    assert stopped and all(row == "failed: timed out after 1 s (--variant-timeout)" for row in stopped)
+    # A variant that reached its simulation within the second keeps its traces (a fast,
+    # quiet machine: seen in CI); at least one must have been stopped while it started.
+    kept = r"failed: timed out after 1 s \(--variant-timeout\)(; its traces up to t = [0-9.]+ s are kept)?"
+    assert stopped and all(re.fullmatch(kept, row) for row in stopped), stopped
+    assert "failed: timed out after 1 s (--variant-timeout)" in stopped, stopped
     assert f"nsdrake: {len(stopped)} of 3 variants failed" in err
 
 
