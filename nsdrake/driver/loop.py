@@ -202,13 +202,19 @@ class ControllerLoop:
         self.bus.handle(0)
         while not self._inbox:
             self._check_stop()
-            remaining = deadline - self._clock()
-            if remaining < 0:
+            now = self._clock()
+            if now > deadline:
+                # drained once more first: a status that arrived while this thread was
+                # descheduled between the last drain and the clock's reading is not silence
+                self.bus.handle(0)
+                if self._inbox:
+                    break
                 raise self._fault(
                     f"no lcmt_panda_status on {self.config.status_channel} for "
-                    f"{(self._clock() - self._last_arrival) * 1e3:.1f} ms "
+                    f"{(now - self._last_arrival) * 1e3:.1f} ms "
                     f"(driver.status_timeout_periods {self.config.status_timeout_periods:g} periods)"
                 )
+            remaining = deadline - now
             self.bus.handle(1 if remaining > 1e-3 else 0)
             self.bus.handle(0)  # the force-torque message of the same instant, and any newer status
         self._check_stop()
