@@ -196,8 +196,9 @@ class ControllerLoop:
         self._answer(data, arrival, wall, cpu)
         self.started = True
 
-    def tick(self) -> None:
-        """Waits for the next status and answers the newest (module docstring)."""
+    def _wait_for_a_status(self) -> None:
+        """Until the inbox holds a status; silence beyond the bound, on the wall clock from
+        the last status's arrival, is a fault."""
         deadline = self._last_arrival + self.bound
         self.bus.handle(0)
         while not self._inbox:
@@ -217,6 +218,10 @@ class ControllerLoop:
             remaining = deadline - now
             self.bus.handle(1 if remaining > 1e-3 else 0)
             self.bus.handle(0)  # the force-torque message of the same instant, and any newer status
+
+    def tick(self) -> None:
+        """Waits for the next status and answers the newest (module docstring)."""
+        self._wait_for_a_status()
         self._check_stop()
         inbox = self._inbox
         for _, _, _, data in inbox:  # every status received, in order: their clocks, whatever the inbox holds
