@@ -57,6 +57,7 @@ from nsdrake.control.validation import (
     is_number,
     show,
     validate_controller,
+    vector_size_problem,
 )
 
 
@@ -288,7 +289,7 @@ class ControllerStep:
 
     def _prescribed_velocity(self, qdot) -> tuple[np.ndarray, str | None]:
         """q̇_dⁿ as an array, and why it cannot be taken (or None)."""
-        problem = _vector_size_problem(qdot, self._n, f"{self._n} joint speeds [rad/s] (q̇_dⁿ)")
+        problem = vector_size_problem(qdot, self._n, f"{self._n} joint speeds [rad/s] (q̇_dⁿ)")
         if problem is not None:
             return qdot, f"desired_null_space_velocity {problem}"
         qdot = np.asarray(qdot, dtype=float)
@@ -320,7 +321,7 @@ class ControllerStep:
             (name, m_t, f"{m_t} numbers, the task axes {axes}") for name in ("x_d", "xdot_d", "xddot_d")
         ]
         for name, size, what in expected:
-            problem = _vector_size_problem(arguments[name], size, what)
+            problem = vector_size_problem(arguments[name], size, what)
             if problem:
                 return f"{name} {problem}"
         wrench, f_d = arguments["wrench"], arguments["f_d"]
@@ -332,7 +333,7 @@ class ControllerStep:
                 "would do nothing: pass None"
             )
         if wrench is not None:
-            problem = _vector_size_problem(wrench, 6, "[M; f] (6) [N m, N]")
+            problem = vector_size_problem(wrench, 6, "[M; f] (6) [N m, N]")
             if problem:
                 return f"wrench {problem}"
         if not is_number(f_d) and f_d is not None:
@@ -343,7 +344,7 @@ class ControllerStep:
             value = arguments[name]
             if value is not None and not plan.m_r:
                 return f"{name} is given, but the task has no rotational axes: pass None"
-            problem = None if value is None else _vector_size_problem(value, size, what)
+            problem = None if value is None else vector_size_problem(value, size, what)
             if problem:
                 return f"{name} {problem}"
         return "its arguments do not match its signature (see its docstring)"
@@ -351,14 +352,3 @@ class ControllerStep:
 
 class _RefusedError(Exception):
     """An argument of the wrong size (the slow path names it)."""
-
-
-def _vector_size_problem(value, size: int, what: str) -> str | None:
-    """``value`` is not ``size`` numbers (finiteness is checked after, in one pass)."""
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return f"must be {what}, got {show(value)}"
-    if array.shape != (size,):
-        return f"must be {what}, got {show(value)}"
-    return None

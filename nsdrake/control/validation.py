@@ -164,15 +164,23 @@ def fraction_problem(value) -> str | None:
     return problem
 
 
-def vector_problem(value, size: int, what: str) -> str | None:
-    """``value`` is ``size`` finite numbers; ``what`` says what they are ("[x, y, z]")."""
+def vector_size_problem(value, size: int, what: str) -> str | None:
+    """``value`` is ``size`` numbers; ``what`` says what they are ("[x, y, z]")."""
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         return f"must be {what}, got {show(value)}"
     if array.shape != (size,):
         return f"must be {what}, got {show(value)}"
-    if not np.all(np.isfinite(array)):
+    return None
+
+
+def vector_problem(value, size: int, what: str) -> str | None:
+    """``value`` is ``size`` finite numbers; ``what`` says what they are ("[x, y, z]")."""
+    problem = vector_size_problem(value, size, what)
+    if problem is not None:
+        return problem
+    if not np.all(np.isfinite(np.asarray(value, dtype=float))):
         return f"must be finite, got {show(value)}"
     return None
 
