@@ -139,6 +139,10 @@ class ControllerLoop:
         self._anchor = self._last_clock = 0
         self._long_gaps = 0  # statuses in a row two periods or more after the previous
         self._last_arrival = 0.0
+        # the longest silence the silence rule measured once started [s]: from the answered
+        # status's arrival to the next arrival, when the loop had to wait for it (statuses that
+        # arrived during a tick are no silence): how near the stream came to the bound
+        self.longest_silence = 0.0
         self.time = 0.0
         self.started = self._ready = False
         bus.subscribe(c.status_channel, self._on_status)
@@ -201,6 +205,7 @@ class ControllerLoop:
         the last status's arrival, is a fault."""
         deadline = self._last_arrival + self.bound
         self.bus.handle(0)
+        waited = not self._inbox
         while not self._inbox:
             self._check_stop()
             now = self._clock()
@@ -218,6 +223,8 @@ class ControllerLoop:
             remaining = deadline - now
             self.bus.handle(1 if remaining > 1e-3 else 0)
             self.bus.handle(0)  # the force-torque message of the same instant, and any newer status
+        if waited:
+            self.longest_silence = max(self.longest_silence, self._inbox[0][0] - self._last_arrival)
 
     def tick(self) -> None:
         """Waits for the next status and answers the newest (module docstring)."""

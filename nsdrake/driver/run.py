@@ -123,6 +123,7 @@ def _timing(loop: ControllerLoop, pauses: GcPauses, paused: bool) -> dict:
         loop.times.cpu_seconds,
         commands=loop.commands,
         statuses_skipped=loop.skipped,
+        longest_silence_us=loop.longest_silence * 1e6,
         periods=loop.periods,
         clock=loop.clock_name,
         control_command_success_rate_min=None

@@ -67,6 +67,11 @@ def timing_line(summary: dict) -> str:
         f"{summary['over_period']} over the {summary['period_us']:.0f} µs period"
         + (f" (its CPU time: p99.9 {summary['cpu_p999_us']:.0f} µs)" if "cpu_p999_us" in summary else "")
         + (f"; {summary['statuses_skipped']} statuses skipped" if summary.get("statuses_skipped") else "")
+        + (
+            f"; longest silence {summary['longest_silence_us'] / 1e3:.1f} ms"
+            if summary.get("longest_silence_us")
+            else ""
+        )
         + _success_rate_note(summary.get("control_command_success_rate_min"))
     )
 

@@ -276,6 +276,29 @@ def test_a_long_tick_skips_statuses_without_a_fault(sides):
     assert loop.skipped == 4 and loop.periods == 6
 
 
+def test_the_longest_silence_is_the_longest_wait_from_the_last_arrival(sides):
+    """A status 2.7 ms after the last while the loop waits, then a 5 ms tick during which
+    statuses go on at 1 kHz: the loop's longest silence is 2.7 ms (catches a silence
+    figure that is not measured from the answered status's arrival on the wall clock, and
+    one that counts the controller's own long tick, 5 ms here, which the silence rule does
+    not)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    robot.status(after=2.7e-3, clock_step=3000)
+    loop.tick()
+    assert math.isclose(loop.longest_silence, 2.7e-3, rel_tol=1e-6), loop.longest_silence
+    robot.status()
+    bus.tick_cost = 5e-3
+    loop.tick()
+    bus.tick_cost = 0.0
+    for _ in range(5):
+        robot.status()
+    loop.tick()
+    assert loop.skipped == 4
+    assert math.isclose(loop.longest_silence, 2.7e-3, rel_tol=1e-6), loop.longest_silence
+
+
 def test_the_sensor_s_silence_is_elapsed_time_not_statuses(sides):
     """Force-torque messages stop at t = 1 ms; statuses go on, the next two 2.5 ms and
     1 ms later (one period on each, a late status is not a fault): at 3.5 ms the sensor
