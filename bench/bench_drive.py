@@ -1,7 +1,7 @@
 """Benchmark: the drive's tick, status arrival to command publish, over memq:// and over UDP.
 
     python bench/bench_drive.py [--duration 20] [--out DIR] [--transport memq|udp|both]
-                                [--config FILE] [--profile]
+                                [--config FILE|default ...] [--loop-runs 3] [--profile]
 
 ``memq``: panda_wipe's first ``--duration`` seconds through the controller side and the
 simulated driver in one process (lockstep, the driver paced at real time: one status
@@ -14,7 +14,14 @@ off, commands expiring after 50 ms); also the driver's own count of the periods 
 applied a fresh command, a stale one, or fell back to damping, and how many it started
 late itself (the simulated driver is a Python simulation of the plant: on a loaded
 machine it cannot keep 1 kHz either). ``--config`` is passed to both (e.g. a larger
-``driver.status_timeout_periods`` on a shared machine).
+``driver.status_timeout_periods`` on a shared machine); repeated, one UDP run per file
+(``default``: the scenario as shipped), each in its own folder under ``--out``. Each run
+reports the longest silence the loop's silence rule measured (``longest_silence_us``: how
+near the stream came to the bound) and whether panda_wipe met its bounds.
+
+Then ``--loop-runs`` runs of the loop alone (``--profile``'s measurement, unprofiled),
+their medians. Writes ``table.md`` under ``--out``, one row per run (docs/results/drive/
+keeps the one the docs show).
 
 Each tick's CPU time is the loop thread's (``time.thread_time``), from the status's
 arrival to the command's publish: what the controller itself costs, apart from the time
@@ -58,7 +65,7 @@ OUT = ROOT / "bench" / "out" / "drive"
 URL = "udpm://239.255.76.67:7667?ttl=0"  # used only inside the private namespace below
 TARGETS = {"cpu_p50_us": 80.0, "cpu_p999_us": 200.0}
 KEYS = ("ticks", "cpu_p50_us", "cpu_p99_us", "cpu_p999_us", "cpu_max_us", "p50_us", "p99_us", "p999_us",
-        "max_us", "over_period", "statuses_skipped", "periods", "failure")  # fmt: skip
+        "max_us", "over_period", "statuses_skipped", "longest_silence_us", "periods", "failure")  # fmt: skip
 
 
 def memq(duration: float, out: Path) -> dict:
@@ -79,15 +86,15 @@ NAMESPACE = (
 def udp(duration: float, out: Path, config: Path | None) -> dict:
     if shutil.which("unshare") is None or os.geteuid() != 0:
         return {"failure": "no private network namespace here (unshare -n needs root)"}
-    folder = out / "udp"
+    folder = out / ("udp" if config is None else f"udp-{config.stem}")
     shutil.rmtree(folder, ignore_errors=True)
     python = f"PYTHONPATH={ROOT} {sys.executable} -m nsdrake"
     options = f" --config {config.resolve()}" if config else ""
     script = (
         NAMESPACE + f"{python} sim-driver panda_wipe --lcm '{URL}' --duration {duration + 1:g}{options} "
-        "--low-pass-freq 1000 --expire-sec 0.05 > driver.out 2>&1 &\n"
+        f"--low-pass-freq 1000 --expire-sec 0.05 > {folder.name}-driver.out 2>&1 &\n"
         + f"{python} drive panda_wipe --lcm '{URL}' --duration {duration:g}{options} --out {folder}"
-        + " > drive.out 2>&1\nwait\n"
+        + f" > {folder.name}-drive.out 2>&1\nwait\n"
     )
     load = os.getloadavg()[0]
     subprocess.run(
@@ -97,7 +104,10 @@ def udp(duration: float, out: Path, config: Path | None) -> dict:
     )
     timing = json.loads((folder / "timing.json").read_text())
     timing["load_average_1min"] = [load, os.getloadavg()[0]]
-    driver_line = (out / "driver.out").read_text()
+    metrics = json.loads((folder / "metrics.json").read_text())
+    timing["failure"] = metrics.get("failure")
+    timing["bounds_met"] = metrics.get("all_passed")
+    driver_line = (out / f"{folder.name}-driver.out").read_text()
     numbers = re.search(
         r"(\d+) periods from the first command to the last, (\d+) of them applied a fresh command .*; "
         r"in all (\d+) periods after the first command, (\d+) commands received; (\d+) applied a fresh "
@@ -106,7 +116,8 @@ def udp(duration: float, out: Path, config: Path | None) -> dict:
     )
     print(f"udp: {timing_line(timing)}")
     print(f"udp: {driver_line.strip().splitlines()[-1]}")
-    result = {key: timing.get(key) for key in (*KEYS, "load_average_1min")}
+    result = {key: timing.get(key) for key in (*KEYS, "load_average_1min", "bounds_met")}
+    result["silence_bound_periods"] = silence_bound(config)
     if numbers:
         commanded, commanded_fresh, periods, commands, fresh, stale, expired, behind = (
             int(x) for x in numbers.groups()
@@ -117,6 +128,64 @@ def udp(duration: float, out: Path, config: Path | None) -> dict:
             "fresh_fraction": commanded_fresh / commanded if commanded else None,
         }  # fmt: skip
     return result
+
+
+def silence_bound(config: Path | None) -> float:
+    """The drive's silence bound [periods] with ``config`` overlaid on panda_wipe."""
+    return load_scenario("panda_wipe", config=config).driver.status_timeout_periods
+
+
+def cell(value, unit: str = " µs", digits: int = 0) -> str:
+    return "–" if value is None else f"{value:.{digits}f}{unit}"
+
+
+def table(results: dict) -> str:
+    """The measured table (docs/results/drive/table.md): one row per run."""
+    header = (
+        "| panda_wipe at 1 kHz | load (1 min) | ran | CPU p50 | CPU p99.9 | wall p50 | wall p99.9 "
+        "| ticks over 1 ms | statuses skipped | longest silence | driver: fresh commands | bounds met |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    rows = []
+    loop = results.get("loop_alone")
+    if loop:
+        rows.append(
+            f"| loop alone: a recorded 6 s, in-process bus, unpaced (median of {loop['runs']}) "
+            f"| {loop['load_average_1min']:.2f} | {loop['ticks']} ticks | {cell(loop['cpu_p50_us'])} "
+            f"| {cell(loop['cpu_p999_us'])} | – | – | – | – | – | – | – |"
+        )
+    runs = [("memq://, lockstep with the simulated driver", results.get("memq"))]
+    runs += [
+        (f"UDP, two processes, silence bound {r.get('silence_bound_periods', 0):g} periods", r)
+        for r in results.get("udp_runs", [])
+    ]
+    for label, r in runs:
+        if not r:
+            continue
+        if r.get("ticks") is None:
+            rows.append(f"| {label} | – | not run: {r.get('failure')} |" + " – |" * 9)
+            continue
+        load = r["load_average_1min"]
+        ran = f"{results['duration_s']:g} s" if not r.get("failure") else f"stopped: {r['failure']}"
+        driver = r.get("driver") or {}
+        fresh = driver.get("fresh_fraction")
+        lockstep = r is results.get("memq")  # the robot waits for the controller: no silence
+        silence = "–" if lockstep else cell(r["longest_silence_us"] / 1e3, " ms", 2)
+        rows.append(
+            f"| {label} | {load[0]:.2f}–{load[1]:.2f} | {ran} | {cell(r['cpu_p50_us'])} "
+            f"| {cell(r['cpu_p999_us'])} | {cell(r['p50_us'])} | {cell(r['p999_us'])} | {r['over_period']} "
+            f"| {r['statuses_skipped']} | {silence} | {'–' if fresh is None else f'{100 * fresh:.2f}%'} "
+            f"| {'– (stopped)' if r.get('failure') else ('yes' if r.get('bounds_met') else 'no')} |"
+        )
+    title = (
+        "# drive\n\n"
+        "panda_wipe driven by `nsdrake drive` against the simulated driver: CPU and wall figures are the "
+        "tick's, from a status's arrival to the command's publish; the longest silence is the longest "
+        "time the loop waited for a status from the last one's arrival (the silence rule's measure); "
+        "fresh commands are the driver's share of periods that applied a command answering its "
+        "previous status. This machine's figures, with its load.\n\n"
+    )
+    return title + header + "\n".join(rows) + "\n"
 
 
 def recorded_statuses(duration: float) -> list[tuple[bytes, bytes]]:
@@ -196,8 +265,14 @@ def main():
     parser.add_argument("--duration", type=float, default=20.0, help="drive length [s]")
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--transport", choices=("memq", "udp", "both"), default="both")
-    parser.add_argument("--config", type=Path, help="a --config for both sides of the UDP run")
+    parser.add_argument(
+        "--config",
+        type=Path,
+        action="append",
+        help="a --config for both sides of a UDP run; repeat for several runs ('default': none)",
+    )
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--loop-runs", type=int, default=3, help="runs of the loop alone for the table")
     args = parser.parse_args()
     if args.profile:
         print(json.dumps(profile()))
@@ -212,7 +287,17 @@ def main():
     if args.transport in ("memq", "both"):
         results["memq"] = memq(args.duration, args.out)
     if args.transport in ("udp", "both"):
-        results["udp"] = udp(args.duration, args.out, args.config)
+        configs = [None if str(c) == "default" else c for c in (args.config or [None])]
+        results["udp_runs"] = [udp(args.duration, args.out, config) for config in configs]
+        results["udp"] = results["udp_runs"][-1]
+    if args.loop_runs:
+        alone = [profile() for _ in range(args.loop_runs)]
+        results["loop_alone"] = {"runs": len(alone), "ticks": alone[0]["ticks"]} | {
+            key: float(np.median([a[key] for a in alone]))
+            for key in ("cpu_p50_us", "cpu_p999_us", "load_average_1min")
+        }
+    (args.out / "table.md").write_text(table(results))
+    print(table(results), end="")
     main_run = results.get("udp") if results.get("udp", {}).get("cpu_p50_us") else results.get("memq", {})
     results["cpu_p50_us"], results["cpu_p999_us"] = main_run.get("cpu_p50_us"), main_run.get("cpu_p999_us")
     print(json.dumps(results))

@@ -3,12 +3,14 @@
     python scripts/regenerate_results.py --family NAME|all [--runs DIR]
 
 Each folder docs/results/FAMILY/ holds ``command``, the one line that made its table
-(``nsdrake compare FAMILY [options]``), and ``table.md``, the table that command wrote,
-unedited; the docs pages copy that table's rows (a test checks the copy,
-tests/test_results_tables.py). This script re-runs the command of the family named (or of
-every folder, with ``all``) with ``--out RUNS/FAMILY --overwrite`` (default RUNS: runs/results;
-the run folder with every variant's traces is kept there), copies the new ``table.md``
-over the committed one (and the committed figures, ``*.png``, with the run's), and prints one
+(``nsdrake compare FAMILY [options]``, or ``python bench/bench_FAMILY.py [options]`` for a
+benchmark's table: this machine's figures, which another machine will not reproduce), and
+``table.md``, the table that command wrote, unedited; the docs pages copy that table's rows
+(a test checks the copy, tests/test_results_tables.py). This script re-runs the command of
+the family named (or of every folder, with ``all``) with ``--out RUNS/FAMILY`` (and
+``--overwrite`` for a compare; default RUNS: runs/results; the run folder with every
+variant's traces is kept there), copies the new ``table.md`` over the committed one (and
+the committed figures, ``*.png``, with the run's), and prints one
 line per family: ``unchanged``, or ``changed`` with
 the variants whose rows differ (then copy the rows into the page, and check its prose).
 
@@ -35,13 +37,20 @@ def result_families() -> list[str]:
 
 
 def read_command(family: str) -> list[str]:
-    """The arguments of docs/results/FAMILY/command after ``nsdrake``, checked to be a
-    ``compare`` of that family without an ``--out`` (this script chooses where it runs)."""
+    """The command of docs/results/FAMILY/command, as arguments for this Python: a
+    ``nsdrake compare FAMILY [options]``, or a benchmark ``python bench/bench_FAMILY.py
+    [options]`` (a machine's measured figures), without an ``--out`` (this script chooses
+    where it runs)."""
     path = RESULTS / family / "command"
     words = shlex.split(path.read_text())
-    if words[:3] != ["nsdrake", "compare", family] or any(w.startswith("--out") for w in words):
-        raise SystemExit(f"{path}: must read 'nsdrake compare {family} [options]' without --out")
-    return words[1:]
+    if any(w.startswith("--out") for w in words):
+        raise SystemExit(f"{path}: must not name --out (this script chooses where the run goes)")
+    if words[:3] == ["nsdrake", "compare", family]:
+        return ["-m", "nsdrake", *words[1:]]
+    if words[:2] == ["python", f"bench/bench_{family}.py"]:
+        return words[1:]
+    forms = f"'nsdrake compare {family} [options]' or 'python bench/bench_{family}.py [options]'"
+    raise SystemExit(f"{path}: must read {forms}")
 
 
 def table_rows(text: str) -> dict[str, str]:
@@ -55,7 +64,7 @@ def regenerate(family: str, runs: Path) -> tuple[str, bool]:
     args = read_command(family)
     out = runs / family
     done = subprocess.run(
-        [sys.executable, "-m", "nsdrake", *args, "--out", str(out), "--overwrite"], cwd=ROOT
+        [sys.executable, *args, "--out", str(out), *(["--overwrite"] if args[0] == "-m" else [])], cwd=ROOT
     )
     new = out / "table.md"
     if done.returncode != 0 or not new.exists():
