@@ -393,6 +393,37 @@ class CircleOnSurface:
         )
 
 
+def reference_problem(reference, task_rows, contact_threshold, period, loss_time) -> tuple[str, str] | None:
+    """(argument, problem) of the first argument
+    :class:`nsdrake.experiment.reference_system.SurfaceReferenceSystem` and
+    :class:`PlainSurfaceReference` cannot take, or None: ``reference`` a path with ``at``,
+    ``x0`` and ``normal`` (:class:`SlideAndPress`, :class:`CircleOnSurface`), ``task_rows``
+    one distinct force row (0, 1, 2: x, y, z) per axis of the path, and positive, finite
+    ``contact_threshold``, ``period`` and ``loss_time``."""
+    if not all(hasattr(reference, name) for name in ("at", "x0", "normal")):
+        return "reference", f"must be a SlideAndPress or a CircleOnSurface, got {type(reference).__name__}"
+    m = np.size(reference.x0)
+    try:
+        rows = np.asarray(task_rows)
+        valid = rows.shape == (m,) and all(float(r).is_integer() and 0 <= r <= 2 for r in rows.tolist())
+    except (TypeError, ValueError):
+        valid = False
+    if not valid or len(set(rows.tolist())) != m:
+        return "task_rows", (
+            f"must be {m} distinct rows of the measured force (0, 1, 2: x, y, z), one per axis of "
+            f"the reference's x0, got {show(task_rows)}"
+        )
+    for name, value in (
+        ("contact_threshold", contact_threshold),
+        ("period", period),
+        ("loss_time", loss_time),
+    ):
+        problem = positive_problem(value)
+        if problem:
+            return name, problem
+    return None
+
+
 class PlainSurfaceReference:
     """:class:`nsdrake.experiment.reference_system.SurfaceReferenceSystem` as plain calls,
     for a loop outside a Simulator (``nsdrake drive``): the same path and the same contact
@@ -404,6 +435,8 @@ class PlainSurfaceReference:
     measurement of t_k, and the normal offset of x_d(t_j)), then returns (x_d, ẋ_d, ẍ_d,
     f_d) at t_k. A tick that follows a skipped period (t_k − t_j of two periods or more)
     updates once, at t_j: a missed period is not replayed. The first tick only evaluates.
+    Arguments the system would refuse (:func:`reference_problem`) are refused here too,
+    with :class:`TaskReferenceError`.
     """
 
     def __init__(
@@ -415,6 +448,9 @@ class PlainSurfaceReference:
         period: float,
         loss_time: float = 0.05,
     ):
+        problem = reference_problem(reference, task_rows, contact_threshold, period, loss_time)
+        if problem is not None:
+            raise TaskReferenceError(f"PlainSurfaceReference.{problem[0]}", problem[1])
         self.path, self._rows = reference, np.asarray(task_rows)
         self._threshold, self._loss_time = contact_threshold, loss_time
         self._offset0 = float(reference.x0 @ reference.normal)

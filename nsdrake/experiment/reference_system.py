@@ -9,43 +9,14 @@ from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
 from nsdrake.control.leaf_system import LeafSystem
-from nsdrake.control.validation import positive_problem, show
 from nsdrake.experiment.reference import (
     CircleOnSurface,
     ContactState,
     SlideAndPress,
     TaskReferenceError,
+    reference_problem,
     update_contact,
 )
-
-
-def reference_problem(reference, task_rows, contact_threshold, period, loss_time) -> tuple[str, str] | None:
-    """(argument, problem) of the first argument :class:`SurfaceReferenceSystem` cannot take,
-    or None: ``reference`` a path with ``at``, ``x0`` and ``normal`` (:class:`SlideAndPress`,
-    :class:`CircleOnSurface`), ``task_rows`` one distinct force row (0, 1, 2: x, y, z) per
-    axis of the path, and positive, finite ``contact_threshold``, ``period`` and ``loss_time``."""
-    if not all(hasattr(reference, name) for name in ("at", "x0", "normal")):
-        return "reference", f"must be a SlideAndPress or a CircleOnSurface, got {type(reference).__name__}"
-    m = np.size(reference.x0)
-    try:
-        rows = np.asarray(task_rows)
-        valid = rows.shape == (m,) and all(float(r).is_integer() and 0 <= r <= 2 for r in rows.tolist())
-    except (TypeError, ValueError):
-        valid = False
-    if not valid or len(set(rows.tolist())) != m:
-        return "task_rows", (
-            f"must be {m} distinct rows of the measured force (0, 1, 2: x, y, z), one per axis of "
-            f"the reference's x0, got {show(task_rows)}"
-        )
-    for name, value in (
-        ("contact_threshold", contact_threshold),
-        ("period", period),
-        ("loss_time", loss_time),
-    ):
-        problem = positive_problem(value)
-        if problem:
-            return name, problem
-    return None
 
 
 class SurfaceReferenceSystem(LeafSystem):
@@ -69,7 +40,7 @@ class SurfaceReferenceSystem(LeafSystem):
     in task coordinates (m each) [m, m/s, m/s²], the desired normal force f_d [N],
     and 1 while in contact, 0 before it and after it was lost (one port, evaluated
     once per tick; :class:`SurfaceReference` splits it into named ports, :meth:`output_parts`).
-    Arguments it cannot take (:func:`reference_problem`) raise
+    Arguments it cannot take (:func:`nsdrake.experiment.reference.reference_problem`) raise
     :class:`nsdrake.experiment.reference.TaskReferenceError` (a ValueError) in one line.
     """
 

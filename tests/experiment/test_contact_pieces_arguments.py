@@ -25,6 +25,7 @@ from pydrake.all import (
 )
 
 from nsdrake import CircleOnSurface, ForceSensor, SlideAndPress, SurfaceReference, TaskReferenceError
+from nsdrake.experiment.reference import PlainSurfaceReference
 from nsdrake.station.config import StationError
 
 
@@ -218,10 +219,12 @@ def test_a_good_circle_is_taken_and_drawn():
         ({"reference": None}, r"SurfaceReference\.reference: must be a SlideAndPress or a CircleOnSurface"),
     ],
 )
-def test_the_surface_reference_refuses_what_would_fail_mid_run(change, expected):
+@pytest.mark.parametrize("made", [SurfaceReference, PlainSurfaceReference], ids=lambda c: c.__name__)
+def test_the_surface_reference_refuses_what_would_fail_mid_run(change, expected, made):
     """An out-of-range task row (IndexError mid-simulation, as it was), period 0 (Drake's
     error later), a contact threshold ≤ 0 (contact declared with no force): refused when
-    the reference is made, naming the argument."""
+    the reference is made, naming the argument; the same by the drive's plain reference
+    (which took them all before, and failed in the loop)."""
     arguments = {
         "reference": SlideAndPress(**SLIDE),
         "task_rows": [0, 1],
@@ -229,8 +232,10 @@ def test_the_surface_reference_refuses_what_would_fail_mid_run(change, expected)
         "period": 0.002,
     }
     with pytest.raises(TaskReferenceError) as caught:
-        SurfaceReference(**(arguments | change))
-    assert re.match(expected, str(caught.value)) and "\n" not in str(caught.value), str(caught.value)
+        made(**(arguments | change))
+    message = str(caught.value)
+    assert re.match(expected.replace("SurfaceReference", made.__name__), message), message
+    assert "\n" not in message
 
 
 def test_the_surface_reference_declares_contact_only_with_force():
