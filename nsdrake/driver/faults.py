@@ -4,27 +4,6 @@ the problem in words (None: fine), so that the loop can stop with one line."""
 from __future__ import annotations
 
 import numpy as np
-from drake import lcmt_panda_status
-
-STATUS_FIELDS = ("joint_position", "joint_velocity", "joint_torque_external")
-
-
-def status_problem(status: lcmt_panda_status, num_joints: int) -> str | None:
-    """A status the controller cannot use: the wrong joint count, or a position,
-    velocity or external torque that is not finite."""
-    if status.num_joints != num_joints:
-        return f"it has {status.num_joints} joints, the arm has {num_joints}"
-    fields = [getattr(status, field) for field in STATUS_FIELDS]
-    if all(len(values) == num_joints for values in fields) and np.isfinite(fields).all():
-        return None  # the usual case, in one array operation (this runs inside every tick)
-    for field in STATUS_FIELDS:
-        values = np.asarray(getattr(status, field), dtype=float)
-        if values.shape != (num_joints,):
-            return f"{field} has {values.size} values, the arm has {num_joints} joints"
-        bad = np.flatnonzero(~np.isfinite(values))
-        if bad.size:
-            return f"{field}[{bad[0]}] is {float(values[bad[0]])!r}"
-    return None
 
 
 def start_problem(q: np.ndarray, q0: np.ndarray, tolerance: float, joint_names) -> str | None:
@@ -55,14 +34,6 @@ def jump_problem(
     )
 
 
-def clock_steps(utime: int, previous_utime: int, period: float) -> int | None:
-    """Control periods between two statuses from their ``utime`` [µs], at least one; None
-    when the clock did not advance."""
-    if utime <= previous_utime:
-        return None
-    return max(1, round((utime - previous_utime) * 1e-6 / period))
-
-
 def clock_problem(
     clock: int, previous: int, anchor: int, period_us: int, bound_periods: float, name: str
 ) -> str | None:
@@ -73,7 +44,8 @@ def clock_problem(
     back (two publishers on the channel interleave their clocks), it falls in a period
     already answered (a stream faster than the controller's period, 2 kHz), or it jumps
     forward beyond the bound (a stream at 250 Hz, statuses lost, a wall clock stepped by
-    NTP). Jitter of less than half a period on the clock (a PC's utime) is taken."""
+    NTP). Jitter of less than half a period around the anchor (a PC's utime; the loop keeps
+    the anchor on the stream's phase, :func:`anchor_step`) is taken."""
     gap = clock - previous
     if gap == 0:
         return f"its {name} {clock} µs repeats the previous status's (a second publisher on the channel?)"
@@ -93,6 +65,23 @@ def clock_problem(
             f"status's (driver.status_timeout_periods {bound_periods:g})"
         )
     return None
+
+
+ANCHOR_GAIN = 16  # the anchor follows the stream's phase: at most 1/16 of a status's offset
+
+
+def anchor_step(clock: int, anchor: int, period_us: int, accepted: int) -> int:
+    """How far [µs] the anchor moves toward the phase of ``clock``, the ``accepted``-th
+    status taken after the first: its offset from the nearest period on the anchor, over
+    ``accepted + 1`` (the anchor is the mean phase of the statuses so far) and at most
+    over :data:`ANCHOR_GAIN` (then an average that follows a slow drift of the clock),
+    rounded toward zero, so that the status keeps its period. On the robot's own clock
+    (``robot_utime``, whole periods) the offset is zero; on a PC's ``utime`` the anchor
+    stops being the first status's jitter, and jitter of less than half a period around
+    the stream's phase is taken (against the first status alone, an offset of 300 µs on
+    it and −250 µs on a later one would put that one in the period already answered)."""
+    offset = clock - anchor - elapsed_periods(clock, anchor, period_us) * period_us
+    return int(offset / min(accepted + 1, ANCHOR_GAIN))
 
 
 def elapsed_periods(clock: int, anchor: int, period_us: int) -> int:

@@ -36,6 +36,7 @@ import numpy as np
 from nsdrake.driver.bus import Bus
 from nsdrake.driver.controller_side import ControllerSide, Recorder
 from nsdrake.driver.faults import (
+    anchor_step,
     clock_problem,
     elapsed_periods,
     jump_problem,
@@ -137,6 +138,7 @@ class ControllerLoop:
 
         self._wrench = np.zeros(6)
         self._anchor = self._last_clock = 0
+        self._accepted = 0  # statuses taken after the first (faults.anchor_step)
         self._long_gaps = 0  # statuses in a row two periods or more after the previous
         self._last_arrival = 0.0
         # the longest silence the silence rule measured once started [s]: from the answered
@@ -194,6 +196,7 @@ class ControllerLoop:
         clock = self._status.robot_utime(data)
         self.clock_name = "robot_utime" if clock else "utime"
         self._anchor = self._last_clock = clock or self._status.utime(data)
+        self._accepted = 0
         problem = start_problem(self._q, self.side.station.q0, c.start_tolerance, self._names)
         if problem:
             raise self._fault(f"first status refused: {problem}")
@@ -215,6 +218,7 @@ class ControllerLoop:
                 self.bus.handle(0)
                 if self._inbox:
                     break
+                self.longest_silence = max(self.longest_silence, now - self._last_arrival)
                 raise self._fault(
                     f"no lcmt_panda_status on {self.config.status_channel} for "
                     f"{(now - self._last_arrival) * 1e3:.1f} ms "
@@ -260,6 +264,8 @@ class ControllerLoop:
             if problem:
                 raise self._fault(f"status refused: {problem}")
             self._last_clock = clock
+            self._anchor += anchor_step(clock, self._anchor, self.period_us, self._accepted)
+            self._accepted += 1
         arrival, wall, cpu, data = inbox[-1]
         self.skipped += len(inbox) - 1
         inbox.clear()

@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 from pydrake.lcm import DrakeLcm
 
+from nsdrake.control.validation import ControllerInputError
 from nsdrake.driver.bus import Bus, DrakeBus
 from nsdrake.driver.controller_side import _Log, build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
@@ -75,8 +76,24 @@ class Drive:
                     _lockstep(loop, driver, duration, progress)
             except DriveFaultError as e:
                 failure, interrupted = str(e), isinstance(e, DriveInterruptedError)
+            except Exception as e:  # noqa: BLE001 (anything else the loop met: one line, the folder kept)
+                t = loop.time if loop.started else None
+                failure = str(DriveFaultError(t, _unexpected(e), loop.commands))
         timing = _timing(loop, pauses, pause_gc)
         return DriveRun(loop=loop, driver=driver, timing=timing, failure=failure, interrupted=interrupted)
+
+
+def _unexpected(error: Exception) -> str:
+    """The line for an error the loop's own checks did not turn into a fault: the
+    controller refusing its input, the bus failing (an OSError of LCM's socket), or a bug
+    (its type named). The run still keeps what it computed."""
+    if isinstance(error, ControllerInputError):
+        problem = f"the controller refused its input: {error}"
+    elif isinstance(error, OSError):
+        problem = f"the LCM bus failed: {error}"
+    else:
+        problem = f"unexpected {type(error).__name__}: {error}"
+    return " ".join(problem.split())
 
 
 def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, progress) -> None:

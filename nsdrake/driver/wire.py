@@ -85,6 +85,9 @@ class StatusBuffer:
         return struct.unpack_from(">b", self.buffer, _TAIL + 8)[0]
 
 
+FORCE_TORQUE_FIELDS = ("fx", "fy", "fz", "tx", "ty", "tz")  # lcmt_force_torque's values, in order
+
+
 class ForceTorqueBuffer:
     """The latest ``lcmt_force_torque``, decoded in place; :attr:`wrench` is [M; f] (6)
     [N m, N] (the message's tx ty tz, fx fy fz), a view."""
@@ -97,8 +100,13 @@ class ForceTorqueBuffer:
         self._values = values
 
     def problem(self, data: bytes) -> str | None:
+        """Why ``data`` is not an lcmt_force_torque with finite values (None: it is one)."""
         if len(data) != FORCE_TORQUE_SIZE or data[:8] != self._fingerprint:
             return f"{len(data)} bytes that are not an lcmt_force_torque"
+        values = np.frombuffer(data, ">f8", 6, offset=16)
+        if not np.isfinite(values).all():
+            k = int(np.flatnonzero(~np.isfinite(values))[0])
+            return f"{FORCE_TORQUE_FIELDS[k]} is {float(values[k])!r}"
         return None
 
     def load(self, data: bytes) -> None:

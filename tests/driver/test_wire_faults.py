@@ -8,18 +8,21 @@ between processes: tests/driver/test_udp.py.)"""
 from __future__ import annotations
 
 import dataclasses
+import errno
 import math
 
 import numpy as np
 import pytest
-from drake import lcmt_panda_status
+from drake import lcmt_force_torque, lcmt_panda_status
 from fake_bus import FakeBus, force_torque_bytes, status_bytes
 
 from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.faults import clock_problem, elapsed_periods, jump_problem, start_problem
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError
 from nsdrake.driver.panda import POSITION_UPPER, VELOCITY_LIMIT, limit_problem
+from nsdrake.driver.run import Drive, write_drive_folder
 from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.traces import Traces
 
 NAMES = tuple(f"panda_joint{k}" for k in range(1, 8))
 T = 1e-3
@@ -73,10 +76,11 @@ def start_loop(sides, force_source="sensor", **robot):
     return loop, robot, bus
 
 
-def run_until_fault(loop, robot, bus, fault) -> DriveFaultError:
+def run_until_fault(loop, robot, bus, fault, sent: int = 5) -> DriveFaultError:
     """Five good statuses answered one by one, then ``fault(robot)`` and ticks until the
     fault (at most 2: a faulty stream may begin with a status that is still fine): returns
-    it, after checking that nothing was sent after it."""
+    it, after checking that exactly ``sent`` commands went out, one per status answered
+    (catches a command, a "safe" zero torque included, sent on the fault) and nothing after."""
     robot.status()
     loop.start()
     for _ in range(4):
@@ -87,11 +91,11 @@ def run_until_fault(loop, robot, bus, fault) -> DriveFaultError:
     with pytest.raises(DriveFaultError) as info:
         for _ in range(2):
             loop.tick()
-    sent = loop.commands
+    assert loop.commands == sent, loop.commands  # one per good status: none sent on the fault
     for _ in range(3):  # the robot keeps talking; the stopped controller does not answer
         robot.status()
     bus.handle(10)
-    assert len(bus.sent) == sent and sent in (5, 6)
+    assert len(bus.sent) == sent
     message = str(info.value)
     assert "\n" not in message and f"stopped commanding after {sent} command(s)" in message
     return info.value
@@ -148,24 +152,27 @@ def test_a_gap_is_counted_in_periods_to_the_nearest(sides, step_us, periods):
 
 
 def test_the_clock_is_the_robot_s_re_anchored_every_tick(sides):
-    """utime from a PC clock with ±300 µs of jitter, robot_utime the robot's own 1 kHz:
-    after 500 statuses the controller's clock is the robot's, exactly (catches utime read
-    instead of robot_utime, and a sum of rounded gaps)."""
+    """utime from a PC clock running 0.2% fast with ±300 µs of jitter and stepped 2 s
+    forward by NTP halfway, robot_utime the robot's own 1 kHz: after 500 statuses the
+    controller's clock is the robot's, exactly, and the step is no fault (catches utime
+    read instead of robot_utime: the step would stop the drive as a jump)."""
     loop, robot, bus = start_loop(sides)
     rng = np.random.default_rng(0)
     robot.status()
     loop.start()
-    for _ in range(500):
-        robot.status(utime=robot.utime + 1000 + int(rng.integers(-300, 301)))
+    utime0 = robot.utime
+    for k in range(1, 501):
+        step = 2_000_000 if k > 250 else 0
+        robot.status(utime=utime0 + 1002 * k + step + int(rng.integers(-300, 301)))
         loop.tick()
+    assert loop.clock_name == "robot_utime"
     assert loop.time == pytest.approx(500 * T, abs=1e-12) and loop.skipped == 0
 
 
 def test_without_robot_utime_the_clock_is_utime_re_anchored(sides):
-    """No robot_utime: utime, re-anchored at the first status. Jitter of ±300 µs that
-    alternates (+300, −300) keeps the time on the period; a rounded-sum clock would too,
-    so also a run of 1400 µs gaps: 1.4 periods each, five of them are 7 periods (a sum of
-    rounded gaps says 5)."""
+    """No robot_utime: utime, counted in periods from an anchor re-set every tick. A run
+    of 1400 µs gaps: 1.4 periods each, five of them are 7 periods (a sum of rounded gaps
+    says 5)."""
     loop, robot, bus = start_loop(sides, robot_clock=False)
     robot.status()
     loop.start()
@@ -174,6 +181,23 @@ def test_without_robot_utime_the_clock_is_utime_re_anchored(sides):
         robot.status(after=1.4e-3, clock_step=1400)
         loop.tick()
     assert loop.periods == 7
+
+
+def test_utime_jitter_is_taken_around_the_stream_s_phase(sides):
+    """No robot_utime, a PC clock whose first stamp is 300 µs late, the next ones +100,
+    −250, −280, then ±280 alternating: every status is one period on (500 of them, none
+    refused, none skipped), although −250 and −280 lie more than half a period from the
+    first stamp (catches the first status's stamp kept as the anchor: the third status
+    would be refused as a stream faster than the controller's period)."""
+    loop, robot, bus = start_loop(sides, robot_clock=False)
+    utime0 = robot.utime + 1000
+    robot.status(utime=utime0 + 300)
+    loop.start()
+    jitter = [100, -250, -280] + [280 if k % 2 else -280 for k in range(497)]
+    for k, j in enumerate(jitter, 1):
+        robot.status(utime=utime0 + 1000 * k + j)
+        loop.tick()
+    assert loop.periods == 500 and loop.skipped == 0 and loop.commands == 501
 
 
 @pytest.mark.parametrize(
@@ -197,7 +221,8 @@ def test_a_clock_that_is_not_the_robot_s_period_stops_the_controller(sides, cloc
         else:
             r.status(clock_step=clock_step)
 
-    error = run_until_fault(loop, robot, bus, fault)
+    # at 2 kHz the first half-period status rounds to the next period and is answered
+    error = run_until_fault(loop, robot, bus, fault, sent=6 if clock_step == 500 else 5)
     assert error.problem.startswith("status refused: its robot_utime") and words in error.problem
 
 
@@ -277,14 +302,16 @@ def test_a_long_tick_skips_statuses_without_a_fault(sides):
 
 
 def test_the_longest_silence_is_the_longest_wait_from_the_last_arrival(sides):
-    """A status 2.7 ms after the last while the loop waits, then a 5 ms tick during which
-    statuses go on at 1 kHz: the loop's longest silence is 2.7 ms (catches a silence
-    figure that is not measured from the answered status's arrival on the wall clock, and
-    one that counts the controller's own long tick, 5 ms here, which the silence rule does
-    not)."""
+    """A status 2.7 ms after the last while the loop waits (from 0.5 ms after that one's
+    arrival: its tick's cost), then a 5 ms tick during which statuses go on at 1 kHz: the
+    loop's longest silence is 2.7 ms (catches a silence figure measured from the end of
+    the tick, 2.2 ms here, instead of the answered status's arrival, and one that counts
+    the controller's own long tick, 5 ms here, which the silence rule does not)."""
     loop, robot, bus = start_loop(sides)
     robot.status()
+    bus.tick_cost = 0.5e-3  # the wait begins 0.5 ms after the status arrived
     loop.start()
+    bus.tick_cost = 0.0
     robot.status(after=2.7e-3, clock_step=3000)
     loop.tick()
     assert math.isclose(loop.longest_silence, 2.7e-3, rel_tol=1e-6), loop.longest_silence
@@ -353,6 +380,53 @@ def test_a_joint_beyond_the_panda_s_limits_stops_the_controller(sides):
         and "above the Panda's limit 3.7525 rad" in info.value.problem
     )
     assert q[5] > POSITION_UPPER[5] + 0.01
+
+
+def test_a_non_finite_force_torque_message_stops_the_controller(sides):
+    """A force-torque message with fz NaN (a sensor that saturated or lost its link): one
+    line naming the channel and the field, nothing sent after (catches the sensor's values
+    taken unchecked, which made the controller step raise a traceback mid-run)."""
+    loop, robot, bus = start_loop(sides)
+    bad = lcmt_force_torque()
+    bad.fz = math.nan
+
+    def fault(r):
+        r.force_torque = False
+        r.status()
+        bus.at(r.arrival, "PANDA_FORCE_TORQUE", bad.encode())
+
+    error = run_until_fault(loop, robot, bus, fault)
+    assert error.problem == "force-torque message refused on PANDA_FORCE_TORQUE: fz is nan"
+
+
+class FailingBus(FakeBus):
+    """A bus whose socket fails (ENETUNREACH) at the sixth publish."""
+
+    def publish(self, channel: str, data) -> None:
+        if len(self.sent) == 5:
+            raise OSError(errno.ENETUNREACH, "Network is unreachable")
+        super().publish(channel, data)
+
+
+def test_an_error_the_checks_do_not_name_still_ends_in_one_line_keeping_the_rows(sides, tmp_path):
+    """The bus failing at the sixth command (an OSError from LCM's socket): the drive ends
+    with one failure line, the five commands sent recorded and written to traces.csv
+    (catches the error escaping Drive.run: a traceback, and the folder with the traces of
+    the commands already sent removed)."""
+    bus = FailingBus()
+    loop = ControllerLoop(sides["sensor"], bus, clock=bus.clock)
+    loop.side.reset()
+    robot = Robot(bus, loop.side.station.q0)
+    for _ in range(10):
+        robot.status()
+    run = Drive(loop, None).run()
+    assert run.failure == (
+        "at t = 0.005 s: the LCM bus failed: [Errno 101] Network is unreachable; "
+        "stopped commanding after 5 command(s)"
+    )
+    result = write_drive_folder(run, tmp_path)
+    assert result.failure == run.failure
+    assert len(Traces.read_csv(tmp_path / "traces.csv")["t"]) == 5
 
 
 def test_limit_checks_at_their_margins():
