@@ -379,7 +379,7 @@ def _drive(args) -> int:
 
 def _sim_driver(args) -> int:
     from nsdrake.driver.controller_side import check_drive_scenario
-    from nsdrake.driver.serve import serve_simulated_driver
+    from nsdrake.driver.serve import SimulatedDriverStopError, serve_simulated_driver
     from nsdrake.driver.stop import ctrl_c_requests
 
     scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
@@ -392,15 +392,21 @@ def _sim_driver(args) -> int:
     print(f"nsdrake: simulated driver for {args.scenario} on {args.lcm}; serving (Ctrl-C ends)", flush=True)
     progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
     with ctrl_c_requests() as stop:
-        served = serve_simulated_driver(
-            scenario,
-            lcm,
-            expire_sec=args.expire_sec,
-            low_pass_freq=args.low_pass_freq,
-            rate_limit=not args.no_rate_limit,
-            progress=progress,
-            stop=stop,
-        )
+        try:
+            served = serve_simulated_driver(
+                scenario,
+                lcm,
+                expire_sec=args.expire_sec,
+                low_pass_freq=args.low_pass_freq,
+                rate_limit=not args.no_rate_limit,
+                progress=progress,
+                stop=stop,
+            )
+        except SimulatedDriverStopError as e:
+            progress.end_line()
+            print(f"nsdrake: simulated driver: {e.result.line()}")
+            print(f"nsdrake: simulated driver stopped: {e}", file=sys.stderr)
+            return 1
     progress.end_line()
     print(f"nsdrake: simulated driver: {served.line()}")
     if stop.requested:

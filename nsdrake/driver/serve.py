@@ -56,6 +56,7 @@ class ServeResult:
     stale: int = 0  # … that applied an older command, not yet expired
     expired: int = 0  # … that fell back to damping (no command within expire_sec)
     behind: int = 0  # periods the driver itself started late (its own step overran the period)
+    undecodable: int = 0  # messages on the command channel that were not an lcmt_panda_command (dropped)
     # periods, and fresh ones, up to the last command received (the controller's run; after
     # it the driver damps until it is stopped, which is not the controller's doing)
     commanded_periods: int = 0
@@ -74,7 +75,34 @@ class ServeResult:
             f"{self.periods} periods after the first command, {self.commands} commands received; "
             f"{self.fresh} applied a fresh command, {self.stale} a stale one, "
             f"{self.expired} fell back to damping; the driver itself started {self.behind} periods late"
+            + (f"; {self.undecodable} undecodable command messages dropped" if self.undecodable else "")
         )
+
+
+class SimulatedDriverStopError(RuntimeError):
+    """The simulated driver stopped on a command it cannot apply, as drake-franka-driver
+    does (its torque loop throws on a command not in torque mode; libfranka refuses a
+    non-finite torque): one line; ``result`` what it served until then."""
+
+    def __init__(self, problem: str, result: ServeResult):
+        self.result = result
+        super().__init__(problem)
+
+
+def command_problem(command: lcmt_panda_command) -> str | None:
+    """Why the driver cannot apply ``command`` in torque mode (None: it can)."""
+    torque = lcmt_panda_status.CONTROL_MODE_TORQUE
+    if command.control_mode_expected != torque or command.num_joint_torque != NUM_JOINTS:
+        return (
+            f"a command that is not a torque command of {NUM_JOINTS} joints (control_mode_expected "
+            f"{command.control_mode_expected}, expected {torque}; "
+            f"num_joint_torque {command.num_joint_torque})"
+        )
+    values = np.asarray(command.joint_torque, dtype=float)
+    if not np.isfinite(values).all():
+        k = int(np.flatnonzero(~np.isfinite(values))[0])
+        return f"a command whose joint_torque[{k}] is {float(values[k])!r}"
+    return None
 
 
 def lowpass(previous: np.ndarray, value: np.ndarray, period: float, cutoff: float) -> np.ndarray:
@@ -170,18 +198,28 @@ class _Server:
             self.inner.Subscribe(
                 d.force_torque_channel, lambda data: self.outgoing.append((d.force_torque_channel, data))
             ),
-            lcm.Subscribe(
-                d.command_channel, lambda data: self.received.append(lcmt_panda_command.decode(data))
-            ),
+            lcm.Subscribe(d.command_channel, self._on_command),
         ]
         self.result, self.recent = ServeResult(), []
         self.command, self.applied = None, np.zeros(NUM_JOINTS)
         self.published: list[int] = []  # utime of each status published
         self.first = None
 
+    def _on_command(self, data: bytes) -> None:
+        """A command received: kept to apply; bytes that do not decode are dropped and
+        counted (as LCM's typed subscription in drake-franka-driver drops them)."""
+        try:
+            self.received.append(lcmt_panda_command.decode(data))
+        except ValueError:
+            self.result.undecodable += 1
+
     def publish_status(self) -> None:
-        """The status of t_k (the station's diagram published it on reaching t_k), stamped."""
+        """The status of t_k (the station's diagram published it on reaching t_k), stamped
+        t_k, sent now: taken off the inner bus first (left there, it went out a period
+        later, stamped t_k+1: two periods from measurement to applied torque, where the
+        real driver takes one)."""
         d = self.channels
+        self.inner.HandleSubscriptions(0)
         for channel, data in self.outgoing:
             if channel == d.status_channel:
                 status = lcmt_panda_status.decode(data)
@@ -203,6 +241,9 @@ class _Server:
             self.result.commands += len(self.received)
             self.command = self.received[-1]
             self.received.clear()
+            problem = command_problem(self.command)
+            if problem:
+                raise SimulatedDriverStopError(problem, self.result)
             if self.first is None:
                 self.first = self.driver.time
         if self.command is not None and abs(self.wall_utime() - self.command.utime) > self.expire_us:

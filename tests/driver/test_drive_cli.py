@@ -145,10 +145,11 @@ def test_a_bad_driver_setting_is_refused(tmp_path, capsys):
 
 class AnsweringController:
     """Answers each status on ``lcm`` at once with a zero torque command carrying its
-    utime, until ``stop_after`` statuses."""
+    utime, until ``stop_after`` statuses; ``bad`` (status index -> a function that spoils
+    the command, or bytes sent instead) for a controller that misbehaves."""
 
-    def __init__(self, lcm, stop_after: int = 10**9):
-        self.lcm, self.statuses, self.stop_after = lcm, [], stop_after
+    def __init__(self, lcm, stop_after: int = 10**9, bad=None):
+        self.lcm, self.statuses, self.stop_after, self.bad = lcm, [], stop_after, bad or {}
         self._subscription = lcm.Subscribe("PANDA_STATUS", self._answer)
 
     def _answer(self, data: bytes):
@@ -159,7 +160,71 @@ class AnsweringController:
         command = lcmt_panda_command()
         command.utime, command.control_mode_expected = status.utime, lcmt_panda_status.CONTROL_MODE_TORQUE
         command.num_joint_torque, command.joint_torque = 7, [0.0] * 7
+        spoil = self.bad.get(len(self.statuses))
+        if isinstance(spoil, bytes):
+            self.lcm.Publish("PANDA_COMMAND", spoil)
+            return
+        if spoil is not None:
+            spoil(command)
         self.lcm.Publish("PANDA_COMMAND", command.encode())
+
+
+def test_each_status_of_the_standalone_driver_carries_the_state_of_its_own_robot_utime(monkeypatch):
+    """nsdrake sim-driver forwards the station's status of t_k at t_k, stamped robot_utime
+    t_k, from the first period on (catches the status left on the station's bus for a
+    period: sent at t_k+1 stamped t_k+1, it made two periods from measurement to applied
+    torque where drake-franka-driver takes one). The station's own status carries its
+    diagram's time in utime, before the driver re-stamps it with the wall clock."""
+    import nsdrake.driver.serve as serve
+
+    inner_stamps = []
+
+    def drake_lcm(url):
+        bus = DrakeLcm(url)
+        bus.Subscribe("PANDA_STATUS", lambda data: inner_stamps.append(lcmt_panda_status.decode(data).utime))
+        return bus
+
+    monkeypatch.setattr(serve, "DrakeLcm", drake_lcm)
+    lcm = DrakeLcm("memq://")
+    controller = AnsweringController(lcm)
+    serve_simulated_driver(load_scenario("panda_wipe"), lcm, duration=0.02, low_pass_freq=1000.0)
+    sent = [s.robot_utime for s in controller.statuses]
+    assert sent[:3] == [0, 1000, 2000] and len(sent) >= 20
+    assert sent == inner_stamps[: len(sent)]
+
+
+@pytest.mark.parametrize(
+    ("bad", "words"),
+    [
+        (lambda c: setattr(c, "control_mode_expected", 1), "not a torque command of 7 joints"),
+        (lambda c: setattr(c, "joint_torque", [0.0] * 6 + [float("nan")]), "joint_torque[6] is nan"),
+    ],
+    ids=["position mode", "NaN torque"],
+)
+def test_the_standalone_driver_stops_on_a_command_it_cannot_apply(bad, words):
+    """A command in another mode or with a NaN torque at the fifth status: the simulated
+    driver stops with one line naming it, as drake-franka-driver's torque loop throws and
+    libfranka refuses a non-finite torque (catches a traceback from the plant, or the
+    command applied)."""
+    from nsdrake.driver.serve import SimulatedDriverStopError
+
+    lcm = DrakeLcm("memq://")
+    AnsweringController(lcm, bad={5: bad})
+    with pytest.raises(SimulatedDriverStopError) as caught:
+        serve_simulated_driver(load_scenario("panda_wipe"), lcm, duration=0.02, low_pass_freq=1000.0)
+    assert words in str(caught.value) and "\n" not in str(caught.value)
+    assert caught.value.result.commands == 5
+
+
+def test_the_standalone_driver_drops_undecodable_commands_and_counts_them():
+    """Bytes that are no lcmt_panda_command at the fifth status: dropped and counted in the
+    driver's line, the run goes on (as LCM's typed subscription drops them; catches a
+    decode error ending the driver with a traceback)."""
+    lcm = DrakeLcm("memq://")
+    AnsweringController(lcm, bad={5: b"not a command"})
+    served = serve_simulated_driver(load_scenario("panda_wipe"), lcm, duration=0.02, low_pass_freq=1000.0)
+    assert served.undecodable == 1 and served.periods == 20
+    assert served.line().endswith("; 1 undecodable command messages dropped")
 
 
 def test_the_standalone_simulated_driver_applies_each_command_one_period_late():
