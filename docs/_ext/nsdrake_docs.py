@@ -384,7 +384,8 @@ class PydrakeSystemDirective(SphinxDirective):
 class ResultsDirective(SphinxDirective):
     """``.. nsdrake-results:: FAMILY``: the family's description (its file in
     nsdrake/studies/families/), the command that measures it, and its table: the
-    ``table.md`` that command wrote, committed as docs/results/FAMILY/table.md. Until that
+    ``table.md`` that command wrote, committed as docs/results/FAMILY/table.md. For a
+    benchmark's table (no family file) the command is docs/results/FAMILY/command. Until that
     file is committed, the directive's content (the README's table, or nothing) is shown
     under a note saying so."""
 
@@ -399,9 +400,15 @@ class ResultsDirective(SphinxDirective):
         family = self.arguments[0]
         docs = Path(self.env.srcdir)
         family_file = docs.parent / "nsdrake" / "studies" / "families" / f"{family}.yaml"
-        spec = yaml.safe_load(family_file.read_text())
-        command = f"nsdrake compare {family}"
-        out = [nodes.paragraph("", "", *inline(" ".join(spec["description"].split())))]
+        command_file = docs / "results" / family / "command"
+        out = []
+        if family_file.exists():  # a comparison family: its description, then its command
+            spec = yaml.safe_load(family_file.read_text())
+            out.append(nodes.paragraph("", "", *inline(" ".join(spec["description"].split()))))
+            command = f"nsdrake compare {family}"
+        else:  # a benchmark's table (bench/bench_FAMILY.py): the command it was measured with
+            self.env.note_dependency(str(command_file))
+            command = command_file.read_text().strip()
         out.append(nodes.literal_block(command, command, language="bash"))
         table_file = docs / "results" / family / "table.md"
         container = nodes.container(classes=["nsdrake-results"])
