@@ -219,9 +219,14 @@ def test_subset_of_a_family_runs_its_own_variants_in_worker_processes(tmp_path):
     assert rows[1]["nu_final"] == full[2]["nu_final"]
 
 
+# Both slow: each waits out its 20 s limit (the healthy variants' room on a loaded machine).
+# The fast subset keeps a hung variant stopped at its limit, with its row saying so, in
+# test_a_variant_that_starts_late_gets_the_whole_time_limit (10 s), and every variant
+# stopped at a 1 s limit in test_interrupt.py's test_a_variant_stopped_while_it_imports.
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("fault", "grace"),
-    [("hang", None), pytest.param("hang_hard", 1.0, marks=pytest.mark.slow)],
+    [("hang", None), ("hang_hard", 1.0)],
     ids=["hangs until stopped", "deaf to SIGINT, killed"],
 )
 def test_a_hung_variant_is_stopped_at_its_time_limit_and_the_others_finish(
