@@ -230,14 +230,18 @@ def test_ctrl_c_while_the_kernels_compile_ends_a_comparison_at_once(tmp_path, to
 def test_a_variant_stopped_while_it_imports_prints_no_traceback(tmp_path):
     """Issue 24, item 2: --variant-timeout 1 stops each variant while its process still
     starts; the SIGINT reached the starting interpreter, whose default handler printed a
-    60-line KeyboardInterrupt traceback. Every interpreter here starts 3 s late (a
-    sitecustomize that sleeps, run before anything of nsdrake's), so each variant is
-    still starting when its second runs out, however fast the machine (on CI's quiet
-    machine a 0.5 s variant had finished within the second). Catches that traceback:
-    every line on stderr is one of nsdrake's, and each variant says it timed out."""
+    60-line KeyboardInterrupt traceback. Every variant's interpreter here starts 3 s late
+    (a sitecustomize that sleeps in multiprocessing's children, run before anything of
+    nsdrake's; the command itself starts at once, the sleep is for the variants), so
+    each variant is still starting when its second runs out, however fast the machine
+    (on CI's quiet machine a 0.5 s variant had finished within the second). Catches that
+    traceback: every line on stderr is one of nsdrake's, and each variant says it timed
+    out."""
     slow_start = tmp_path / "slow_start"
     slow_start.mkdir()
-    (slow_start / "sitecustomize.py").write_text("import time\ntime.sleep(3.0)\n")
+    (slow_start / "sitecustomize.py").write_text(
+        'import sys\nimport time\nif "--multiprocessing-fork" in sys.argv:\n    time.sleep(3.0)\n'
+    )
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join(filter(None, [str(slow_start), os.environ.get("PYTHONPATH")])),
