@@ -177,7 +177,12 @@ def released(folder: Path) -> bool:
     )
 
 
-@pytest.mark.parametrize("to", ["the command", "its process group"])
+# Each variant compiles every kernel into a cold cache (CPU-bound, two processes at once):
+# the terminal's case (the whole process group, so the workers take the SIGINT inside
+# numba's compiler) stays in the fast subset, the command alone runs with the whole suite;
+# the fast subset sends `kill -INT` to the command alone in
+# test_ctrl_c_ends_a_comparison_at_once_while_no_variant_simulates.
+@pytest.mark.parametrize("to", [pytest.param("the command", marks=pytest.mark.slow), "its process group"])
 def test_ctrl_c_while_the_kernels_compile_ends_a_comparison_at_once(tmp_path, to):
     """Issue 24, item 2: Ctrl-C during a comparison's first kernel compile. A numba cache of
     the test's own (NUMBA_CACHE_DIR, empty) makes the variants compile; the signal goes as
@@ -230,14 +235,18 @@ def test_ctrl_c_while_the_kernels_compile_ends_a_comparison_at_once(tmp_path, to
 def test_a_variant_stopped_while_it_imports_prints_no_traceback(tmp_path):
     """Issue 24, item 2: --variant-timeout 1 stops each variant while its process still
     starts; the SIGINT reached the starting interpreter, whose default handler printed a
-    60-line KeyboardInterrupt traceback. Every interpreter here starts 3 s late (a
-    sitecustomize that sleeps, run before anything of nsdrake's), so each variant is
-    still starting when its second runs out, however fast the machine (on CI's quiet
-    machine a 0.5 s variant had finished within the second). Catches that traceback:
-    every line on stderr is one of nsdrake's, and each variant says it timed out."""
+    60-line KeyboardInterrupt traceback. Every variant's interpreter here starts 3 s late
+    (a sitecustomize that sleeps in multiprocessing's children, run before anything of
+    nsdrake's; the command itself starts at once, the sleep is for the variants), so
+    each variant is still starting when its second runs out, however fast the machine
+    (on CI's quiet machine a 0.5 s variant had finished within the second). Catches that
+    traceback: every line on stderr is one of nsdrake's, and each variant says it timed
+    out."""
     slow_start = tmp_path / "slow_start"
     slow_start.mkdir()
-    (slow_start / "sitecustomize.py").write_text("import time\ntime.sleep(3.0)\n")
+    (slow_start / "sitecustomize.py").write_text(
+        'import sys\nimport time\nif "--multiprocessing-fork" in sys.argv:\n    time.sleep(3.0)\n'
+    )
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join(filter(None, [str(slow_start), os.environ.get("PYTHONPATH")])),
@@ -263,7 +272,9 @@ def test_a_variant_stopped_while_it_imports_prints_no_traceback(tmp_path):
     assert f"nsdrake: {len(stopped)} of 3 variants failed" in err
 
 
-@pytest.mark.parametrize("to", ["the command", "its process group"])
+# The command alone in the fast subset, the process group with the whole suite (the fast
+# subset sends it to the process group in the compile test above).
+@pytest.mark.parametrize("to", ["the command", pytest.param("its process group", marks=pytest.mark.slow)])
 def test_ctrl_c_ends_a_comparison_at_once_while_no_variant_simulates(tmp_path, to):
     """Issue 24, item 2, deterministically: both running variants hang deaf to SIGINT before
     they simulate (NSDRAKE_TEST_FAULT hang_hard: as a worker whose KeyboardInterrupt a
@@ -339,8 +350,19 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
-@pytest.mark.parametrize("when", ["at the compile notice", "after the claim"])
-@pytest.mark.parametrize("to", ["the command", "its process group"])
+# Each compiles kernels into a cold cache ("after the claim": the model's kernels first,
+# whole). The fast subset keeps each state and each recipient once: the command at the
+# compile notice, its process group after the claim; the other two run with the whole suite.
+@pytest.mark.parametrize(
+    ("to", "when"),
+    [
+        ("the command", "at the compile notice"),
+        pytest.param("the command", "after the claim", marks=pytest.mark.slow),
+        pytest.param("its process group", "at the compile notice", marks=pytest.mark.slow),
+        ("its process group", "after the claim"),
+    ],
+    ids=lambda value: value,
+)
 def test_ctrl_c_while_the_kernels_compile_ends_a_run_at_once(tmp_path, to, when):
     """Issue 24, item 2: Ctrl-C during `nsdrake run`'s first kernel compile (a numba cache of
     the test's own, empty, so that the kernels compile). The signal goes when the compile

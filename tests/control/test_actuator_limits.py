@@ -65,23 +65,35 @@ def lattice(lo, hi):
     return st.integers(lo * 16, hi * 16).map(lambda k: k / 16.0)
 
 
+# The strategies built once (not at each draw): hypothesis checks each new strategy object
+# before it draws from it, which cost more than the limiter under test; the values drawn
+# are the same (a strategy's draws depend on its definition, not on the object).
+TORQUE_TASK = lattice(-150, 150)
+TORQUE_NULL = st.one_of(st.just(0.0), lattice(-20, 20))
+SHARE = lattice(0, 1)
+TORQUE_MAX = st.one_of(st.just(np.inf), lattice(1, 100))
+RATE_STEP = st.one_of(st.just(np.inf), lattice(1, 5).filter(lambda x: x > 0))
+NEAR, ANYWHERE = lattice(-3, 3), lattice(-100, 100)
+JOINTS = st.integers(1, 7)
+
+
 @st.composite
 def limiter_inputs(draw, n=None):
     """(τ_task, τ₀, lower, upper): per joint ±τ_max (or none) ∩ τ_prev ± ρ_max T (or none),
     τ_prev either where a limiter would have left it, τ_task + c τ₀ (c ∈ [0, 1]) plus a
     few steps, or anywhere within ±τ_max."""
-    n = n or draw(st.integers(1, 7))
-    a = np.array(draw(st.lists(lattice(-150, 150), min_size=n, max_size=n)))
-    b = np.array(draw(st.lists(st.one_of(st.just(0.0), lattice(-20, 20)), min_size=n, max_size=n)))
+    n = n or draw(JOINTS)
+    a = np.array(draw(st.lists(TORQUE_TASK, min_size=n, max_size=n)))
+    b = np.array(draw(st.lists(TORQUE_NULL, min_size=n, max_size=n)))
     lower, upper = np.empty(n), np.empty(n)
-    c = draw(lattice(0, 1))
+    c = draw(SHARE)
     for j in range(n):
-        tau_max = draw(st.one_of(st.just(np.inf), lattice(1, 100)))
-        step = draw(st.one_of(st.just(np.inf), lattice(1, 5).filter(lambda x: x > 0)))
+        tau_max = draw(TORQUE_MAX)
+        step = draw(RATE_STEP)
         if draw(st.booleans()):
-            prev = a[j] + c * b[j] + draw(lattice(-3, 3))
+            prev = a[j] + c * b[j] + draw(NEAR)
         else:
-            prev = draw(lattice(-100, 100))
+            prev = draw(ANYWHERE)
         prev = min(tau_max, max(-tau_max, prev))
         lower[j], upper[j] = max(-tau_max, prev - step), min(tau_max, prev + step)
     return a, b, lower, upper
@@ -193,13 +205,17 @@ def turns(tau):
     return np.array(out)
 
 
+HELD_TASK, HELD_NULL = lattice(-40, 40), st.one_of(st.just(0.0), lattice(-10, 10))
+HELD_MAX = st.one_of(st.just(np.inf), lattice(1, 40))
+
+
 @st.composite
 def held_inputs(draw):
     """(τ_task, τ₀, τ_max, from rest): held inputs on 1–7 joints, ±τ_max or none."""
-    n = draw(st.integers(1, 7))
-    a = np.array(draw(st.lists(lattice(-40, 40), min_size=n, max_size=n)))
-    b = np.array(draw(st.lists(st.one_of(st.just(0.0), lattice(-10, 10)), min_size=n, max_size=n)))
-    tau_max = np.array(draw(st.lists(st.one_of(st.just(np.inf), lattice(1, 40)), min_size=n, max_size=n)))
+    n = draw(JOINTS)
+    a = np.array(draw(st.lists(HELD_TASK, min_size=n, max_size=n)))
+    b = np.array(draw(st.lists(HELD_NULL, min_size=n, max_size=n)))
+    tau_max = np.array(draw(st.lists(HELD_MAX, min_size=n, max_size=n)))
     return a, b, tau_max, draw(st.booleans())
 
 
