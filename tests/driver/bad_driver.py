@@ -20,7 +20,6 @@ import lcm
 from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
 
 WARM = 100  # commands before the fault
-AFTER = 0.4  # [s] of talking after it: longer than the controller's silence bound (0.2 s)
 UTIME0 = 1_700_000_000_000_000
 FAULTS = (
     "undecodable", "nan", "position_limit", "velocity_limit", "two_publishers", "silence",
@@ -48,6 +47,9 @@ def main() -> None:
     parser.add_argument("--fault", choices=FAULTS, required=True)
     parser.add_argument("--q", required=True)
     parser.add_argument("--seconds", type=float, default=20.0, help="give up after this long")
+    parser.add_argument(
+        "--after", type=float, default=0.4, help="[s] of talking after the fault (past any silence bound)"
+    )
     args = parser.parse_args()
     bus = lcm.LCM(args.url)
     commands: list[int] = []
@@ -97,7 +99,7 @@ def main() -> None:
             bus.publish("PANDA_STATUS", status(q, v, utime + 1, 1000 + k))
         if not (fault == "no_sensor" or (on and fault == "sensor_silence")):
             bus.publish("PANDA_FORCE_TORQUE", lcmt_force_torque().encode())
-        if faulty_at is not None and time.monotonic() > faulty_at + AFTER:
+        if faulty_at is not None and time.monotonic() > faulty_at + args.after:
             break
         next_time += period
         _sleep_until(next_time, bus)
