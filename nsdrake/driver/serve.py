@@ -4,7 +4,8 @@ read, not run here). Each period k, on the driver's own clock at real time, whet
 not commands come:
 
 1. the status of t_k is published, ``utime`` the wall clock [µs] (as the driver stamps
-   it: an NTP step moves it), ``robot_utime`` the robot's own clock (t_k), ``robot_mode``
+   it: an NTP step moves it), ``robot_utime`` the robot's own clock (t_k, from
+   :data:`ROBOT_UP_US`), ``robot_mode``
    2 (kMove, the mode that takes torque commands) and ``control_command_success_rate``
    the fraction of the last 100 periods that applied a fresh command (the robot's figure
    is its own, of the commands that reached it in time: an analogue);
@@ -46,6 +47,10 @@ from nsdrake.experiment.scenario import Scenario
 DAMPING = np.array([37.5, 50.0, 37.5, 25.0, 5.0, 3.75, 2.5])  # [N m s/rad] drake-franka-driver's k_d
 ROBOT_MODE_MOVE = 2  # lcmt_panda_status.kMove: the mode in which the robot takes torque commands
 NO_FILTER = 1000.0  # [Hz] libfranka's kMaxCutoffFrequency: at or above it the filter is off
+# [µs] the robot's clock when the simulation starts: libfranka's RobotState::time counts from
+# the robot's start, never 0 at a driver's first status (and 0 means "no robot_utime" to the
+# controller side, which would fall back to the wall clock's utime)
+ROBOT_UP_US = 60_000_000
 
 
 @dataclass
@@ -223,7 +228,7 @@ class _Server:
         for channel, data in self.outgoing:
             if channel == d.status_channel:
                 status = lcmt_panda_status.decode(data)
-                status.robot_utime = round(self.driver.time * 1e6)
+                status.robot_utime = ROBOT_UP_US + round(self.driver.time * 1e6)
                 status.utime = self.wall_utime()
                 status.robot_mode = ROBOT_MODE_MOVE
                 status.control_command_success_rate = float(np.mean(self.recent)) if self.recent else 1.0

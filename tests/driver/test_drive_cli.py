@@ -191,9 +191,10 @@ def test_each_status_of_the_standalone_driver_carries_the_state_of_its_own_robot
     lcm = DrakeLcm("memq://")
     controller = AnsweringController(lcm)
     serve_simulated_driver(load_scenario("panda_wipe"), lcm, duration=0.02, low_pass_freq=1000.0)
-    sent = [s.robot_utime for s in controller.statuses]
+    sent = [s.robot_utime - serve.ROBOT_UP_US for s in controller.statuses]
     assert sent[:3] == [0, 1000, 2000] and len(sent) >= 20
     assert sent == inner_stamps[: len(sent)]
+    assert controller.statuses[0].robot_utime > 0  # 0 would say "no robot clock" to the controller
 
 
 @pytest.mark.parametrize(
