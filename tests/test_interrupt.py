@@ -43,6 +43,33 @@ def wait_for_progress(fd: int, process: subprocess.Popen, percent: int, seconds:
     raise AssertionError(f"no progress to {percent}% within {seconds} s: {seen[-200:]!r}")
 
 
+def interrupt_when(command: list[str], *, env: dict, to: str, ready) -> tuple[int, str, float]:
+    """Runs ``command`` in a session of its own (as a terminal starts it), reading its
+    stderr as it comes, and once ``ready(stderr so far)`` holds sends SIGINT to the command
+    alone (``to`` "the command": `kill -INT`) or to its process group (a terminal's Ctrl-C).
+    Returns its exit status, all it wrote on stderr and the seconds from the signal to its
+    exit. (900 s without ``ready`` fails the test: a guard against a hang, not a duration.)"""
+    process = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, env=env
+    )
+    try:
+        shown, deadline = b"", time.monotonic() + 900
+        while not ready(shown.decode(errors="replace")):
+            assert time.monotonic() < deadline and process.poll() is None, shown[-2000:]
+            if select.select([process.stderr], [], [], 0.02)[0]:
+                shown += os.read(process.stderr.fileno(), 4096)
+        sent = time.monotonic()
+        if to == "the command":
+            process.send_signal(signal.SIGINT)
+        else:
+            os.killpg(process.pid, signal.SIGINT)
+        _, err = process.communicate(timeout=120)
+        took = time.monotonic() - sent
+    finally:
+        process.kill()
+    return process.returncode, (shown + err).decode(), took
+
+
 @pytest.mark.slow
 def test_ctrl_c_during_a_run_keeps_its_traces_marked_interrupted(tmp_path):
     """Catches the 40-60-line traceback (KeyboardInterrupt out of Drake's AdvanceTo), a run
@@ -128,23 +155,13 @@ def test_ctrl_c_during_a_comparison_keeps_each_variants_traces(tmp_path, to):
     out, simulating = tmp_path / "lyap", tmp_path / "simulating"
     simulating.mkdir()
     command = [sys.executable, "-m", "nsdrake", "compare", "lyapunov", "--duration", "60", "--jobs", "2"]
-    process = subprocess.Popen(
-        [*command, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        start_new_session=True, env=os.environ | {"NSDRAKE_TEST_SIMULATING": str(simulating)},
-    )  # fmt: skip
-    try:
-        deadline = time.monotonic() + 900  # a guard against a hang, not a duration the test expects
-        while min(simulated_times(simulating, 2)) < 1.2:
-            assert time.monotonic() < deadline and process.poll() is None, simulated_times(simulating, 2)
-            time.sleep(0.02)
-        if to == "the command":
-            process.send_signal(signal.SIGINT)
-        else:
-            os.killpg(process.pid, signal.SIGINT)
-        _, err = process.communicate(timeout=120)
-    finally:
-        process.kill()
-    assert process.returncode == 130
+    code, err, _ = interrupt_when(
+        [*command, "--out", str(out)],
+        env=os.environ | {"NSDRAKE_TEST_SIMULATING": str(simulating)},
+        to=to,
+        ready=lambda _: min(simulated_times(simulating, 2)) >= 1.2,
+    )
+    assert code == 130
     assert without_notices(err) == (
         f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "
         "(unfinished rows marked interrupted)\n"
@@ -197,28 +214,12 @@ def test_ctrl_c_while_the_kernels_compile_ends_a_comparison_at_once(tmp_path, to
     out = tmp_path / "lyap"
     env = os.environ | {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
     command = [sys.executable, "-m", "nsdrake", "compare", "lyapunov", "--duration", "2", "--jobs", "2"]
-    process = subprocess.Popen(
-        [*command, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        start_new_session=True, env=env,
-    )  # fmt: skip
-    try:
-        shown, deadline = b"", time.monotonic() + 900  # a guard against a hang, not a duration
-        while NOTICE.encode() not in shown:
-            assert time.monotonic() < deadline and process.poll() is None, shown
-            if select.select([process.stderr], [], [], 0.1)[0]:
-                shown += os.read(process.stderr.fileno(), 4096)
-        sent = time.monotonic()
-        if to == "the command":
-            process.send_signal(signal.SIGINT)
-        else:
-            os.killpg(process.pid, signal.SIGINT)
-        _, err = process.communicate(timeout=120)
-        took = time.monotonic() - sent
-    finally:
-        process.kill()
-    assert process.returncode == 130
+    code, err, took = interrupt_when(
+        [*command, "--out", str(out)], env=env, to=to, ready=lambda shown: NOTICE in shown
+    )
+    assert code == 130
     assert took < STOP_GRACE
-    assert without_notices(shown.decode() + err.decode()) == (
+    assert without_notices(err) == (
         f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "
         "(unfinished rows marked interrupted)\n"
     )
@@ -291,25 +292,13 @@ def test_ctrl_c_ends_a_comparison_at_once_while_no_variant_simulates(tmp_path, t
         "NSDRAKE_TEST_SIMULATING": str(hanging),
     }
     command = [sys.executable, "-m", "nsdrake", "compare", "lyapunov", "--duration", "2", "--jobs", "2"]
-    process = subprocess.Popen(
-        [*command, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        start_new_session=True, env=env,
-    )  # fmt: skip
-    try:
-        deadline = time.monotonic() + 900  # a guard against a hang, not a duration
-        while not all((hanging / f"{i}.hanging").exists() for i in (0, 1)):
-            assert time.monotonic() < deadline and process.poll() is None
-            time.sleep(0.02)
-        sent = time.monotonic()
-        if to == "the command":
-            process.send_signal(signal.SIGINT)
-        else:
-            os.killpg(process.pid, signal.SIGINT)
-        _, err = process.communicate(timeout=120)
-        took = time.monotonic() - sent
-    finally:
-        process.kill()
-    assert process.returncode == 130
+    code, err, took = interrupt_when(
+        [*command, "--out", str(out)],
+        env=env,
+        to=to,
+        ready=lambda _: all((hanging / f"{i}.hanging").exists() for i in (0, 1)),
+    )
+    assert code == 130
     assert took < STOP_GRACE
     assert without_notices(err) == (
         f"nsdrake: interrupted; the table and each variant's traces so far are in {out}/ "
@@ -380,28 +369,11 @@ def test_ctrl_c_while_the_kernels_compile_ends_a_run_at_once(tmp_path, to, when)
     out = mine / "new" / "run"  # the claim makes mine/new and mine/new/run
     env = os.environ | {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
     command = [sys.executable, "-c", _WITH_MARKER, "run", "fig3", "--duration", "2", "--no-replay"]
-    process = subprocess.Popen(
-        [*command, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        start_new_session=True, env=env,
-    )  # fmt: skip
     state = NOTICE if when == "at the compile notice" else AFTER_CLAIM
-    try:
-        shown, deadline = b"", time.monotonic() + 900  # a guard against a hang, not a duration
-        while state.encode() not in shown:
-            assert time.monotonic() < deadline and process.poll() is None, shown
-            if select.select([process.stderr], [], [], 0.1)[0]:
-                shown += os.read(process.stderr.fileno(), 4096)
-        sent = time.monotonic()
-        if to == "the command":
-            process.send_signal(signal.SIGINT)
-        else:
-            os.killpg(process.pid, signal.SIGINT)
-        _, err = process.communicate(timeout=120)
-        took = time.monotonic() - sent
-    finally:
-        process.kill()
-    err = shown.decode() + err.decode()
-    assert process.returncode == 130, err
+    code, err, took = interrupt_when(
+        [*command, "--out", str(out)], env=env, to=to, ready=lambda shown: state in shown
+    )
+    assert code == 130, err
     assert took < STOP_WITHIN, took
     assert without_notices(err.replace(AFTER_CLAIM + "\n", "")) == ctrl_c.LINE, err
     assert not (mine / "new").exists()
