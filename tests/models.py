@@ -1,9 +1,29 @@
 """URDF text for test arms that are not the paper's: other sizes, spatial axes,
-prismatic joints, actuators declared out of order."""
+prismatic joints, actuators declared out of order; and the arguments of a circle on the
+Panda's table that the reference tests share."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+# CircleOnSurface's arguments: a 0.1 m circle twice round on the table below the Panda's
+# tool, 10 N pressed (the shape of panda_wipe's reference)
+PANDA_CIRCLE = {
+    "x0": np.array([0.5, 0.0, 0.15]),
+    "tangent": np.array([1.0, 0.0, 0.0]),
+    "normal": np.array([0.0, 0.0, -1.0]),
+    "radius": 0.1,
+    "laps": 2.0,
+    "speed": 0.05,
+    "start_angle": -math.pi / 2,
+    "delay": 0.3,
+    "approach_speed": 0.03,
+    "blend_time": 0.5,
+    "force": 10.0,
+    "force_ramp_time": 0.3,
+}
 
 
 def serial_arm_urdf(

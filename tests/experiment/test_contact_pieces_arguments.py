@@ -15,6 +15,7 @@ import re
 
 import numpy as np
 import pytest
+from models import PANDA_CIRCLE
 from pydrake.all import (
     MultibodyPlant,
     RevoluteJoint,
@@ -136,22 +137,6 @@ def test_slide_and_press_takes_lists_and_a_zero_tangent_without_a_slide():
     assert f_d == 0.0
 
 
-CIRCLE = {
-    "x0": np.array([0.5, 0.0, 0.15]),
-    "tangent": np.array([1.0, 0.0, 0.0]),
-    "normal": np.array([0.0, 0.0, -1.0]),
-    "radius": 0.1,
-    "laps": 2.0,
-    "speed": 0.05,
-    "start_angle": -math.pi / 2,
-    "delay": 0.3,
-    "approach_speed": 0.03,
-    "blend_time": 0.5,
-    "force": 10.0,
-    "force_ramp_time": 0.3,
-}
-
-
 @pytest.mark.parametrize(
     "change, expected",
     [
@@ -184,14 +169,14 @@ def test_circle_on_surface_refuses_what_it_cannot_draw(change, expected):
     a circle shorter than its speed blends, a NaN angle, a zero normal or tangent: refused
     naming the field."""
     with pytest.raises(TaskReferenceError) as caught:
-        CircleOnSurface(**(CIRCLE | change))
+        CircleOnSurface(**(PANDA_CIRCLE | change))
     assert re.match(expected, str(caught.value)) and "\n" not in str(caught.value), str(caught.value)
 
 
 def test_a_good_circle_is_taken_and_drawn():
     """The good arguments are taken: a quarter of the way round after its blend, the tool
     is on the circle of radius 0.1 m about the centre c = p_c − r u(φ₀), by hand."""
-    path = CircleOnSurface(**(CIRCLE | {"laps": 1.0}))
+    path = CircleOnSurface(**(PANDA_CIRCLE | {"laps": 1.0}))
     t_c = 0.5
     start = path.at(t_c, t_c)[0]
     centre = start - 0.1 * np.array([0.0, -1.0, 0.0])  # u(−π/2) = −t₂, t₂ = t₁ × n = (0, 1, 0)

@@ -8,10 +8,10 @@ the issue's bounds on the traces the runner writes; they are marked slow.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
+from models import PANDA_CIRCLE
 from pydrake.systems.framework import DiagramBuilder
 
 from nsdrake.control.orientation import orientation_error
@@ -27,22 +27,7 @@ from nsdrake.station.plant import desired_tool_orientation, tool_orientation
 
 
 def circle(**overrides):
-    values = {
-        "x0": np.array([0.5, 0.0, 0.15]),
-        "tangent": np.array([1.0, 0.0, 0.0]),
-        "normal": np.array([0.0, 0.0, -1.0]),
-        "radius": 0.1,
-        "laps": 2.0,
-        "speed": 0.05,
-        "start_angle": -math.pi / 2,
-        "delay": 0.3,
-        "approach_speed": 0.03,
-        "blend_time": 0.5,
-        "force": 10.0,
-        "force_ramp_time": 0.3,
-    }
-    values.update(overrides)
-    return CircleOnSurface(**values)
+    return CircleOnSurface(**(PANDA_CIRCLE | overrides))
 
 
 # ---------------------------------------------------------------- the circle reference
