@@ -128,7 +128,7 @@ CONTROLLER_STRUCTURES = ("auto", "systems", "fused")
 
 @dataclass
 class DivergenceConfig:
-    """When a run counts as diverged and is stopped (nsdrake/simulate.py)."""
+    """When a run counts as diverged and is stopped (nsdrake/experiment/simulate.py)."""
 
     # Any joint faster than this [rad/s].
     max_joint_speed: float = 100.0
@@ -188,7 +188,7 @@ class Scenario:
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     # An external force pulse on a link (nsdrake/experiment/push.py); off by default.
     push: PushConfig = field(default_factory=PushConfig)
-    # Effects of the real robot, each off by default (nsdrake/realism.py: the realism ladder).
+    # Effects of the real robot, each off by default (nsdrake/realism/: the realism ladder).
     realism: RealismConfig = field(default_factory=RealismConfig)
     # How the controller's stages run (NullSpaceImpedanceController's ``fused``): systems,
     # the paper's named systems (diagram.svg shows them); fused, the same stages in one

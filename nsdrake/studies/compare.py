@@ -335,7 +335,7 @@ def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
 
 
 def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
-    """The realism ladder (nsdrake/realism.py), in the fig3 window (from 0.5 s after first
+    """The realism ladder (nsdrake/realism/), in the fig3 window (from 0.5 s after first
     contact to the end): the measured normal force's error (what the controller and the
     paper's Fig. 3 see), its drift (least-squares slope) and the share of it that the
     impedance law's normal spring adds, K_p,n nᵀ(x_d − x) / K_f (mean; the normal
