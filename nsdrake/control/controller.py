@@ -82,7 +82,7 @@ class NullSpaceImpedanceController(Diagram):
 
     J_Tᵀ W_T is Eq. 6's Jᵀ F for the whole measured wrench moved to the tool point
     (:mod:`nsdrake.control.impedance`); q̈_dⁿ is the backward difference of q̇_dⁿ over one
-    period. With an exact model the closed loop is
+    period. With an exact model the closed loop is::
 
         (ẍ_d − ẍ) + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − f_n) = 0    (Eq. 10)
         ėⁿ = −K_n eⁿ + J̄ J (J̄̇ J + J̄ J̇) q̇ − N H⁻¹ C eⁿ                      (Eq. 22)
