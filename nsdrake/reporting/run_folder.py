@@ -1,7 +1,7 @@
 """One run of a scenario into an output folder: traces, metrics, plots, the
 diagram's picture, the 3D replay and the HTML report.
 
-(The output folder rules are in nsdrake/output.py; their names are re-exported here.)
+(The output folder rules are in nsdrake/experiment/output.py; their names are re-exported here.)
 """
 
 from __future__ import annotations
@@ -159,9 +159,12 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
     notes += [picture.note] if picture.note else []
     write_report(
         out,
-        title=f"nsdrake run {out.resolve().name}",
-        description=f"{scenario.description} (scenario: {scenario.source or 'built in code'})",
+        title=run_title(scenario, traces, events, failure),
+        description=f"The scenario ({scenario.source or 'built in code'}, folder {out.resolve().name}): "
+        f"{scenario.description}",
         parameters=yaml.safe_load(scenario_yaml(scenario)),
+        defaults=yaml.safe_load(scenario_yaml(Scenario())),
+        modes=modes_in_order(traces),
         metrics=metrics,
         plots=plots,
         diagram=picture,
@@ -207,6 +210,40 @@ def _simulate(scenario: Scenario, out: Path, progress, meshcat, live: bool) -> _
         return _Simulated(built, None, f"the comparison run (q̇_dⁿ = 0) {e}", False)
     baseline_traces.write_csv(baseline_csv)
     return _Simulated(built, Traces.read_csv(baseline_csv), None, False)
+
+
+def modes_in_order(traces: Traces) -> list[int]:
+    """The modes of Fig. 1 the run went through, in order, a mode repeated when the run
+    returned to it; [] for traces without a mode column."""
+    if "mode" not in traces or len(traces) == 0:
+        return []
+    mode = traces["mode"].astype(int)
+    return [int(m) for k, m in enumerate(mode) if k == 0 or m != mode[k - 1]]
+
+
+def run_title(
+    scenario: Scenario, traces: Traces, events: list[tuple[str, float]], failure: str | None
+) -> str:
+    """The report's title, from what the run did (not what the scenario meant it to do):
+    how long it ran, whether and when the tool touched, which criteria the null space
+    served (Fig. 1's modes), and a failure."""
+    from nsdrake.reporting.report import MODE_WORDS
+
+    name = scenario.source or "a scenario built in code"
+    t_end = float(traces["t"][-1]) if len(traces) else 0.0
+    parts = [f"{name}, {t_end:.3g} s"]
+    touched = [t for e, t in events if e == "contact"]
+    if scenario.reference.force > 0 or touched:
+        parts.append(f"contact from t = {touched[0]:.3g} s" if touched else "the tool never touched")
+    modes = modes_in_order(traces)
+    if len(modes) == 1:
+        parts.append(f"level 2: {MODE_WORDS.get(modes[0], '?')} throughout (mode {modes[0]})")
+    elif modes:
+        parts.append("level 2: " + " → ".join(f"{MODE_WORDS.get(m, '?')} ({m})" for m in modes[:6]))
+        parts[-1] += " …" if len(modes) > 6 else ""
+    if failure:
+        parts.append("FAILED")
+    return "; ".join(parts)
 
 
 def contact_note(events: list[tuple[str, float]]) -> str:
