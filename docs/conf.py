@@ -43,6 +43,9 @@ nb_execution_timeout = 900
 nb_execution_raise_on_error = True
 nb_execution_show_tb = True
 nb_execution_in_temp = True
+# A notebook's log lines (Meshcat's "listening at http://localhost:7000", a link dead on the
+# site) are not shown; an error still fails the build.
+nb_output_stderr = "remove"
 
 autodoc_member_order = "bysource"
 autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": False}

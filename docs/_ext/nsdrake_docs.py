@@ -421,6 +421,10 @@ class ResultsDirective(SphinxDirective):
         if table_file.exists():
             self.env.note_dependency(str(table_file))
             text = table_file.read_text().splitlines()
+            if text and text[0].startswith("# "):  # the file's title: the page's section has one
+                text = text[1:]
+            if family_file.exists():  # the description is the family file's, shown above
+                text = text[next((k for k, line in enumerate(text) if line.startswith("|")), len(text)) :]
             self.state.nested_parse(StringList(text, source=str(table_file)), 0, container)
         else:  # a page asks for a table nobody committed: an error under -W, no placeholder
             logger.warning(
@@ -466,7 +470,8 @@ def parse_number(text: str) -> tuple[float, int, str] | None:
 def figure_problem(root, written: str, target: str) -> str | None:
     """Why ``written`` is not the figure ``target`` names (None when it is). The target is
     ``RESULTS | ROW | COLUMN [| UNIT]``: the table docs/results/RESULTS/table.md, the one row
-    whose first cell contains ROW, the column headed COLUMN. The written figure is that
+    whose first cell is ROW (else the one whose first cell contains it), the column headed
+    COLUMN. The written figure is that
     cell rounded to the decimals written ('99.7%' for a cell '99.70%'); a cell that is a
     bare number needs UNIT, the cell's unit ('m'), and the written figure may carry a
     prefix of it ('62.9 µm'; '%' for a UNIT '1'); a cell of prose must contain the written
@@ -481,7 +486,7 @@ def figure_problem(root, written: str, target: str) -> str | None:
         return str(error)
     if column not in header:
         return f"docs/results/{name}/table.md has no column '{column}'"
-    found = [row for row in rows if row_key in row[0]]
+    found = [row for row in rows if row[0] == row_key] or [row for row in rows if row_key in row[0]]
     if len(found) != 1:
         return f"docs/results/{name}/table.md: {len(found)} rows contain '{row_key}' (one needed)"
     cell = found[0][header.index(column)]
