@@ -154,12 +154,13 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
     if failure:
         extra["failure"] = failure
     write_metrics(out / "metrics.json", metrics, extra)
-    plots = write_plots(scenario, sim.built, traces, sim.baseline, out)
+    title = run_title(scenario, traces, events, failure)
+    plots = write_plots(scenario, sim.built, traces, sim.baseline, out, title=title)
     notes = [contact_note(events)] if any(e == "lost" for e, _ in events) else []
     notes += [picture.note] if picture.note else []
     write_report(
         out,
-        title=run_title(scenario, traces, events, failure),
+        title=title,
         description=f"The scenario ({scenario.source or 'built in code'}, folder {out.resolve().name}): "
         f"{scenario.description}",
         parameters=yaml.safe_load(scenario_yaml(scenario)),
@@ -229,7 +230,8 @@ def run_title(
     served (Fig. 1's modes), and a failure."""
     from nsdrake.reporting.report import MODE_WORDS
 
-    name = scenario.source or "a scenario built in code"
+    source = scenario.source or "a scenario built in code"
+    name = Path(source).stem if source.endswith((".yaml", ".yml")) else source
     t_end = float(traces["t"][-1]) if len(traces) else 0.0
     parts = [f"{name}, {t_end:.3g} s"]
     touched = [t for e, t in events if e == "contact"]
@@ -257,8 +259,12 @@ def contact_note(events: list[tuple[str, float]]) -> str:
     return "contact " + ", ".join(parts) + " (the force command falls to 0 while contact is lost)"
 
 
-def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | None, out: Path) -> list[Path]:
-    """fig3.png, priority.png and pose.png, as the scenario's checks ask (none for an empty trace)."""
+def write_plots(
+    scenario: Scenario, built, traces: Traces, baseline: Traces | None, out: Path, title: str | None = None
+) -> list[Path]:
+    """fig3.png, priority.png and pose.png, as the scenario's checks ask (none for an empty trace),
+    titled ``title`` (what the run did: :func:`run_title`; default the scenario's description)."""
+    title = scenario.description if title is None else title
     if len(traces) < 2:
         return []
     k0 = first_contact_index(traces, scenario.reference.contact_threshold)
@@ -270,7 +276,7 @@ def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | No
             traces,
             out / "fig3.png",
             task_axes=built.station.arm_model.task_axes[: built.station.arm_model.m_t],
-            title=scenario.description,
+            title=title,
             baseline=baseline,
             contact_time=contact_time,
             selector=scenario.desired_null_space.selector,
@@ -280,7 +286,7 @@ def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | No
         plot_priority(
             traces,
             out / "priority.png",
-            title=scenario.description,
+            title=title,
             selector=scenario.desired_null_space.selector,
         )
     if {"pose", "self_motion"} & set(scenario.report.checks):
@@ -291,7 +297,7 @@ def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | No
             out / "pose.png",
             normal=built.station.normal,
             task_axes=arm.task_axes[: arm.m_t],
-            title=scenario.description,
+            title=title,
             baseline=baseline,
             contact_time=contact_time,
             d_lim=scenario.desired_null_space.selector.d_lim,
