@@ -137,3 +137,13 @@ def test_the_decision_tree_page_is_the_selector():
         (ROOT / "docs" / "decision_tree.md").read_text().replace("| 2 | joint-torque", "| 3 | joint-torque")
     )
     assert decision_tree_rows(swapped) != rows
+
+
+def test_a_docstring_role_renders_as_its_target():
+    """A port's or a field's meaning read from a docstring shows ``:mod:`x``` as the literal
+    x, never the raw role (the API page printed ':mod:nsdrake.control.actuator_limits')."""
+    parts = nsdrake_docs.inline("clipped (:mod:`nsdrake.control.actuator_limits`: τ), :func:`~a.b` and `c`")
+    text = "".join(p.astext() for p in parts)
+    assert ":mod:" not in text and ":func:" not in text
+    literals = [p.astext() for p in parts if p.tagname == "literal"]
+    assert literals == ["nsdrake.control.actuator_limits", "a.b", "c"]
