@@ -351,9 +351,11 @@ class PortsDirective(SphinxDirective):
                     )
                     continue
                 size, unit, text = described[kind][name]
-                rows.append(
-                    [[nodes.literal(name, name)], [nodes.Text(size)], [nodes.Text(unit)], inline(text)]
-                )
+                meaning = inline(text)
+                if name == "mode":  # every mode column links the page of Fig. 1's tree
+                    link = nodes.reference("", "Fig. 1's decision tree", refuri="decision_tree.html")
+                    meaning += [nodes.Text(" ("), link, nodes.Text(")")]
+                rows.append([[nodes.literal(name, name)], [nodes.Text(size)], [nodes.Text(unit)], meaning])
             title = "input port" if kind == "in" else "output port"
             tables.append(
                 table([title, "size", "unit", "meaning (the class's docstring)"], rows, [28, 8, 10, 54])
