@@ -29,6 +29,7 @@ argument (and the joint or entry), and the step's state is left as it was.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from pathlib import Path
@@ -55,10 +56,19 @@ from nsdrake.control.validation import (
     finite_problem,
     inputs_problem,
     is_number,
+    is_real_array,
     show,
     validate_controller,
     vector_size_problem,
 )
+
+# [-] how far from a whole number of periods the advance of t may be, in periods: float
+# rounding of k T or of t += T (1e-13 s after 1000 s at 1 kHz), never a late tick of a loop
+# that reads a wall clock (give such a loop's t as k T, its tick count).
+TIME_SLACK = 1e-3
+# Calls in a row that each skip one period or more before the loop is taken to run slower
+# than the controller's period (nsdrake's drive refuses such a status stream as well).
+SKIPPED_IN_A_ROW = 10
 
 
 class StepResult:
@@ -143,6 +153,8 @@ class ControllerStep:
         self._terms = plan.allocate_terms()
         self._m_t = m_t
         self._n = n
+        self._period = config.period
+        self._slack = TIME_SLACK * config.period  # [s] rounding of t, far below a period
         joints, axes = list(model.joint_names), list(model.arm.task_axes[:m_t])
         parts = [("t", 1), ("q", joints), ("v", joints), ("wrench", 6)]
         parts += [(name, axes) for name in ("x_d", "xdot_d", "xddot_d")] + [("f_d", 1)]
@@ -174,6 +186,8 @@ class ControllerStep:
         ):
             part[:] = value
         self._t_previous = None
+        self._skipped_in_a_row = 0
+        self._rotation_needed = self.plan.m_r > 0  # R_d, ω_d, ω̇_d: given again after a reset
         self._thread = None  # the next call's thread owns the step (class docstring)
 
     def _claim(self) -> None:
@@ -217,21 +231,29 @@ class ControllerStep:
             self._claim()
         m_t, n, plan, c = self._m_t, self._n, self.plan, self._buffers.commands
         try:  # the sizes; numpy's copy refuses any other shape but a scalar's or a 1-vector's
+            if not (is_number(t) and is_real_array(q) and is_real_array(v) and is_real_array(x_d)
+                    and is_real_array(xdot_d) and is_real_array(xddot_d)):  # fmt: skip
+                raise _RefusedError  # text, booleans, complex values (validation.is_real_array)
             if len(q) != n or len(v) != n or len(x_d) != m_t or len(xdot_d) != m_t or len(xddot_d) != m_t:
                 raise _RefusedError
-            if self._t_previous is not None and not t >= self._t_previous:
-                raise _RefusedError
-            self._inputs[0] = t + 0.0  # a number (numpy would read the text "0.1")
+            t = float(t)  # an integer t would make numba compile the kernels anew for int
+            if self._t_previous is not None and not abs(t - self._t_previous - self._period) <= self._slack:
+                skipped, problem = self._time_problem(t)  # not the next period: skipped, or refused
+                if problem is not None:
+                    raise _RefusedError
+            else:
+                skipped = 0
+            self._inputs[0] = t
             self._q[:], self._v[:] = q, v
             if wrench is None or f_d is None or not plan.has_force_axis:
                 self._optional_force(wrench, f_d)
             else:
-                if len(wrench) != 6:
+                if not (is_real_array(wrench) and is_number(f_d)) or len(wrench) != 6:
                     raise _RefusedError
-                c[:6], c[6 + 3 * m_t] = wrench, f_d + 0.0
+                c[:6], c[6 + 3 * m_t] = wrench, f_d
             c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
             rotation = R_d is not None or omega_d is not None or omegadot_d is not None
-            if rotation:
+            if rotation or self._rotation_needed:
                 self._rotation(R_d, omega_d, omegadot_d)
         except (TypeError, ValueError, IndexError, _RefusedError):
             raise self._refuse(self._argument_problem(locals())) from None
@@ -240,8 +262,10 @@ class ControllerStep:
             qdot, problem = self._prescribed_velocity(desired_null_space_velocity)
         if problem is not None:
             raise self._refuse(problem)
-        if rotation:  # kept for the calls that pass None
+        if rotation:  # held for the calls that pass None
             self._kept_rotation[:] = c[7 + 3 * m_t :]
+            self._rotation_needed = False
+        self._skipped_in_a_row = skipped
         return self._tick(t, None if desired_null_space_velocity is None else qdot)
 
     def _tick(self, t: float, qdot: np.ndarray | None) -> StepResult:
@@ -271,21 +295,59 @@ class ControllerStep:
         if wrench is None:
             c[:6] = 0.0
         else:
-            if len(wrench) != 6:
+            if not is_real_array(wrench) or len(wrench) != 6:
                 raise _RefusedError
             c[:6] = wrench
         c[6 + 3 * m_t] = 0.0
 
     def _rotation(self, R_d, omega_d, omegadot_d) -> None:
-        """R_d, ω_d, ω̇_d (each kept from the previous call when None)."""
+        """R_d, ω_d, ω̇_d (each held from the previous call when None; all three needed by
+        the first call since construction or :meth:`reset`)."""
         if not self.plan.m_r:
             raise _RefusedError
         c, o = self._buffers.commands, 7 + 3 * self._m_t
         for value, start, size in ((R_d, o, 4), (omega_d, o + 4, 3), (omegadot_d, o + 7, 3)):
-            if value is not None:
-                if len(value) != size:
+            if value is None:
+                if self._rotation_needed:  # never given: nothing to hold
+                    raise _RefusedError
+            else:
+                if not is_real_array(value) or len(value) != size:
                     raise _RefusedError
                 c[start : start + size] = value
+
+    def _time_problem(self, t: float) -> tuple[int, str | None]:
+        """(skipped-in-a-row count after this call, why ``t`` is refused or None) for a
+        ``t`` that is not the previous call's plus one period T: earlier or the same
+        (refused), not a whole number of periods later (refused), or k ≥ 2 periods later
+        (taken: k − 1 ticks skipped, as a drive skips lost statuses; the held state is
+        the last call's, and the q̈_dⁿ feed-forward and the torque-rate limit of this
+        call take it as one period old), unless SKIPPED_IN_A_ROW calls in a row each
+        skipped: then the loop's period is not the controller's."""
+        previous, T = self._t_previous, self._period
+        if not math.isfinite(t):
+            return 0, f"t {finite_problem(t)} [s]"
+        if t < previous:
+            return 0, f"t = {t:g} s is before the previous call's {previous:g} s: reset() to start over"
+        periods = (t - previous) / T
+        k = round(periods)
+        if abs(periods - k) * T > self._slack:
+            return 0, (
+                f"t = {t:g} s is {periods:.4g} periods after the previous call's {previous:g} s: t must "
+                f"advance by whole periods T = {T:g} s (config.period), the controller's sampled time"
+            )
+        if k == 0:
+            return 0, (
+                f"t = {t:g} s is the previous call's time again: each call is one tick, t advancing by "
+                f"the period T = {T:g} s (config.period)"
+            )
+        skipped = self._skipped_in_a_row + 1 if k >= 2 else 0
+        if skipped >= SKIPPED_IN_A_ROW:
+            return skipped, (
+                f"t has advanced by 2 periods or more at each of the last {skipped} calls (now {k}): the "
+                f"loop calls slower than the controller's period T = {T:g} s (config.period), at which "
+                "its gains were checked stable; give config.period your loop's period"
+            )
+        return skipped, None
 
     def _prescribed_velocity(self, qdot) -> tuple[np.ndarray, str | None]:
         """q̇_dⁿ as an array, and why it cannot be taken (or None)."""
@@ -310,8 +372,10 @@ class ControllerStep:
         problem = finite_problem(t)
         if problem:
             return f"t {problem} [s]"
-        if self._t_previous is not None and t < self._t_previous:
-            return f"t = {t:g} s is before the previous call's {self._t_previous:g} s: reset() to start over"
+        if self._t_previous is not None:
+            problem = self._time_problem(float(t))[1]
+            if problem:
+                return problem
         joints = list(self.model.joint_names)
         expected = [
             ("q", n, f"{n} joint positions [rad], the joints {joints}"),
@@ -344,6 +408,12 @@ class ControllerStep:
             value = arguments[name]
             if value is not None and not plan.m_r:
                 return f"{name} is given, but the task has no rotational axes: pass None"
+            if value is None and self._rotation_needed:
+                axes = list(self.model.arm.task_axes[m_t:])
+                return (
+                    f"{name} is None on the first call (since the step was made or reset()), but the task "
+                    f"has rotational axes {axes}: give {what}; later calls may pass None to hold it"
+                )
             problem = None if value is None else vector_size_problem(value, size, what)
             if problem:
                 return f"{name} {problem}"

@@ -105,7 +105,7 @@ REFUSED = {
     "f_d a list": (bad(2, f_d=[4.0]), r"f_d must be a number \[N\]"),
     "f_d None with a force axis": (bad(2, f_d=None), r"f_d is None, but the task has a force axis"),
     "t nan": (bad(2, t=np.nan), r"t must be a finite number"),
-    "t inf": (bad(2, t=np.inf), r"t is inf: must be finite"),
+    "t inf": (bad(2, t=np.inf), r"t must be a finite number, got inf"),
     "t before the previous call": (
         bad(2, t=0.0),
         r"t = 0 s is before the previous call's 0\.002 s: reset\(\)",
