@@ -340,7 +340,7 @@ class ControllerStep:
                 f"t = {t:g} s is the previous call's time again: each call is one tick, t advancing by "
                 f"the period T = {T:g} s (config.period)"
             )
-        skipped = self._skipped_in_a_row + 1 if k >= 2 else 0
+        skipped = self._skipped_in_a_row + 1  # k >= 2: one period on (k = 1) took the fast path
         if skipped >= SKIPPED_IN_A_ROW:
             return skipped, (
                 f"t has advanced by 2 periods or more at each of the last {skipped} calls (now {k}): the "
