@@ -20,9 +20,11 @@ In steady state a call allocates no Python object that outlives it (the result's
 arrays are views into one buffer, rewritten by the next call), so Python's garbage
 collector never has work to do on its account.
 
-Every call checks its arguments before anything is computed: their sizes (the copy into
-the step's input buffer, with the lengths compared), then one compiled pass over all of
-them for a value that is not finite (:func:`nsdrake.control.validation.inputs_problem`);
+Every call checks its arguments before anything is computed: real numbers
+(:func:`nsdrake.control.validation.is_real_array`), their sizes (the copy into the
+step's input buffer, with the lengths compared), ``t`` one period on (or whole periods:
+:meth:`ControllerStep.step`), then one compiled pass over all of them for a value that
+is not finite (:func:`nsdrake.control.validation.inputs_problem`);
 a wrong one raises :class:`nsdrake.control.validation.ControllerInputError` naming the
 argument (and the joint or entry), and the step's state is left as it was.
 """
@@ -222,10 +224,21 @@ class ControllerStep:
         velocity order), the measured wrench [M; f] (6) [N m, N] (as the ``measured_wrench``
         port), the desired x_d, ẋ_d, ẍ_d (m_t each) [m, m/s, m/s²] and f_d [N]; with
         rotational task axes the desired orientation R_d as a quaternion [w, x, y, z] and
-        ω_d, ω̇_d (3 each) [rad/s, rad/s²] (kept from the previous call when None). Without a
-        force axis (``normal`` None) ``wrench`` and ``f_d`` may be None (zero), as the
-        controller's optional ports. ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], when
-        given, replaces the configured source's, as the controller's input of that name.
+        ω_d, ω̇_d (3 each) [rad/s, rad/s²]: held from the previous call when None, so the
+        first call after the step was made or :meth:`reset` must give all three (refused
+        otherwise). Nothing else is held. Without a force axis (``normal`` None) ``wrench``
+        and ``f_d`` may be None (zero), as the controller's optional ports.
+        ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], when given, replaces the
+        configured source's at this call, as the controller's input of that name.
+
+        Numbers are real numbers or arrays of them (text, booleans, complex values refused;
+        integers taken). ``t`` is the tick's time k T (T = ``config.period``): the first
+        call's any finite time, each later one a whole number of periods after the
+        previous call's (the same time, a time between periods or an earlier one refused);
+        two or more periods on skips the ticks between (taken, as nsdrake's drive skips
+        the statuses it could not answer: the q̈_dⁿ feed-forward and the torque-rate limit
+        take the last call's state as one period old), but not at SKIPPED_IN_A_ROW calls
+        in a row (a loop slower than the period). docs/own_diagram.md, "The contract".
         Returns :attr:`result`, rewritten in place."""
         if self._thread != threading.get_ident():
             self._claim()
