@@ -68,9 +68,6 @@ from nsdrake.control.validation import (
 # rounding of k T or of t += T (1e-13 s after 1000 s at 1 kHz), never a late tick of a loop
 # that reads a wall clock (give such a loop's t as k T, its tick count).
 TIME_SLACK = 1e-3
-# Calls in a row that each skip one period or more before the loop is taken to run slower
-# than the controller's period (nsdrake's drive refuses such a status stream as well).
-SKIPPED_IN_A_ROW = 10
 
 
 class StepResult:
@@ -188,7 +185,6 @@ class ControllerStep:
         ):
             part[:] = value
         self._t_previous = None
-        self._skipped_in_a_row = 0
         self._rotation_needed = self.plan.m_r > 0  # R_d, ω_d, ω̇_d: given again after a reset
         self._thread = None  # the next call's thread owns the step (class docstring)
 
@@ -237,37 +233,14 @@ class ControllerStep:
         previous call's (the same time, a time between periods or an earlier one refused);
         two or more periods on skips the ticks between (taken, as nsdrake's drive skips
         the statuses it could not answer: the q̈_dⁿ feed-forward and the torque-rate limit
-        take the last call's state as one period old), but not at SKIPPED_IN_A_ROW calls
-        in a row (a loop slower than the period). docs/own_diagram.md, "The contract".
+        take the last call's state as one period old; a loop that calls every 2T runs the
+        gains at a period they were not checked for: give config.period its period).
+        docs/own_diagram.md, "The contract".
         Returns :attr:`result`, rewritten in place."""
         if self._thread != threading.get_ident():
             self._claim()
-        m_t, n, plan, c = self._m_t, self._n, self.plan, self._buffers.commands
-        try:  # the sizes; numpy's copy refuses any other shape but a scalar's or a 1-vector's
-            if not (is_number(t) and is_real_array(q) and is_real_array(v) and is_real_array(x_d)
-                    and is_real_array(xdot_d) and is_real_array(xddot_d)):  # fmt: skip
-                raise _RefusedError  # text, booleans, complex values (validation.is_real_array)
-            if len(q) != n or len(v) != n or len(x_d) != m_t or len(xdot_d) != m_t or len(xddot_d) != m_t:
-                raise _RefusedError
-            t = float(t)  # an integer t would make numba compile the kernels anew for int
-            if self._t_previous is not None and not abs(t - self._t_previous - self._period) <= self._slack:
-                skipped, problem = self._time_problem(t)  # not the next period: skipped, or refused
-                if problem is not None:
-                    raise _RefusedError
-            else:
-                skipped = 0
-            self._inputs[0] = t
-            self._q[:], self._v[:] = q, v
-            if wrench is None or f_d is None or not plan.has_force_axis:
-                self._optional_force(wrench, f_d)
-            else:
-                if not (is_real_array(wrench) and is_number(f_d)) or len(wrench) != 6:
-                    raise _RefusedError
-                c[:6], c[6 + 3 * m_t] = wrench, f_d
-            c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
-            rotation = R_d is not None or omega_d is not None or omegadot_d is not None
-            if rotation or self._rotation_needed:
-                self._rotation(R_d, omega_d, omegadot_d)
+        try:
+            t = self._take(t, q, v, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d)
         except (TypeError, ValueError, IndexError, _RefusedError):
             raise self._refuse(self._argument_problem(locals())) from None
         problem = inputs_problem(self._inputs, self._names, self._quaternion)
@@ -275,11 +248,41 @@ class ControllerStep:
             qdot, problem = self._prescribed_velocity(desired_null_space_velocity)
         if problem is not None:
             raise self._refuse(problem)
-        if rotation:  # held for the calls that pass None
-            self._kept_rotation[:] = c[7 + 3 * m_t :]
+        if R_d is not None or omega_d is not None or omegadot_d is not None:  # held for calls passing None
+            self._kept_rotation[:] = self._buffers.commands[7 + 3 * self._m_t :]
             self._rotation_needed = False
-        self._skipped_in_a_row = skipped
         return self._tick(t, None if desired_null_space_velocity is None else qdot)
+
+    def _take(self, t, q, v, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d) -> float:
+        """The arguments into the step's input buffer, their types, sizes and ``t`` checked
+        (anything else raises, and :meth:`_argument_problem` says what); returns t as a float
+        (an integer t would make numba compile the kernels anew for int)."""
+        m_t, n, plan, c = self._m_t, self._n, self.plan, self._buffers.commands
+        if not (is_number(t) and is_real_array(q) and is_real_array(v) and is_real_array(x_d)
+                and is_real_array(xdot_d) and is_real_array(xddot_d)):  # fmt: skip
+            raise _RefusedError  # text, booleans, complex values (validation.is_real_array)
+        if len(q) != n or len(v) != n or len(x_d) != m_t or len(xdot_d) != m_t or len(xddot_d) != m_t:
+            raise _RefusedError  # numpy's copy would take a scalar, or a 1-vector, for any size
+        t = float(t)
+        previous = self._t_previous
+        if (
+            previous is not None
+            and not abs(t - previous - self._period) <= self._slack
+            and self._time_problem(t)
+        ):
+            raise _RefusedError  # not one period on, nor whole periods (skipped ticks)
+        self._inputs[0] = t
+        self._q[:], self._v[:] = q, v
+        if wrench is None or f_d is None or not plan.has_force_axis:
+            self._optional_force(wrench, f_d)
+        else:
+            if not (is_real_array(wrench) and is_number(f_d)) or len(wrench) != 6:
+                raise _RefusedError
+            c[:6], c[6 + 3 * m_t] = wrench, f_d
+        c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
+        if R_d is not None or omega_d is not None or omegadot_d is not None or self._rotation_needed:
+            self._rotation(R_d, omega_d, omegadot_d)
+        return t
 
     def _tick(self, t: float, qdot: np.ndarray | None) -> StepResult:
         """The stages on the checked inputs (``qdot``: a prescribed q̇_dⁿ, or None)."""
@@ -328,39 +331,33 @@ class ControllerStep:
                     raise _RefusedError
                 c[start : start + size] = value
 
-    def _time_problem(self, t: float) -> tuple[int, str | None]:
-        """(skipped-in-a-row count after this call, why ``t`` is refused or None) for a
-        ``t`` that is not the previous call's plus one period T: earlier or the same
-        (refused), not a whole number of periods later (refused), or k ≥ 2 periods later
-        (taken: k − 1 ticks skipped, as a drive skips lost statuses; the held state is
-        the last call's, and the q̈_dⁿ feed-forward and the torque-rate limit of this
-        call take it as one period old), unless SKIPPED_IN_A_ROW calls in a row each
-        skipped: then the loop's period is not the controller's."""
+    def _time_problem(self, t: float) -> str | None:
+        """Why ``t``, not the previous call's plus one period T, is refused, or None: earlier
+        or the same (refused), not a whole number of periods later (refused), or k ≥ 2
+        periods later (taken: k − 1 ticks skipped, as nsdrake's drive skips the statuses a
+        late tick could not answer, nsdrake/driver/loop.py; the state is the last call's,
+        and this call's q̈_dⁿ feed-forward and torque-rate limit take it as one period old).
+        Skips are taken however many in a row: a late loop skips at every call for as long
+        as it is late, which a loop at half the rate cannot be told from here (the drive
+        tells them apart by its statuses' own clock, driver.faults.slow_stream_problem)."""
         previous, T = self._t_previous, self._period
         if not math.isfinite(t):
-            return 0, f"t {finite_problem(t)} [s]"
+            return f"t {finite_problem(t)} [s]"
         if t < previous:
-            return 0, f"t = {t:g} s is before the previous call's {previous:g} s: reset() to start over"
+            return f"t = {t:g} s is before the previous call's {previous:g} s: reset() to start over"
         periods = (t - previous) / T
         k = round(periods)
         if abs(periods - k) * T > self._slack:
-            return 0, (
+            return (
                 f"t = {t:g} s is {periods:.4g} periods after the previous call's {previous:g} s: t must "
                 f"advance by whole periods T = {T:g} s (config.period), the controller's sampled time"
             )
         if k == 0:
-            return 0, (
+            return (
                 f"t = {t:g} s is the previous call's time again: each call is one tick, t advancing by "
                 f"the period T = {T:g} s (config.period)"
             )
-        skipped = self._skipped_in_a_row + 1  # k >= 2: one period on (k = 1) took the fast path
-        if skipped >= SKIPPED_IN_A_ROW:
-            return skipped, (
-                f"t has advanced by 2 periods or more at each of the last {skipped} calls (now {k}): the "
-                f"loop calls slower than the controller's period T = {T:g} s (config.period), at which "
-                "its gains were checked stable; give config.period your loop's period"
-            )
-        return skipped, None
+        return None
 
     def _prescribed_velocity(self, qdot) -> tuple[np.ndarray, str | None]:
         """q̇_dⁿ as an array, and why it cannot be taken (or None)."""
@@ -386,7 +383,7 @@ class ControllerStep:
         if problem:
             return f"t {problem} [s]"
         if self._t_previous is not None:
-            problem = self._time_problem(float(t))[1]
+            problem = self._time_problem(float(t))
             if problem:
                 return problem
         joints = list(self.model.joint_names)

@@ -122,7 +122,12 @@ def show(value) -> str:
 
 def is_number(value) -> bool:
     """A real number (numpy's too), not a bool nor a string."""
+    if type(value) in _PLAIN_NUMBERS:  # the usual case, without the ABC's isinstance (per tick)
+        return True
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+_PLAIN_NUMBERS = frozenset((float, int, np.float64, np.int64))
 
 
 def finite_problem(value) -> str | None:
@@ -172,7 +177,7 @@ def is_real_array(value) -> bool:
     dropped), None and object arrays are not. The one rule of every public numeric
     argument, its shape checked after it (:func:`vector_size_problem`); integers are
     taken, and converted to float before any compiled code sees them."""
-    if isinstance(value, np.ndarray):
+    if type(value) is np.ndarray or isinstance(value, np.ndarray):
         return value.dtype.kind in REAL_KINDS
     if isinstance(value, (list, tuple)):
         return all(is_real_array(v) for v in value)
