@@ -17,6 +17,7 @@ count of compiled signatures.
 from __future__ import annotations
 
 import math
+import re
 import sys
 
 import numpy as np
@@ -416,3 +417,36 @@ def test_every_input_port_refuses_a_value_it_cannot_use_naming_the_port(fused, p
         ControllerInputError, port, lambda: controller.GetOutputPort("generalized_force").Eval(context)
     )
     assert "impedance_controller" not in text and "Multiplexer" not in text and "InputPort[" not in text, text
+
+
+@pytest.mark.parametrize(
+    "bad, expected",
+    [
+        (np.r_[0.0, 0.0, 0.0, 0.0, np.nan, 0.0], r"measured_wrench\[4\] is nan: must be finite"),
+        (None, r"measured_wrench is not connected"),
+    ],
+)
+def test_the_surface_reference_refuses_a_wrench_it_cannot_read(bad, expected):
+    """SurfaceReference's measured_wrench NaN (its force never reaches the threshold: contact
+    silently never detected) or unconnected: one line naming the port at the first update."""
+    from pydrake.systems.analysis import Simulator
+
+    reference = SurfaceReference(reference=SlideAndPress(**SLIDE), task_rows=[0, 1], **SURFACE)
+    simulator = Simulator(reference)
+    if bad is not None:
+        reference.GetInputPort("measured_wrench").FixValue(simulator.get_mutable_context(), bad)
+    with pytest.raises(TaskReferenceError) as caught:
+        simulator.AdvanceTo(2 * T)
+    assert "\n" not in str(caught.value) and re.search(expected, str(caught.value)), str(caught.value)
+
+
+def test_the_models_gravity_takes_the_same_rule():
+    """ControllerModel.from_urdf's gravity: text and booleans refused naming it."""
+    for gravity in ([0, 0, "-9.81"], [False, 0.0, -9.81], np.array([0, 0, -9.81], dtype=complex)):
+        refused_naming(
+            ControllerConfigError,
+            "gravity",
+            lambda g=gravity: ControllerModel.from_urdf(
+                ARM, tool_frame="tool", task_axes=("x", "y"), gravity=g
+            ),
+        )
