@@ -241,7 +241,13 @@ class ControllerStep:
             self._claim()
         try:
             t = self._take(t, q, v, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d)
-        except (TypeError, ValueError, IndexError, _RefusedError):
+        except (
+            TypeError,
+            ValueError,
+            IndexError,
+            OverflowError,
+            _RefusedError,
+        ):  # an int beyond float's range
             raise self._refuse(self._argument_problem(locals())) from None
         problem = inputs_problem(self._inputs, self._names, self._quaternion)
         if problem is None and desired_null_space_velocity is not None:

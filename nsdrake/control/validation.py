@@ -131,9 +131,16 @@ _PLAIN_NUMBERS = frozenset((float, int, np.float64, np.int64))
 
 
 def finite_problem(value) -> str | None:
-    if not is_number(value) or not math.isfinite(value):
+    if not is_number(value) or not _finite(value):
         return f"must be a finite number, got {show(value)}"
     return None
+
+
+def _finite(value) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an int beyond float's range (10**400)
+        return False
 
 
 def positive_problem(value) -> str | None:
