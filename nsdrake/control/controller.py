@@ -150,7 +150,9 @@ class NullSpaceImpedanceController(Diagram):
     evaluated (it would change nothing). Every input is checked when it is used: a value
     that is not finite (or a zero ``desired_orientation``) raises
     :class:`nsdrake.control.validation.ControllerInputError` naming the port, its entry and
-    the time, before any torque is computed from it.
+    the time, before any torque is computed from it, and an input it needs that was never
+    connected nor fixed raises it naming the port (``desired_orientation``). Nothing is
+    held or assumed: every input but the optional ones is read at every evaluation.
 
     Outputs:
 

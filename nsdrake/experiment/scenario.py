@@ -441,8 +441,12 @@ def _read(path: Path, defaults: Scenario | None) -> Scenario:
         raise ScenarioError(f"{path}: {_cut(e)}") from None
 
 
-def load_scenario(name: str, config: str | Path | None = None, duration: float | None = None) -> Scenario:
-    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated.
+def load_scenario(
+    name: str, config: str | Path | None = None, duration: float | None = None, *, validated: bool = True
+) -> Scenario:
+    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated
+    (unless ``validated`` is False: a base that more overrides follow, validated after them,
+    as a compare variant's).
 
     ``duration`` (command line) overrides the files. Raises ScenarioError.
     """
@@ -459,7 +463,8 @@ def load_scenario(name: str, config: str | Path | None = None, duration: float |
     if duration is not None:
         scenario = dataclasses.replace(scenario, duration=duration)
         check_positive(scenario.source, "--duration", duration)
-    validate(scenario)
+    if validated:
+        validate(scenario)
     return scenario
 
 
