@@ -26,9 +26,25 @@ import numpy as np
 # (name, parent-joint origin xyz, rpy, axis, mass, com, (ixx, iyy, izz)) per joint/link
 JOINTS = [
     ("j1", (0.0, 0.0, 0.20), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 3.0, (0.0, 0.01, 0.08), (0.020, 0.020, 0.010)),
-    ("j2", (0.0, 0.0, 0.15), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 2.5, (0.0, -0.01, 0.15), (0.030, 0.030, 0.008)),
+    (
+        "j2",
+        (0.0, 0.0, 0.15),
+        (0.0, 0.0, 0.0),
+        (0.0, 1.0, 0.0),
+        2.5,
+        (0.0, -0.01, 0.15),
+        (0.030, 0.030, 0.008),
+    ),
     ("j3", (0.0, 0.0, 0.30), (0.0, 0.0, 0.3), (0.0, 0.0, 1.0), 2.0, (0.01, 0.0, 0.12), (0.020, 0.020, 0.006)),
-    ("j4", (0.04, 0.0, 0.25), (0.0, 0.0, 0.0), (0.0, 0.6, 0.8), 1.8, (0.0, 0.02, 0.10), (0.015, 0.015, 0.005)),
+    (
+        "j4",
+        (0.04, 0.0, 0.25),
+        (0.0, 0.0, 0.0),
+        (0.0, 0.6, 0.8),
+        1.8,
+        (0.0, 0.02, 0.10),
+        (0.015, 0.015, 0.005),
+    ),
     ("j5", (0.0, 0.0, 0.22), (0.2, 0.0, 0.0), (0.0, 0.0, -1.0), 1.2, (0.0, 0.0, 0.08), (0.008, 0.008, 0.003)),
     ("j6", (0.0, 0.0, 0.18), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 1.0, (0.01, 0.0, 0.05), (0.004, 0.004, 0.002)),
     ("j7", (0.0, 0.0, 0.10), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.6, (0.0, 0.0, 0.03), (0.001, 0.001, 0.0008)),
@@ -70,7 +86,15 @@ def _box_obj(boxes) -> str:
 
 def fin_vertices() -> np.ndarray:
     """The U's vertices in link 5's frame (k, 3) [m]."""
-    return np.array([(x, y, z) for x0, x1, y0, y1, z0, z1 in FIN_BOXES for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)])
+    return np.array(
+        [
+            (x, y, z)
+            for x0, x1, y0, y1, z0, z1 in FIN_BOXES
+            for x in (x0, x1)
+            for y in (y0, y1)
+            for z in (z0, z1)
+        ]
+    )
 
 
 def _inertial(mass, com, moments, indent="    ") -> str:
@@ -90,7 +114,9 @@ def _urdf(geometry: bool, welded: bool) -> str:
     out.append('  <link name="base">\n' + _inertial(4.0, (0, 0, 0.05), (0.02, 0.02, 0.02)) + "  </link>\n")
     if welded:
         out.append('  <link name="world"/>\n')
-        out.append('  <joint name="base_weld" type="fixed"><parent link="world"/><child link="base"/></joint>\n')
+        out.append(
+            '  <joint name="base_weld" type="fixed"><parent link="world"/><child link="base"/></joint>\n'
+        )
     parent = "base"
     for k, (name, xyz, rpy, axis, mass, com, moments) in enumerate(JOINTS):
         link = LINKS[k]
@@ -182,7 +208,8 @@ def _sdf() -> str:
         )
         parent = link
     name, xyz, mass, com, moments = TOOL
-    out.append(f'<link name="tool"><pose relative_to="link7">{_v(xyz - np.array([0, 0, 0.01]))} 0 0 0</pose>{_sdf_inertial(mass, com, moments)}</link>\n')
+    pose = f'<pose relative_to="link7">{_v(xyz - np.array([0, 0, 0.01]))} 0 0 0</pose>'
+    out.append(f'<link name="tool">{pose}{_sdf_inertial(mass, com, moments)}</link>\n')
     out.append('<joint name="tool_joint" type="fixed"><parent>link7</parent><child>tool</child></joint>\n')
     return "".join(out) + "</model>\n</sdf>\n"
 

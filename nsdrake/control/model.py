@@ -405,7 +405,9 @@ def _pinocchio_dynamics(fast_terms: bool, arm: ArmModel, dynamics: str):
     except ValueError as e:  # a joint Pinocchio's model here does not take
         if dynamics == "auto":
             return None  # the same terms from Drake
-        raise ControllerConfigError("controller_model", f"Pinocchio cannot model the arm: {_cut(e)}") from None
+        raise ControllerConfigError(
+            "controller_model", f"Pinocchio cannot model the arm: {_cut(e)}"
+        ) from None
     check_agreement(pinocchio, arm)
     return pinocchio
 

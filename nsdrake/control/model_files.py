@@ -53,7 +53,9 @@ class Payload:
         """M_TTo: the payload's spatial inertia about T's origin, expressed in T."""
         I = np.zeros((3, 3)) if self.inertia is None else inertia_matrix(self.inertia)
         I_Tcm = RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
-        return SpatialInertia.MakeFromCentralInertia(float(self.mass), np.asarray(self.com, dtype=float), I_Tcm)
+        return SpatialInertia.MakeFromCentralInertia(
+            float(self.mass), np.asarray(self.com, dtype=float), I_Tcm
+        )
 
 
 def inertia_matrix(inertia) -> np.ndarray:

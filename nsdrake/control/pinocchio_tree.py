@@ -60,7 +60,9 @@ def pinocchio_model(plant: MultibodyPlant, frames=()):
         if not model.existFrame(frame.name()):
             joint_id, X_JB = where[frame.body().index()]
             X_JT = X_JB * _se3(pin, frame.GetFixedPoseInBodyFrame())
-            model.addFrame(pin.Frame(frame.name(), joint_id, frame_of[joint_id], X_JT, pin.FrameType.OP_FRAME))
+            model.addFrame(
+                pin.Frame(frame.name(), joint_id, frame_of[joint_id], X_JT, pin.FrameType.OP_FRAME)
+            )
     return model
 
 
@@ -77,10 +79,16 @@ def _add_joint(pin, model, joint, parent) -> tuple:
         return J_P, X_JF * _se3(pin, joint.X_FM()) * X_MC
     if isinstance(joint, RevoluteJoint):
         axis = joint.revolute_axis()
-        aligned, unaligned = (pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ), pin.JointModelRevoluteUnaligned
+        aligned, unaligned = (
+            (pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ),
+            pin.JointModelRevoluteUnaligned,
+        )
     elif isinstance(joint, PrismaticJoint):
         axis = joint.translation_axis()
-        aligned, unaligned = (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ), pin.JointModelPrismaticUnaligned
+        aligned, unaligned = (
+            (pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ),
+            pin.JointModelPrismaticUnaligned,
+        )
     else:
         raise ValueError(
             f"joint '{joint.name()}' is a {joint.type_name()} joint: nsdrake's Pinocchio model takes "

@@ -153,7 +153,17 @@ def test_a_mesh_on_a_link_is_seen_by_the_obstacle_criterion_as_its_convex_hull(a
     X = model.arm.tool_frame.CalcPoseInWorld(context)
     zero = np.zeros(3)
     result = step.step(
-        0.0, Q0, np.zeros(7), None, X.translation(), zero, zero, None, X.rotation().ToQuaternion().wxyz(), zero, zero
+        0.0,
+        Q0,
+        np.zeros(7),
+        None,
+        X.translation(),
+        zero,
+        zero,
+        None,
+        X.rotation().ToQuaternion().wxyz(),
+        zero,
+        zero,
     )
     d_min = result.criteria[0, 7 + 1]
     hull = ConvexHull(fin_vertices())
