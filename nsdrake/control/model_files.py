@@ -45,9 +45,9 @@ class Payload:
     and ``inertia``, its rotational inertia about the centre of mass in T's axes, a (3, 3)
     matrix or the six numbers (ixx, iyy, izz, ixy, ixz, iyz) [kg m²]; None: a point mass."""
 
-    mass: float
-    com: Sequence[float] = (0.0, 0.0, 0.0)
-    inertia: Sequence | None = None
+    mass: float  # [kg]
+    com: Sequence[float] = (0.0, 0.0, 0.0)  # its centre of mass in the tool frame [m]
+    inertia: Sequence | None = None  # about the centre of mass, tool frame axes [kg m²]; None: a point mass
 
     def spatial_inertia(self) -> SpatialInertia:
         """M_TTo: the payload's spatial inertia about T's origin, expressed in T."""
