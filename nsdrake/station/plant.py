@@ -281,7 +281,7 @@ def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> 
     """The arm's model on the task axes, its initial state and the plate's directions on
     the task axes, on the finalized ``world``."""
     plant = world.plant
-    arm_model = _arm_model(plant, world.arm, arm, world.arm_file, task_axes, belt, world.gravity, source)
+    arm_model = _arm_model(plant, world, arm, task_axes, belt, source)
     q0, v0 = _initial_state(arm, arm_model.joint_names, source)
     elastic, plant_q0, plant_v0 = _plant_initial_state(plant, world.arm, arm_model, belt, q0, v0)
     try:
@@ -343,14 +343,15 @@ def _the_one_body(plant: MultibodyPlant, plate: ModelInstanceIndex, src: str):
     return plant.get_body(plate_bodies[0])
 
 
-def _arm_model(plant, arm_instance, arm: ArmConfig, arm_file, task_axes, belt, gravity, src) -> ArmModel:
+def _arm_model(plant, world: _World, arm: ArmConfig, task_axes, belt, src) -> ArmModel:
     """The arm's kinematics and dynamics on the task axes: on the station's plant, or on a
     rigid arm of its own beside belts (link coordinates)."""
+    arm_instance, arm_file = world.arm, world.arm_file
     if not plant.HasFrameNamed(arm.tool_frame, arm_instance):
         raise StationError(f"{src}: arm.tool_frame: no frame '{arm.tool_frame}' in {arm_file.name}")
     tool = plant.GetFrameByName(arm.tool_frame, arm_instance)
     if belt is not None:
-        tool = rigid_arm_plant(arm_file, gravity).GetFrameByName(arm.tool_frame)
+        tool = rigid_arm_plant(arm_file, world.gravity, world.packages).GetFrameByName(arm.tool_frame)
     try:
         arm_model = ArmModel(tool.GetParentPlant(), tool, tuple(task_axes))
     except ValueError as e:
