@@ -180,12 +180,13 @@ class ControllerModel:
     ) -> ControllerModel:
         """The arm of a URDF, welded to the world by the file itself, with ``obstacles``
         fixed in the world and ``gravity`` [m/s²]. ``urdf``: a ``Path``, or a ``str`` that
-        is the URDF's text (it holds a "<" or a line break) or else a path (a path goes to
-        :meth:`from_file`: meshes and packages resolve from the file). The URDF is
+        is the URDF's text (it holds a "<" or a line break) or else a path (a ``.urdf`` path
+        goes to :meth:`from_file`: meshes and packages resolve from the file; another name is
+        read and parsed as text). The URDF is
         checked before Drake or Pinocchio reads it (:mod:`nsdrake.control.urdf_checks`);
         every problem is a one-line :class:`ControllerConfigError` naming the argument."""
         text, where = _urdf_text(urdf)
-        if where != "controller_model":  # a path: Drake parses the file itself
+        if where != "controller_model" and str(urdf).lower().endswith(".urdf"):  # Drake parses the file
             return cls.from_file(
                 urdf,
                 tool_frame=tool_frame,

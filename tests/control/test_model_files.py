@@ -213,3 +213,14 @@ def test_a_payload_is_the_arm_carrying_that_link(arm, source):
     assert worst_difference(given, carried) < 1e-9
     bare = ControllerModel.from_urdf(mesh_free_urdf(), tool_frame="tool", task_axes=POSE)
     assert worst_difference(bare, carried) > 1e-3
+
+
+def test_from_urdf_keeps_reading_paths_and_text(arm, reference, tmp_path):
+    """from_urdf still takes a path (a .urdf goes through from_file, meshes and packages
+    resolved; a URDF under another name, e.g. .xml, is read as text, as before) and text."""
+    by_path = ControllerModel.from_urdf(arm.urdf, tool_frame="tool", task_axes=POSE)
+    assert len(by_path.link_geometries) == 3
+    other = tmp_path / "arm7.xml"
+    other.write_text(mesh_free_urdf())
+    by_other_name = ControllerModel.from_urdf(str(other), tool_frame="tool", task_axes=POSE)
+    assert worst_difference(by_path, reference) < 1e-9 and worst_difference(by_other_name, reference) < 1e-9
