@@ -34,6 +34,7 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 
+from nsdrake.control.urdf_checks import sdf_problems
 from nsdrake.control.validation import ControllerConfigError, one_line, show
 
 MODEL_SUFFIXES = (".urdf", ".sdf", ".dmd.yaml")
@@ -119,6 +120,18 @@ def model_file_problem(path) -> str | None:
     return None
 
 
+def sdf_file_problem(path: Path) -> tuple[str, str] | None:
+    """(where, problem) for the first link of an SDF file that is physically invalid
+    (:func:`nsdrake.control.urdf_checks.sdf_problems`), or None (other kinds: None)."""
+    if not str(path).lower().endswith(".sdf"):
+        return None
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:
+        return "", f"not XML: {one_line(e)}"
+    return next(iter(sdf_problems(root)), None)
+
+
 def packages_problem(packages) -> str | None:
     """Why ``packages`` is no {name: folder} map of existing folders, or None."""
     if not isinstance(packages, Mapping):
@@ -173,6 +186,9 @@ def parse_model_file(plant: MultibodyPlant, path, packages=None, where: str = "m
     if problem:
         raise ControllerConfigError("packages", problem)
     path = Path(path)
+    problem = sdf_file_problem(path)
+    if problem:
+        raise ControllerConfigError(f"{where}: {path.name}: {problem[0]}".rstrip(": "), problem[1])
     try:
         parser = model_parser(plant, path, packages or {})
         return parser.AddModels(str(path))

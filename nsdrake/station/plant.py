@@ -49,6 +49,7 @@ from nsdrake.control.model_files import (
     model_parser,
     packages_problem,
     payload_problem,
+    sdf_file_problem,
 )
 from nsdrake.control.validation import arm_problem
 from nsdrake.station.config import ArmConfig, ContactConfig, ObstacleConfig, PlateConfig, StationError
@@ -147,6 +148,9 @@ def _model_file(src: str, where: str, name: str, base_dir: Path | None) -> Path:
             check_model_file(path)
         except StationError as e:
             raise StationError(f"{src}: {e}") from None
+    problem = sdf_file_problem(path)
+    if problem:
+        raise StationError(f"{src}: {path.name}: {problem[0]}: {problem[1]}")
     return path
 
 

@@ -224,3 +224,23 @@ def test_from_urdf_keeps_reading_paths_and_text(arm, reference, tmp_path):
     other.write_text(mesh_free_urdf())
     by_other_name = ControllerModel.from_urdf(str(other), tool_frame="tool", task_axes=POSE)
     assert worst_difference(by_path, reference) < 1e-9 and worst_difference(by_other_name, reference) < 1e-9
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("<mass>1.2</mass>", "<mass>-1.2</mass>", "link 'link5': mass -1.2 kg must be > 0"),
+        ("<ixx>0.008</ixx>", "<ixx>0.02</ixx>", "link 'link5': inertia breaks the triangle inequality"),
+    ],
+)
+def test_an_sdf_link_that_is_not_physical_is_refused_in_one_line(tmp_path, old, new, message):
+    """Drake's SDF parser only warns about a negative mass or an impossible inertia and
+    simulates a "repaired" 1 kg body; the controller's model and the station refuse the file,
+    naming it and the link."""
+    arm = write_vendor_arm(tmp_path)
+    text = arm.sdf.read_text()
+    assert text.count(old) == 1
+    arm.sdf.write_text(text.replace(old, new))
+    with pytest.raises(ControllerConfigError) as e:
+        ControllerModel.from_file(arm.sdf, tool_frame="tool", task_axes=POSE)
+    assert str(e.value).startswith(f"model_file: arm7.sdf: {message}") and "\n" not in str(e.value)
