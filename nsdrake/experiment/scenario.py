@@ -593,6 +593,7 @@ def _arm_and_plate_problems(s: Scenario) -> Iterator[tuple[str, str]]:
             yield from _checked(f"arm.{table}.{_name(name)}", finite_problem(value))
     if not s.arm.initial_positions:
         yield "arm.initial_positions", "must give a position for every joint"
+    yield from _payload_problems(s.arm.payload)
     if len(s.plate.position) != 3:
         yield "plate.position", f"must be [x, y, z], got {_show(s.plate.position)}"
     for i, value in enumerate(s.plate.position):
@@ -604,6 +605,21 @@ def _arm_and_plate_problems(s: Scenario) -> Iterator[tuple[str, str]]:
         "contact.approximation", choice_problem(s.contact.approximation, CONTACT_APPROXIMATIONS)
     )
     yield from _checked("contact.model", choice_problem(s.contact.model, CONTACT_MODELS))
+
+
+def _payload_problems(p) -> Iterator[tuple[str, str]]:
+    """The payload's fields one by one (its physical validity: the station's Payload check)."""
+    yield from _checked("arm.payload.mass", finite_problem(p.mass) or non_negative_problem(p.mass))
+    if len(p.com) != 3:
+        yield "arm.payload.com", f"must be [x, y, z] in the tool frame, got {_show(p.com)}"
+    if len(p.inertia) not in (0, 6):
+        yield (
+            "arm.payload.inertia",
+            f"must be [ixx, iyy, izz, ixy, ixz, iyz] or empty, got {_show(p.inertia)}",
+        )
+    for name in ("com", "inertia"):
+        for i, value in enumerate(getattr(p, name)):
+            yield from _checked(f"arm.payload.{name}[{i}]", finite_problem(value))
 
 
 def _task_and_report_problems(s: Scenario) -> Iterator[tuple[str, str]]:
