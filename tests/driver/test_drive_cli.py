@@ -337,11 +337,12 @@ def test_the_pacing_answers_ctrl_c_within_its_slice():
 
 
 def test_a_paced_drive_is_paced():
-    """--realtime-rate 1: a drive of 0.2 s of robot time takes at least 0.2 s of wall clock
-    (catches the Pacer never called: the simulated driver then runs unpaced)."""
+    """--realtime-rate 0.02: a drive of 0.05 s of robot time (50 ticks) takes at least
+    2.5 s of wall clock (catches the Pacer never called: unpaced, the 50 ticks take a few
+    ms each)."""
     from nsdrake.driver.run import prepare
 
-    drive = prepare(load_scenario("panda_wipe", duration=0.2), realtime_rate=1.0)
+    drive = prepare(load_scenario("panda_wipe", duration=0.05), realtime_rate=0.02)
     start = time.perf_counter()
     run = drive.run()
-    assert run.failure is None and time.perf_counter() - start >= 0.2
+    assert run.failure is None and time.perf_counter() - start >= 2.5
