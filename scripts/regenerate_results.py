@@ -15,8 +15,10 @@ line per family: ``unchanged``, or ``changed`` with
 the variants whose rows differ (then copy the rows into the page, and check its prose).
 
 A family run is CPU-heavy (minutes per family): prefix ``nice`` on a shared machine.
-Exit status: 0 if every command succeeded (changed or not), 1 if one failed, 2 for a
-family without a results folder.
+``--runs`` relative is taken from the folder the script is run in (not the checkout's);
+nothing is written outside RUNS and docs/results. The last line says how many families
+were regenerated and the exit status, which agree: 0 if every command succeeded (changed
+or not), 1 if one failed (its line says why), 2 for a family without a results folder.
 """
 
 from __future__ import annotations
@@ -67,8 +69,11 @@ def regenerate(family: str, runs: Path) -> tuple[str, bool]:
         [sys.executable, *args, "--out", str(out), *(["--overwrite"] if args[0] == "-m" else [])], cwd=ROOT
     )
     new = out / "table.md"
-    if done.returncode != 0 or not new.exists():
+    if done.returncode != 0:
         return f"{family}: FAILED (exit {done.returncode}); the committed table is left as it was", False
+    if not new.exists():
+        why = f"the command exited 0 but wrote no {new}"
+        return f"{family}: FAILED ({why}); the committed table is left as it was", False
     committed = RESULTS / family / "table.md"
     old_text = committed.read_text() if committed.exists() else ""
     new_text = new.read_text()
@@ -88,20 +93,31 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--family", required=True, help="a family with a docs/results folder, or all")
     parser.add_argument(
-        "--runs", type=Path, default=ROOT / "runs" / "results", help="where the runs are kept"
+        "--runs",
+        type=Path,
+        default=ROOT / "runs" / "results",
+        help="where the runs are kept (a relative path is from the folder the script is run in)",
     )
     args = parser.parse_args()
+    runs = args.runs.expanduser().resolve()  # from where the script is run, not the checkout it runs in
     known = result_families()
     if args.family != "all" and args.family not in known:
         print(
-            f"--family: no docs/results/{args.family}/command; the families with results: {', '.join(known)}"
+            f"--family: no docs/results/{args.family}/command; the families with results: "
+            f"{', '.join(known)}; exit 2"
         )
         return 2
     lines, ok = [], True
     for family in known if args.family == "all" else [args.family]:
-        line, good = regenerate(family, args.runs)
+        line, good = regenerate(family, runs)
         lines.append(line)
         ok &= good
+    failed = sum(1 for line in lines if ": FAILED" in line)
+    lines.append(
+        f"{len(lines) - failed} of {len(lines)} regenerated; exit 0"
+        if ok
+        else f"{failed} of {len(lines)} FAILED; exit 1"
+    )
     print("\n".join(lines))
     return 0 if ok else 1
 

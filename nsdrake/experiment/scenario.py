@@ -128,7 +128,7 @@ CONTROLLER_STRUCTURES = ("auto", "systems", "fused")
 
 @dataclass
 class DivergenceConfig:
-    """When a run counts as diverged and is stopped (nsdrake/simulate.py)."""
+    """When a run counts as diverged and is stopped (nsdrake/experiment/simulate.py)."""
 
     # Any joint faster than this [rad/s].
     max_joint_speed: float = 100.0
@@ -188,7 +188,7 @@ class Scenario:
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     # An external force pulse on a link (nsdrake/experiment/push.py); off by default.
     push: PushConfig = field(default_factory=PushConfig)
-    # Effects of the real robot, each off by default (nsdrake/realism.py: the realism ladder).
+    # Effects of the real robot, each off by default (nsdrake/realism/: the realism ladder).
     realism: RealismConfig = field(default_factory=RealismConfig)
     # How the controller's stages run (NullSpaceImpedanceController's ``fused``): systems,
     # the paper's named systems (diagram.svg shows them); fused, the same stages in one
@@ -443,8 +443,12 @@ def _read(path: Path, defaults: Scenario | None) -> Scenario:
         raise ScenarioError(f"{path}: {_cut(e)}") from None
 
 
-def load_scenario(name: str, config: str | Path | None = None, duration: float | None = None) -> Scenario:
-    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated.
+def load_scenario(
+    name: str, config: str | Path | None = None, duration: float | None = None, *, validated: bool = True
+) -> Scenario:
+    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated
+    (unless ``validated`` is False: a base that more overrides follow, validated after them,
+    as a compare variant's).
 
     ``duration`` (command line) overrides the files. Raises ScenarioError.
     """
@@ -461,7 +465,8 @@ def load_scenario(name: str, config: str | Path | None = None, duration: float |
     if duration is not None:
         scenario = dataclasses.replace(scenario, duration=duration)
         check_positive(scenario.source, "--duration", duration)
-    validate(scenario)
+    if validated:
+        validate(scenario)
     return scenario
 
 

@@ -96,3 +96,21 @@ def test_the_tutorial_runs_and_shows_what_it_says(tmp_path):
     assert abs(f_n[late].mean() - 5.0) < 0.05
     assert f_n[late].std() < 0.01
     assert p_tau[-1] < 0.95 * p_tau[0]
+
+
+def test_the_site_runs_every_notebook():
+    """docs/conf.py executes every notebook of docs/tutorials/ at build (their outputs are
+    what the site shows) and fails the build when one raises. Catches execution turned
+    off, or a notebook excluded from it (the site then showed the tutorial without a plot
+    or a number)."""
+    import fnmatch
+    import runpy
+
+    docs = NOTEBOOK.parents[1]
+    conf = runpy.run_path(str(docs / "conf.py"))
+    assert conf["nb_execution_mode"] in ("force", "cache", "auto")  # auto: notebooks without outputs
+    assert conf["nb_execution_raise_on_error"] is True
+    excluded = [*conf.get("nb_execution_excludepatterns", []), *conf.get("exclude_patterns", [])]
+    notebooks = sorted(p.relative_to(docs).as_posix() for p in (docs / "tutorials").glob("*.ipynb"))
+    assert notebooks
+    assert [nb for nb in notebooks if any(fnmatch.fnmatch(nb, pattern) for pattern in excluded)] == []
