@@ -14,7 +14,7 @@ off, commands expiring after 50 ms); also the driver's own count of the periods 
 applied a fresh command, a stale one, or fell back to damping, and how many it started
 late itself (the simulated driver is a Python simulation of the plant: on a loaded
 machine it cannot keep 1 kHz either). ``--config`` is passed to both (e.g. a larger
-``driver.status_timeout_periods`` on a shared machine); repeated, one UDP run per file
+``driver.expire_sec``, the silence bound, on a shared machine); repeated, one UDP run per file
 (``default``: the scenario as shipped), each in its own folder under ``--out``. Each run
 reports the longest silence the loop's silence rule measured (``longest_silence_us``: how
 near the stream came to the bound) and whether panda_wipe met its bounds.
@@ -58,6 +58,7 @@ import numpy as np
 
 from nsdrake.driver.run import prepare, run_simulated, write_drive_folder
 from nsdrake.driver.timing import collector_paused, timing_line
+from nsdrake.experiment.driver_config import silence_bound_periods
 from nsdrake.experiment.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -135,7 +136,8 @@ def udp(duration: float, out: Path, config: Path | None) -> dict:
 
 def silence_bound(config: Path | None) -> float:
     """The drive's silence bound [periods] with ``config`` overlaid on panda_wipe."""
-    return load_scenario("panda_wipe", config=config).driver.status_timeout_periods
+    scenario = load_scenario("panda_wipe", config=config)
+    return silence_bound_periods(scenario.driver, scenario.control_period)
 
 
 def cell(value, unit: str = " µs", digits: int = 0) -> str:

@@ -123,7 +123,7 @@ def serve_simulated_driver(
     lcm: DrakeLcmInterface,
     *,
     duration: float | None = None,
-    expire_sec: float = 0.05,
+    expire_sec: float | None = None,
     low_pass_freq: float = 30.0,
     rate_limit: bool = True,
     progress=None,
@@ -132,8 +132,10 @@ def serve_simulated_driver(
     wall_utime=lambda: time.time_ns() // 1000,
 ) -> ServeResult:
     """The simulated driver on ``lcm`` (module docstring) for ``duration`` [s] (default the
-    scenario's) after the first command; ``stop``: a :class:`nsdrake.driver.stop.StopRequest`
-    that ends it at the next period."""
+    scenario's) after the first command; ``expire_sec`` [s] default the scenario's
+    ``driver.expire_sec`` (the controller's silence bound: the same number on both sides);
+    ``stop``: a :class:`nsdrake.driver.stop.StopRequest` that ends it at the next period."""
+    expire_sec = scenario.driver.expire_sec if expire_sec is None else expire_sec
     server = _Server(scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime)
     duration = scenario.duration if duration is None else duration
     period = server.period
