@@ -24,6 +24,7 @@ from nsdrake.control.validation import ControllerInputError
 from nsdrake.driver.bus import Bus, DrakeBus
 from nsdrake.driver.controller_side import _Log, build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
+from nsdrake.driver.realtime import RealtimeSettings, realtime_mode, realtime_settings
 from nsdrake.driver.simulated_driver import SimulatedDriver
 from nsdrake.driver.stop import ctrl_c_requests
 from nsdrake.driver.timing import GcPauses, collector_paused, timing_line, timing_summary, write_timing
@@ -60,14 +61,25 @@ class Drive:
     def __init__(self, loop: ControllerLoop, driver: SimulatedDriver | None):
         self.loop, self.driver = loop, driver
 
-    def run(self, *, pause_gc: bool = True, progress=None) -> DriveRun:
+    def run(
+        self, *, pause_gc: bool = True, progress=None, realtime: RealtimeSettings | None = None
+    ) -> DriveRun:
         """Runs to the scenario's duration, the first fault or Ctrl-C (which stops it at the
         next status, :mod:`nsdrake.driver.stop`). ``pause_gc``: the garbage collector off
-        during the loop (:func:`nsdrake.driver.timing.collector_paused`)."""
+        during the loop (:func:`nsdrake.driver.timing.collector_paused`). ``realtime``: the
+        loop thread's real-time mode (:mod:`nsdrake.driver.realtime`; the collector off
+        with it); None: the scenario's ``driver.realtime`` (off unless enabled)."""
         loop, driver = self.loop, self.driver
         duration = loop.drive.scenario.duration
         failure, interrupted, pauses = None, False, GcPauses()
-        with collector_paused(pause_gc), pauses.watching(), ctrl_c_requests() as stop:
+        realtime = realtime or realtime_settings(loop.config.realtime)
+        pause_gc = pause_gc or realtime is not None
+        with (
+            collector_paused(pause_gc),
+            realtime_mode(realtime, collector=False) as applied,
+            pauses.watching(),
+            ctrl_c_requests() as stop,
+        ):
             loop.stop = stop
             try:
                 if driver is None:
@@ -79,7 +91,7 @@ class Drive:
             except Exception as e:  # noqa: BLE001 (anything else the loop met: one line, the folder kept)
                 t = loop.time if loop.started else None
                 failure = str(DriveFaultError(t, _unexpected(e), loop.commands))
-        timing = _timing(loop, pauses, pause_gc)
+        timing = _timing(loop, pauses, pause_gc) | {"realtime": applied.as_dict()}
         return DriveRun(loop=loop, driver=driver, timing=timing, failure=failure, interrupted=interrupted)
 
 
