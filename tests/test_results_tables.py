@@ -64,7 +64,7 @@ def differences(readme: str, root: Path) -> list[str]:
                 min(len(copy), len(expected)),
             )
             problems.append(f"{path}: the page's copy differs from line {first + 1} of its table")
-    for file in sorted((root / "docs" / "results").glob("*/table.md")):
+    for file in sorted((root / "docs" / "results").glob("**/table.md")):  # drive/filter/ too
         path = file.relative_to(root).as_posix()
         if path not in copies:
             problems.append(f"{path}: not copied into any page (no marker)")
