@@ -359,8 +359,7 @@ def _bus(url: str):
 
 
 def _drive(args) -> int:
-    from nsdrake.driver.run import prepare, write_drive_folder
-    from nsdrake.driver.timing import timing_line
+    from nsdrake.driver.realtime import memory_locked
 
     if args.lcm is not None and not args.lcm.strip():
         raise ScenarioError("--lcm: the URL is empty (an unset variable?); give the robot's LCM URL")
@@ -370,6 +369,14 @@ def _drive(args) -> int:
         )
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     realtime = _realtime(args, scenario.driver.realtime)
+    with memory_locked(realtime):  # before the bus (nsdrake/driver/realtime.py)
+        return _drive_locked(args, scenario, realtime)
+
+
+def _drive_locked(args, scenario, realtime) -> int:
+    from nsdrake.driver.run import prepare, write_drive_folder
+    from nsdrake.driver.timing import timing_line
+
     lcm = _bus(args.lcm) if args.lcm else None
     # the simulated robot adds g itself, or (driver.robot_adds_gravity false) its driver removes it first
     drive = prepare(
@@ -405,8 +412,7 @@ def _drive(args) -> int:
 
 def _sim_driver(args) -> int:
     from nsdrake.driver.controller_side import check_drive_scenario
-    from nsdrake.driver.serve import SimulatedDriverStopError, serve_simulated_driver
-    from nsdrake.driver.stop import ctrl_c_requests
+    from nsdrake.driver.realtime import memory_locked
 
     scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
     realtime = _realtime(args, None)  # the flags only: the scenario's driver.realtime is the controller's
@@ -415,6 +421,14 @@ def _sim_driver(args) -> int:
             "--lcm: memq:// is a bus inside one process; another process cannot reach the simulated "
             "driver there (nsdrake drive --simulated-driver runs both sides in one process)"
         )
+    with memory_locked(realtime):  # before the bus (nsdrake/driver/realtime.py)
+        return _serve(args, scenario, realtime)
+
+
+def _serve(args, scenario, realtime) -> int:
+    from nsdrake.driver.serve import SimulatedDriverStopError, serve_simulated_driver
+    from nsdrake.driver.stop import ctrl_c_requests
+
     lcm = _lcm(args.lcm)
     print(f"nsdrake: simulated driver for {args.scenario} on {args.lcm}; serving (Ctrl-C ends)", flush=True)
     progress = Progress(args.scenario, 1.0, simulated=scenario.duration)

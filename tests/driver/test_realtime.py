@@ -291,3 +291,43 @@ def test_what_the_os_refuses_a_user_is_refused_in_one_line(capabilities, line, t
     assert done.stderr.strip().splitlines() == [done.stderr.strip()]
     assert done.stderr.startswith(f"nsdrake: error: {line}")
     assert not out.exists()
+
+
+@needs_realtime
+def test_memory_locked_before_the_bus_is_not_locked_again_by_the_loop(monkeypatch):
+    """The commands lock the process's memory before the bus subscribes (memory_locked);
+    the loop's realtime_mode inside it must not call mlockall again (faulting in the whole
+    process while LCM's receive thread waits: statuses queued behind the loop's ready(),
+    measured to stop a real-time drive at its first status), nor unlock it when the loop
+    ends; the outer block unlocks. Catches a second mlockall, and an unlock by the inner block."""
+    from nsdrake.driver import realtime
+
+    calls = []
+    real = realtime._libc
+
+    class Counting:
+        def __init__(self):
+            self.libc = real()
+
+        def mlockall(self, flags):
+            calls.append("mlockall")
+            return self.libc.mlockall(flags)
+
+        def munlockall(self):
+            calls.append("munlockall")
+            return self.libc.munlockall()
+
+    monkeypatch.setattr(realtime, "_libc", Counting)
+
+    def body():
+        with realtime.memory_locked(SETTINGS):
+            locked = vm_lck_kb()
+            with realtime_mode(SETTINGS):
+                inside = list(calls)
+            after_loop = vm_lck_kb(), list(calls)
+        return locked, inside, after_loop, vm_lck_kb()
+
+    locked, inside, (after_loop_kb, after_loop_calls), after = in_a_thread(body)
+    assert locked > 100_000 and inside == ["mlockall"]
+    assert after_loop_kb > 100_000 and after_loop_calls == ["mlockall"]
+    assert after == 0 and calls == ["mlockall", "munlockall"]
