@@ -359,7 +359,7 @@ def _bus(url: str):
 
 
 def _drive(args) -> int:
-    from nsdrake.driver.realtime import memory_locked
+    from nsdrake.driver.realtime import realtime_process
 
     if args.lcm is not None and not args.lcm.strip():
         raise ScenarioError("--lcm: the URL is empty (an unset variable?); give the robot's LCM URL")
@@ -369,7 +369,7 @@ def _drive(args) -> int:
         )
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
     realtime = _realtime(args, scenario.driver.realtime)
-    with memory_locked(realtime):  # before the bus (nsdrake/driver/realtime.py)
+    with realtime_process(realtime):  # before the bus (nsdrake/driver/realtime.py)
         return _drive_locked(args, scenario, realtime)
 
 
@@ -412,7 +412,7 @@ def _drive_locked(args, scenario, realtime) -> int:
 
 def _sim_driver(args) -> int:
     from nsdrake.driver.controller_side import check_drive_scenario
-    from nsdrake.driver.realtime import memory_locked
+    from nsdrake.driver.realtime import realtime_process
 
     scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
     realtime = _realtime(args, None)  # the flags only: the scenario's driver.realtime is the controller's
@@ -421,7 +421,7 @@ def _sim_driver(args) -> int:
             "--lcm: memq:// is a bus inside one process; another process cannot reach the simulated "
             "driver there (nsdrake drive --simulated-driver runs both sides in one process)"
         )
-    with memory_locked(realtime):  # before the bus (nsdrake/driver/realtime.py)
+    with realtime_process(realtime):  # before the bus (nsdrake/driver/realtime.py)
         return _serve(args, scenario, realtime)
 
 

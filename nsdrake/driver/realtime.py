@@ -179,6 +179,7 @@ class Applied:
     cores: tuple[int, ...] = ()
     memory_locked_kb: int = 0
     collector_off: bool = False
+    other_threads: int = 0  # the process's threads given the same mode (the bus's)
 
     def as_dict(self) -> dict:
         return {
@@ -187,15 +188,17 @@ class Applied:
             "cores": list(self.cores),
             "memory_locked_kb": self.memory_locked_kb,
             "collector_off": self.collector_off,
+            "other_threads": self.other_threads,
         }
 
 
 POLICY_NAMES = {os.SCHED_OTHER: "SCHED_OTHER", os.SCHED_FIFO: "SCHED_FIFO", os.SCHED_RR: "SCHED_RR"}
 
 
-def read_back() -> Applied:
+def read_back(other_threads: int = 0) -> Applied:
     """The calling thread's scheduling policy, priority and cores, the process's locked
-    memory, and whether the collector is off."""
+    memory, and whether the collector is off (``other_threads``: how many threads were
+    given the same mode)."""
     policy = os.sched_getscheduler(0)
     return Applied(
         policy=POLICY_NAMES.get(policy, str(policy)),
@@ -203,21 +206,24 @@ def read_back() -> Applied:
         cores=tuple(sorted(os.sched_getaffinity(0))),
         memory_locked_kb=locked_kb(),
         collector_off=not gc.isenabled(),
+        other_threads=other_threads,
     )
 
 
 _locked = [0]  # memory_locked blocks open in this process (mlockall is the process's)
+_baselines: list[set[int]] = []  # the threads there were when realtime_process was entered
+
+
+def thread_ids() -> set[int]:
+    """The ids of this process's threads (the kernel's, as ``threading.get_native_id``)."""
+    return {int(tid) for tid in os.listdir("/proc/self/task")}
 
 
 @contextlib.contextmanager
 def memory_locked(settings: RealtimeSettings | None):
     """The process's memory locked for the block (``mlockall(MCL_CURRENT | MCL_FUTURE)``,
     then ``munlockall``) when ``settings`` ask for it; inside another such block, nothing
-    more. Enter it before the bus subscribes: mlockall faults in every page of the
-    process (about 1.4 GB with pydrake, 0.4 s to seconds) and holds the process's memory
-    map meanwhile, so that LCM's receive thread stops reading; statuses the driver sent in
-    that time would come out of the socket after the loop declared itself ready, stale,
-    then a jump of the robot's clock (measured: 300-560 ms, the drive stopped)."""
+    more."""
     if settings is None or not settings.lock_memory or _locked[0]:
         yield
         return
@@ -234,13 +240,69 @@ def memory_locked(settings: RealtimeSettings | None):
 
 
 @contextlib.contextmanager
+def realtime_process(settings: RealtimeSettings | None):
+    """What the commands enter before the bus is made (``settings`` None: nothing): the
+    process's memory locked (:func:`memory_locked`), and every thread started inside the
+    block (the bus's: LCM receives on a thread of its own, which the loop waits for)
+    given the loop's real-time mode with it by :func:`realtime_mode`. Both measured as
+    needed on a loaded machine: mlockall faults in every page of the process (about
+    1.4 GB with pydrake, 0.4 s to seconds) holding its memory map, so that LCM's receive
+    thread stops reading; locked at the loop's start, the statuses queued meanwhile came
+    out after the loop declared itself ready, stale, then a 300-560 ms jump of the robot's
+    clock stopped the drive (2 of 5 runs). And with LCM's thread left an ordinary one, it
+    delivered the statuses in bursts behind the machine's other work (386 skipped in 3 s,
+    the driver's fresh share 76%)."""
+    if settings is None:
+        yield
+        return
+    baseline = thread_ids()
+    with memory_locked(settings):
+        _baselines.append(baseline)
+        try:
+            yield
+        finally:
+            _baselines.pop()
+
+
+def _follow(settings: RealtimeSettings, restore: contextlib.ExitStack) -> int:
+    """The threads a library started inside :func:`realtime_process` (none outside it;
+    Python's own threads are not among them) at the loop's priority, on its core;
+    restored by ``restore``. Their number."""
+    if not _baselines:
+        return 0
+    python = {thread.native_id for thread in threading.enumerate()}  # the loop's, a progress heartbeat
+    others = thread_ids() - _baselines[-1] - python
+    for tid in sorted(others):
+        try:
+            policy, param, cores = (
+                os.sched_getscheduler(tid),
+                os.sched_getparam(tid),
+                os.sched_getaffinity(tid),
+            )
+            if settings.core != -1:
+                os.sched_setaffinity(tid, {settings.core})
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(settings.priority))
+        except ProcessLookupError:  # the thread ended meanwhile
+            continue
+        restore.callback(_restore_thread, tid, policy, param, cores)
+    return len(others)
+
+
+def _restore_thread(tid: int, policy: int, param, cores) -> None:
+    with contextlib.suppress(ProcessLookupError):
+        os.sched_setscheduler(tid, policy, param)
+        os.sched_setaffinity(tid, cores)
+
+
+@contextlib.contextmanager
 def realtime_mode(settings: RealtimeSettings | None, *, collector: bool = True):
     """The calling thread in real time for the block (module docstring): memory locked
-    first (:func:`memory_locked`, unless locked already), then the core, then SCHED_FIFO;
-    the collector paused when ``collector``. Yields :class:`Applied`, read back from the OS
-    once applied. Restored in the reverse order when the block ends, however it ends:
-    the policy, priority and cores the thread had, the memory unlocked (if this block
-    locked it). ``settings`` None: nothing is changed (yields the thread's own)."""
+    first (:func:`memory_locked`, unless locked already), then the core, then SCHED_FIFO,
+    the same for the threads started inside :func:`realtime_process`; the collector
+    paused when ``collector``. Yields :class:`Applied`, read back from the OS once
+    applied. Restored in the reverse order when the block ends, however it ends: the
+    policy, priority and cores each thread had, the memory unlocked (if this block locked
+    it). ``settings`` None: nothing is changed (yields the thread's own)."""
     if settings is None:
         yield read_back()
         return
@@ -257,4 +319,5 @@ def realtime_mode(settings: RealtimeSettings | None, *, collector: bool = True):
             restore.callback(os.sched_setaffinity, 0, cores)
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(settings.priority))
         restore.callback(os.sched_setscheduler, 0, policy, param)
-        yield read_back()
+        followers = _follow(settings, restore)
+        yield read_back(followers)

@@ -135,7 +135,7 @@ def test_the_drive_loop_ticks_in_real_time_and_records_it():
     assert all(locked > 100_000 and not collecting for _, locked, collecting in seen)
     assert run.timing["realtime"] | {"memory_locked_kb": 0} == {
         "policy": "SCHED_FIFO", "priority": PRIORITY, "cores": [CORE], "memory_locked_kb": 0,
-        "collector_off": True,
+        "collector_off": True, "other_threads": 0,
     }  # fmt: skip
     assert after == before
     scenario.driver.realtime.enabled, scenario.driver.realtime.priority = True, PRIORITY + 1
@@ -331,3 +331,51 @@ def test_memory_locked_before_the_bus_is_not_locked_again_by_the_loop(monkeypatc
     assert locked > 100_000 and inside == ["mlockall"]
     assert after_loop_kb > 100_000 and after_loop_calls == ["mlockall"]
     assert after == 0 and calls == ["mlockall", "munlockall"]
+
+
+def a_bus_thread():
+    """A thread standing in for LCM's receive thread (a UDP bus may not be made outside a
+    namespace, and memq:// starts none): its id, the thread, and the event that ends it.
+    The test hides it from threading.enumerate, as a thread a C library started is."""
+    ready, done = threading.Event(), threading.Event()
+    box = {}
+
+    def run():
+        box["tid"] = threading.get_native_id()
+        ready.set()
+        done.wait()
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    ready.wait()
+    return box["tid"], thread, done
+
+
+@needs_realtime
+def test_threads_the_bus_started_follow_the_loop_s_mode(monkeypatch):
+    """Inside realtime_process (entered before the bus is made), the threads started since
+    (LCM's receive thread) get the loop's priority and core with it, and theirs back after;
+    a thread that was there before (numpy's BLAS worker) keeps its own. Catches the bus's
+    thread left an ordinary one (statuses delivered in bursts behind the machine's other
+    work) and every thread of the process made real-time."""
+    from nsdrake.driver import realtime
+
+    before_tid, before_thread, before_done = a_bus_thread()
+    with realtime.realtime_process(SETTINGS):
+        bus_tid, bus_thread, bus_done = a_bus_thread()
+        hidden = {before_thread, bus_thread}
+        enumerate_ = threading.enumerate
+        monkeypatch.setattr(threading, "enumerate", lambda: [t for t in enumerate_() if t not in hidden])
+        own = os_settings(bus_tid), os_settings(before_tid)
+
+        def body():
+            with realtime_mode(SETTINGS) as applied:
+                return applied, os_settings(bus_tid), os_settings(before_tid)
+
+        applied, bus_inside, before_inside = in_a_thread(body)
+        bus_after = os_settings(bus_tid)
+    for done, thread in ((bus_done, bus_thread), (before_done, before_thread)):
+        done.set()
+        thread.join()
+    assert bus_inside == (os.SCHED_FIFO, PRIORITY, {CORE}) and applied.other_threads == 1
+    assert before_inside == own[1] and bus_after == own[0]
