@@ -151,7 +151,7 @@ def _add_drive_parsers(sub) -> None:
         type=_rate,
         default=1.0,
         help="with --simulated-driver: the driver's pace against the wall clock "
-        "(1: real time; 0: as fast as possible)",
+        "(1: real time; 0: as fast as possible; at least a control period a second)",
     )
     _add_realtime_options(drive, "the loop thread", " (overrides driver.realtime)")
     sim = sub.add_parser("sim-driver", help="run the simulated driver alone on an LCM bus, at real time")
@@ -162,9 +162,8 @@ def _add_drive_parsers(sub) -> None:
     sim.add_argument(
         "--expire-sec",
         type=_positive("--expire-sec"),
-        default=0.05,
         help="a command older than this [s] is dropped and the robot damps (drake-franka-driver's "
-        "--expire_sec; default 0.05)",
+        "--expire_sec; default: the scenario's driver.expire_sec, 0.05 as shipped)",
     )
     sim.add_argument(
         "--low-pass-freq",
@@ -375,6 +374,7 @@ def _drive(args) -> int:
 
 def _drive_locked(args, scenario, realtime) -> int:
     from nsdrake.driver.run import prepare, write_drive_folder
+    from nsdrake.driver.stop import ctrl_c_requests
     from nsdrake.driver.timing import timing_line
 
     lcm = _bus(args.lcm) if args.lcm else None
@@ -384,12 +384,13 @@ def _drive_locked(args, scenario, realtime) -> int:
     )  # every input error before the folder
     with _claimed(args.out, f"drive-{args.scenario}", args.overwrite) as out:
         where = "the simulated driver over memq://" if lcm is None else f"the driver at {args.lcm}"
-        print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
-        progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
-        try:
-            run = drive.run(progress=progress, realtime=realtime)
-        finally:
-            progress.end_line()
+        with ctrl_c_requests() as stop:  # from here on Ctrl-C stops the drive, which keeps its folder
+            print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
+            progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
+            try:
+                run = drive.run(progress=progress, stop=stop, realtime=realtime)
+            finally:
+                progress.end_line()
         result = write_drive_folder(run, out)
     if run.interrupted:
         print(f"nsdrake: {timing_line(run.timing)}")

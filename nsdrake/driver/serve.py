@@ -146,7 +146,7 @@ def serve_simulated_driver(
     lcm: DrakeLcmInterface,
     *,
     duration: float | None = None,
-    expire_sec: float = 0.05,
+    expire_sec: float | None = None,
     low_pass_freq: float = 30.0,
     rate_limit: bool = True,
     progress=None,
@@ -156,9 +156,12 @@ def serve_simulated_driver(
     realtime: RealtimeSettings | None = None,
 ) -> ServeResult:
     """The simulated driver on ``lcm`` (module docstring) for ``duration`` [s] (default the
-    scenario's) after the first command; ``stop``: a :class:`nsdrake.driver.stop.StopRequest`
-    that ends it at the next period; ``realtime``: the serving thread in real time
-    (:mod:`nsdrake.driver.realtime`: SCHED_FIFO, a core, memory locked, the collector off)."""
+    scenario's) after the first command; ``expire_sec`` [s] default the scenario's
+    ``driver.expire_sec`` (the controller's silence bound: the same number on both sides);
+    ``stop``: a :class:`nsdrake.driver.stop.StopRequest` that ends it at the next period;
+    ``realtime``: the serving thread in real time (:mod:`nsdrake.driver.realtime`:
+    SCHED_FIFO, a core, memory locked, the collector off)."""
+    expire_sec = scenario.driver.expire_sec if expire_sec is None else expire_sec
     server = _Server(scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime)
     duration = scenario.duration if duration is None else duration
     period = server.period

@@ -41,7 +41,7 @@ from nsdrake.control.validation import (
     positive_problem,
     task_axes_problem,
 )
-from nsdrake.experiment.driver_config import DriverConfig, driver_problems
+from nsdrake.experiment.driver_config import REMOVED_FIELDS, DriverConfig, driver_problems
 from nsdrake.experiment.push import PushConfig, push_problems
 from nsdrake.realism.config import SHORTEST_STEP, RealismConfig, realism_problems, substeps
 from nsdrake.station.config import (
@@ -368,6 +368,8 @@ def check_shape(data, schema, where: str) -> str | None:
         fields = {f.name: f for f in dataclasses.fields(schema) if f.metadata.get("yaml", True)}
         for key, value in data.items():
             path = f"{where}.{_name(key)}" if where else _name(key)
+            if key not in fields and schema is DriverConfig and key in REMOVED_FIELDS:
+                return f"{path}: {REMOVED_FIELDS[key]}"
             if key not in fields:
                 return f"{path}: unknown field; valid fields here are {', '.join(fields)}"
             problem = check_shape(value, hints[key], path)
@@ -527,7 +529,7 @@ def scenario_problems(s: Scenario, *, push_within_run: bool = True) -> Iterator[
     yield from _checked("divergence.max_torque", positive_problem(s.divergence.max_torque))
     for where, problem in realism_problems(s.realism, s.control_period):
         yield f"realism.{where}", problem
-    for where, problem in driver_problems(s.driver):
+    for where, problem in driver_problems(s.driver, s.control_period):
         yield f"driver.{where}", problem
     yield from _step_problems(s)
     yield from _obstacle_problems(s)
