@@ -12,11 +12,11 @@ per millisecond).
 ``udp``: ``nsdrake sim-driver`` and ``nsdrake drive`` as two processes over UDP multicast
 inside a private network namespace (``unshare -n``, root; tests/driver/netns.py says
 why), free-running at 1 kHz as the README's robot recipe runs them (the driver's filter
-off, commands expiring after 50 ms); also the driver's own count of the periods that
-applied a fresh command, a stale one, or fell back to damping, and how many it started
-late itself (the simulated driver is a Python simulation of the plant: on a loaded
+off, commands expiring after the scenario's ``driver.expire_sec``, 50 ms as shipped);
+also the driver's own count of the periods that applied a fresh command, a stale one,
+or fell back to damping, and how many it started late itself (the simulated driver is a Python simulation of the plant: on a loaded
 machine it cannot keep 1 kHz either). ``--config`` is passed to both (e.g. a larger
-``driver.status_timeout_periods`` on a shared machine); repeated, one UDP run per file
+``driver.expire_sec``, which is also the controller's silence bound); repeated, one UDP run per file
 (``default``: the scenario as shipped), each in its own folder under ``--out``. Each run
 reports the longest silence the loop's silence rule measured (``longest_silence_us``: how
 near the stream came to the bound) and whether panda_wipe met its bounds.
@@ -135,7 +135,7 @@ def udp(
     low_pass = "" if "--low-pass-freq" in driver else " --low-pass-freq 1000"
     script = (
         NAMESPACE + f"{python} sim-driver panda_wipe --lcm '{URL}' --duration {duration + 1:g}{options} "
-        f"{driver}{low_pass} --expire-sec 0.05 > {folder.name}-driver.out 2>&1 &\n"
+        f"{driver}{low_pass} > {folder.name}-driver.out 2>&1 &\n"
         + f"{python} drive panda_wipe --lcm '{URL}' --duration {duration:g}{options} {drive} --out {folder}"
         + f" > {folder.name}-drive.out 2>&1\nwait\n"
     )
@@ -184,8 +184,10 @@ def driver_figures(driver_line: str) -> dict:
 
 
 def silence_bound(config: Path | None) -> float:
-    """The drive's silence bound [periods] with ``config`` overlaid on panda_wipe."""
-    return load_scenario("panda_wipe", config=config).driver.status_timeout_periods
+    """The drive's silence bound [periods] with ``config`` overlaid on panda_wipe: the
+    driver's command expiry (``driver.expire_sec``) in control periods."""
+    scenario = load_scenario("panda_wipe", config=config)
+    return scenario.driver.expire_sec / scenario.control_period
 
 
 def cell(value, unit: str = " µs", digits: int = 0) -> str:
@@ -196,8 +198,9 @@ def table(results: dict) -> str:
     """The measured table (docs/results/drive/table.md): one row per run."""
     header = (
         "| panda_wipe at 1 kHz | load (1 min) | ran | CPU p50 | CPU p99.9 | wall p50 | wall p99.9 "
-        "| ticks over 1 ms | statuses skipped | longest silence | driver: fresh commands | bounds met |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| ticks over 1 ms | statuses skipped | late statuses: 2 / 3–10 / 11–50 periods (longest) "
+        "| longest silence | driver: fresh commands | bounds met |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     rows = []
     loop = results.get("loop_alone")
@@ -205,7 +208,7 @@ def table(results: dict) -> str:
         rows.append(
             f"| loop alone: a recorded 6 s, in-process bus, unpaced (median of {loop['runs']}) "
             f"| {loop['load_average_1min']:.2f} | {loop['ticks']} ticks | {cell(loop['cpu_p50_us'])} "
-            f"| {cell(loop['cpu_p999_us'])} | – | – | – | – | – | – | – |"
+            f"| {cell(loop['cpu_p999_us'])} | – | – | – | – | – | – | – | – |"
         )
     runs = [("memq://, lockstep with the simulated driver", results.get("memq"))]
     runs += [(udp_label(r), r) for r in results.get("udp_runs", [])]
@@ -213,7 +216,7 @@ def table(results: dict) -> str:
         if not r:
             continue
         if r.get("ticks") is None:
-            rows.append(f"| {label} | – | not run: {r.get('failure')} |" + " – |" * 9)
+            rows.append(f"| {label} | – | not run: {r.get('failure')} |" + " – |" * 10)
             continue
         load = r["load_average_1min"]
         ran = f"{results['duration_s']:g} s" if not r.get("failure") else f"stopped: {r['failure']}"
@@ -224,7 +227,7 @@ def table(results: dict) -> str:
         rows.append(
             f"| {label} | {load[0]:.2f}–{load[1]:.2f} | {ran} | {cell(r['cpu_p50_us'])} "
             f"| {cell(r['cpu_p999_us'])} | {cell(r['p50_us'])} | {cell(r['p999_us'])} | {r['over_period']} "
-            f"| {r['statuses_skipped']} | {silence} | {'–' if fresh is None else f'{100 * fresh:.2f}%'} "
+            f"| {r['statuses_skipped']} | {'–' if lockstep else glitches(r)} | {silence} | {percent(fresh)} "
             f"| {'– (stopped)' if r.get('failure') else ('yes' if r.get('bounds_met') else 'no')} |"
         )
     title = (
@@ -232,6 +235,8 @@ def table(results: dict) -> str:
         "panda_wipe driven by `nsdrake drive` against the simulated driver: CPU and wall figures are the "
         "tick's, from a status's arrival to the command's publish; the longest silence is the longest "
         "time the loop waited for a status from the last one's arrival (the silence rule's measure); "
+        "late statuses are those answered two periods or more after the previous one, within the "
+        "silence bound (the drive's glitch counts); "
         "fresh commands are the driver's share of periods that applied a command answering its "
         "previous status. This machine's figures, with its load.\n\n"
     )
@@ -330,6 +335,17 @@ def filter_table(runs: list[dict], config: Path | None, realtime: bool) -> str:
     return title + header + "\n".join(rows) + "\n"
 
 
+def glitches(r: dict) -> str:
+    """The drive's late statuses (timing.json's ``gaps``): how many 2, 3–10, 11–50 periods
+    after the previous one, and the longest."""
+    gaps = r.get("gaps")
+    if gaps is None:
+        return "– (this drive counts none)"
+    counts = f"{gaps.get('2', 0)} / {gaps.get('3-10', 0)} / {gaps.get('11-50', 0)}"
+    counts += f", {gaps['over 50']} over 50" if gaps.get("over 50") else ""
+    return counts + f" ({r.get('longest_gap_periods')} periods)" if r.get("longest_gap_periods") else counts
+
+
 def percent(fraction: float | None) -> str:
     return "–" if fraction is None else f"{100 * fraction:.2f}%"
 
@@ -384,13 +400,6 @@ def soak_table(r: dict) -> str:
     load, driver = r["load_average_1min"], r.get("driver") or {}
     fresh = driver.get("fresh_fraction")
     stops = "0" if not r.get("failure") else f"1: {r['failure']}"
-    gaps = r.get("gaps")
-    glitches = (
-        "– (this drive counts none)"
-        if gaps is None
-        else f"{gaps.get('2', 0)} / {gaps.get('3-10', 0)} / {gaps.get('11-50', 0)} "
-        f"({r.get('longest_gap_periods')} periods)"
-    )
     answered = driver.get("answered_robot_us")
     drift = (
         "–"
@@ -399,7 +408,8 @@ def soak_table(r: dict) -> str:
     )
     row = (
         f"| {label} | {load[0]:.2f}–{load[1]:.2f} | {stops} | {percent(fresh)} "
-        f"| {glitches} | {r['statuses_skipped']} | {cell(r['longest_silence_us'] / 1e3, ' ms', 2)} | {drift} "
+        f"| {glitches(r)} | {r['statuses_skipped']} | {cell(r['longest_silence_us'] / 1e3, ' ms', 2)} "
+        f"| {drift} "
         f"| {cell(r['cpu_p50_us'])} | {cell(r['cpu_p999_us'])} | {cell(r['p999_us'])} | {bounds_cell(r)} |"
     )
     title = (
