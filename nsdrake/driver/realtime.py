@@ -12,7 +12,9 @@ examples run theirs:
 - Python's garbage collector frozen and off (:func:`nsdrake.driver.timing.collector_paused`).
 
 Each is applied to the thread that enters :func:`realtime_mode` (the loop's) and restored
-when it leaves. :func:`realtime_problem` says, in one line, why the OS will not allow a
+when it leaves. The commands lock the memory earlier, before the bus is made, with
+:func:`realtime_process`, inside which the threads the bus starts (LCM's receive thread,
+which the loop waits on) follow the loop's mode too. :func:`realtime_problem` says, in one line, why the OS will not allow a
 setting (a priority outside the scheduler's range, a core this process may not run on,
 a user without the right to a real-time priority or to lock memory); the commands call
 it before anything is simulated or sent. The default is off: an ordinary PC (no
