@@ -120,3 +120,21 @@ def test_the_regenerate_script_refuses_an_unknown_family():
     )
     assert done.returncode == 2
     assert done.stdout.startswith("--family: no docs/results/no_such_family/command")
+
+
+def test_a_further_table_a_command_wrote_is_checked_too(tmp_path):
+    """A table in a results folder's subfolder (bench_drive.py's filter/ and soak/, which
+    docs/results/drive/command writes beside its own) must be copied into a page like any
+    other: left out, or copied with a digit changed, it is caught. Catches a check that
+    looks one folder deep only."""
+    nested = tmp_path / "docs" / "results" / "drive" / "filter" / "table.md"
+    nested.parent.mkdir(parents=True)
+    nested.write_text("# filter\n\n| low-pass | force error |\n|---|---|\n| 30 Hz | 11.101 N |\n")
+    assert differences("no table here\n", tmp_path) == [
+        "docs/results/drive/filter/table.md: not copied into any page (no marker)"
+    ]
+    page = "<!-- table: docs/results/drive/filter/table.md -->\n| low-pass | force error |\n|---|---|\n"
+    assert differences(page + "| 30 Hz | 11.101 N |\n", tmp_path) == []
+    assert differences(page + "| 30 Hz | 11.109 N |\n", tmp_path)[0].endswith(
+        "differs from line 3 of its table"
+    )
