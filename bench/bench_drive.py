@@ -12,14 +12,15 @@ per millisecond).
 ``udp``: ``nsdrake sim-driver`` and ``nsdrake drive`` as two processes over UDP multicast
 inside a private network namespace (``unshare -n``, root; tests/driver/netns.py says
 why), free-running at 1 kHz as the README's robot recipe runs them (the driver's filter
-off, commands expiring after the scenario's ``driver.expire_sec``, 50 ms as shipped);
-also the driver's own count of the periods that applied a fresh command, a stale one,
-or fell back to damping, and how many it started late itself (the simulated driver is a Python simulation of the plant: on a loaded
-machine it cannot keep 1 kHz either). ``--config`` is passed to both (e.g. a larger
-``driver.expire_sec``, which is also the controller's silence bound); repeated, one UDP run per file
-(``default``: the scenario as shipped), each in its own folder under ``--out``. Each run
-reports the longest silence the loop's silence rule measured (``longest_silence_us``: how
-near the stream came to the bound) and whether panda_wipe met its bounds.
+off, commands expiring after the scenario's ``driver.expire_sec``, 50 ms as shipped,
+which is also the controller's silence bound); also the driver's own count of the
+periods that applied a fresh command, a stale one, or fell back to damping, and how many
+it started late itself (the simulated driver is a Python simulation of the plant: on a
+loaded machine it cannot keep 1 kHz either). ``--config`` is passed to both; repeated,
+one UDP run per file (``default``: the scenario as shipped), each in its own folder
+under ``--out``. Each run reports the longest silence the loop's silence rule measured
+(``longest_silence_us``: how near the stream came to the bound) and whether panda_wipe
+met its bounds.
 
 ``--realtime``: each UDP run again with both sides in the real-time mode
 (:mod:`nsdrake.driver.realtime`, ``REALTIME``): the simulated driver at SCHED_FIFO 80 on
@@ -388,7 +389,7 @@ def soak_table(r: dict) -> str:
         "| controller's clock − robot's, at the end | CPU p50 | CPU p99.9 | wall p99.9 | bounds met |\n"
         "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
-    label = f"{r['duration_s']:g} s, {r['laps']:g} laps"
+    label = f"{r['duration_s']:g} s, {r['laps']:g} lap{'' if r['laps'] == 1 else 's'}"
     if r.get("ticks") is None:
         return (
             "# drive: soak\n\n"

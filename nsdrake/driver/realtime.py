@@ -14,11 +14,12 @@ examples run theirs:
 Each is applied to the thread that enters :func:`realtime_mode` (the loop's) and restored
 when it leaves. The commands lock the memory earlier, before the bus is made, with
 :func:`realtime_process`, inside which the threads the bus starts (LCM's receive thread,
-which the loop waits on) follow the loop's mode too. :func:`realtime_problem` says, in one line, why the OS will not allow a
-setting (a priority outside the scheduler's range, a core this process may not run on,
-a user without the right to a real-time priority or to lock memory); the commands call
-it before anything is simulated or sent. The default is off: an ordinary PC (no
-real-time kernel, no root) runs the loop as an ordinary thread.
+which the loop waits on) follow the loop's mode too. :func:`realtime_problem` says, in
+one line, why the OS will not allow a setting (a priority outside the scheduler's range,
+a core this process may not run on, a user without the right to a real-time priority or
+to lock memory); the commands call it before anything is simulated or sent. The default
+is off: an ordinary PC (no real-time kernel, no root) runs the loop as an ordinary
+thread.
 """
 
 from __future__ import annotations
