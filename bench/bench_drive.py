@@ -79,6 +79,7 @@ import yaml
 
 from nsdrake.driver.run import prepare, run_simulated, write_drive_folder
 from nsdrake.driver.timing import collector_paused, timing_line
+from nsdrake.experiment.driver_config import silence_bound_periods
 from nsdrake.experiment.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -185,10 +186,9 @@ def driver_figures(driver_line: str) -> dict:
 
 
 def silence_bound(config: Path | None) -> float:
-    """The drive's silence bound [periods] with ``config`` overlaid on panda_wipe: the
-    driver's command expiry (``driver.expire_sec``) in control periods."""
+    """The drive's silence bound [periods] with ``config`` overlaid on panda_wipe."""
     scenario = load_scenario("panda_wipe", config=config)
-    return scenario.driver.expire_sec / scenario.control_period
+    return silence_bound_periods(scenario.driver, scenario.control_period)
 
 
 def cell(value, unit: str = " µs", digits: int = 0) -> str:

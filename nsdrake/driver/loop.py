@@ -208,11 +208,20 @@ class ControllerLoop:
                 raise
 
     def _check_motion(self, periods: int) -> None:
-        """The status just loaded against the previous one, ``periods`` apart: a glitch
-        counted (two periods or more), then no joint moved more than its velocity limit
-        allows (or than ``driver.max_joint_step`` per period, when set), and every joint's
-        move agrees with its reported velocities (nsdrake/driver/panda.py's bounds)."""
+        """The status just loaded against the previous one answered, ``periods`` apart: a
+        glitch counted (two periods or more; beyond the silence bound a fault, also when
+        each status came on time and the controller itself was late: the driver has
+        expired its command meanwhile, and a command now would be a torque step from the
+        damping that the controller's rate limiter never saw), then no joint moved more
+        than its velocity limit allows (or than ``driver.max_joint_step`` per period, when
+        set), and every joint's move agrees with its reported velocities
+        (nsdrake/driver/panda.py's bounds)."""
         if periods >= 2:
+            if periods > self.bound_periods:  # every status was on time, the controller was not
+                raise self._fault(
+                    f"status refused: {periods} periods since the status answered before it, beyond "
+                    f"{self._bound_words()}: the driver has dropped the last command and damped"
+                )
             self.gap_counts[gap_bin(periods)] += 1
             self.longest_gap = max(self.longest_gap, periods)
         elapsed = periods * self.period

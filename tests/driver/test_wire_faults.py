@@ -772,3 +772,25 @@ def test_another_signal_s_eintr_is_no_fault_and_a_broken_bus_stays_one(sides, tm
         robot.status(after=3 * T, clock_step=3000)
     run = Drive(loop, None).run()
     assert not run.interrupted and "the LCM bus failed: lcm_handle_timeout() returned -1" in run.failure
+
+
+def test_a_controller_later_than_the_bound_stops(sides):
+    """A 52 ms tick while the robot goes on at 1 kHz (each status on time, one period after
+    the last): the next status answered would be 52 periods after the one before, past
+    the 50-period bound, when the driver has dropped the last command and damped: refused
+    (catches only the statuses' own gaps checked: the controller's lateness unbounded)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    robot.status()
+    bus.tick_cost = 52e-3
+    loop.tick()
+    bus.tick_cost = 0.0
+    for _ in range(52):
+        robot.status()
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    assert info.value.problem.startswith(
+        "status refused: 52 periods since the status answered before it, beyond the silence bound"
+    )
+    assert loop.commands == 2
