@@ -357,11 +357,12 @@ def bounds_cell(r: dict) -> str:
 
 def soak_config(seconds: float, config: Path | None, out: Path) -> Path:
     """``config`` with panda_wipe's circle extended to ``seconds``: as many more laps as fit,
-    the path ending as far before the end as the shipped 28 s run's."""
+    the path ending as far before the end as the shipped 28 s run's (a run shorter than the
+    shipped one keeps its laps and ends before them)."""
     scenario = load_scenario("panda_wipe", config=config)
     r = scenario.reference
     lap = 2.0 * np.pi * r.radius / r.tangent_speed  # [s]
-    laps = r.laps + np.floor((seconds - scenario.duration) / lap)
+    laps = r.laps + max(0.0, np.floor((seconds - scenario.duration) / lap))  # a shorter run: the shipped laps
     data = yaml.safe_load(config.read_text()) if config else {}
     data = data or {}
     data.setdefault("reference", {})["laps"] = float(laps)
