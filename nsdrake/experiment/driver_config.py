@@ -86,9 +86,10 @@ class DriverConfig:
     # protects nothing more (the robot applies the last command until its driver expires
     # it, whatever the controller does) and stops every PC without a real-time kernel; a
     # longer one would let the controller resume on a robot that has been damping, a torque
-    # step its rate limiter never saw. At most 0.1 s: held for longer, the last torque can
-    # run a joint at Franka's acceleration limit (up to 20 rad/s²) from rest past its
-    # velocity limit (2.175 rad/s) before the driver damps [s].
+    # step its rate limiter never saw. At most 0.1 s: in 0.1 s a joint accelerated by the
+    # held torque at Franka's published acceleration limit (up to 20 rad/s²) reaches
+    # 2 rad/s, near the velocity limits (2.175-2.61 rad/s); held longer, the last torque can
+    # run a joint past them before the driver damps [s].
     expire_sec: float = 0.05
     # Largest distance of any joint of the first status from the scenario's
     # arm.initial_positions; beyond it the run is refused before any command. At most what
