@@ -78,15 +78,30 @@ def regenerate(family: str, runs: Path) -> tuple[str, bool]:
     old_text = committed.read_text() if committed.exists() else ""
     new_text = new.read_text()
     committed.write_text(new_text)
+    nested = _copy_nested_tables(family, out)
     for image in (RESULTS / family).glob("*.png"):  # the figures a page shows, refreshed with it
         if (out / image.name).exists():
             image.write_bytes((out / image.name).read_bytes())
+    also = f"; also wrote {', '.join(nested)} (copy their rows into the page)" if nested else ""
     if new_text == old_text:
-        return f"{family}: unchanged", True
+        return f"{family}: unchanged{also}", True
     old, now = table_rows(old_text), table_rows(new_text)
     differ = [name for name in now if old.get(name) != now[name]] + [n for n in old if n not in now]
     what = "; rows: " + ", ".join(differ) if differ else " (header or description only)"
-    return f"{family}: changed{what}", True
+    return f"{family}: changed{what}{also}", True
+
+
+def _copy_nested_tables(family: str, out: Path) -> list[str]:
+    """The further tables one command wrote beside its own (``out/NAME/table.md``, e.g.
+    bench_drive.py's filter/ and soak/), copied to docs/results/FAMILY/NAME/table.md; their
+    paths."""
+    copied = []
+    for table in sorted(out.glob("*/table.md")):
+        target = RESULTS / family / table.parent.name / "table.md"
+        target.parent.mkdir(exist_ok=True)
+        target.write_text(table.read_text())
+        copied.append(target.relative_to(ROOT).as_posix())
+    return copied
 
 
 def main() -> int:

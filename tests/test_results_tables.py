@@ -64,7 +64,7 @@ def differences(readme: str, root: Path) -> list[str]:
                 min(len(copy), len(expected)),
             )
             problems.append(f"{path}: the page's copy differs from line {first + 1} of its table")
-    for file in sorted((root / "docs" / "results").glob("*/table.md")):
+    for file in sorted((root / "docs" / "results").glob("**/table.md")):  # drive/filter/ too
         path = file.relative_to(root).as_posix()
         if path not in copies:
             problems.append(f"{path}: not copied into any page (no marker)")
@@ -185,3 +185,21 @@ def test_the_regenerate_scripts_last_line_says_a_failure_and_its_exit_status(tmp
     assert script.main() == 1
     assert lines[0].startswith("standin: FAILED (the command exited 0 but wrote no "), lines
     assert lines[-1] == "1 of 1 FAILED; exit 1", lines
+
+
+def test_a_further_table_a_command_wrote_is_checked_too(tmp_path):
+    """A table in a results folder's subfolder (bench_drive.py's filter/ and soak/, which
+    docs/results/drive/command writes beside its own) must be copied into a page like any
+    other: left out, or copied with a digit changed, it is caught. Catches a check that
+    looks one folder deep only."""
+    nested = tmp_path / "docs" / "results" / "drive" / "filter" / "table.md"
+    nested.parent.mkdir(parents=True)
+    nested.write_text("# filter\n\n| low-pass | force error |\n|---|---|\n| 30 Hz | 11.101 N |\n")
+    assert differences("no table here\n", tmp_path) == [
+        "docs/results/drive/filter/table.md: not copied into any page (no marker)"
+    ]
+    page = "<!-- table: docs/results/drive/filter/table.md -->\n| low-pass | force error |\n|---|---|\n"
+    assert differences(page + "| 30 Hz | 11.101 N |\n", tmp_path) == []
+    assert differences(page + "| 30 Hz | 11.109 N |\n", tmp_path)[0].endswith(
+        "differs from line 3 of its table"
+    )

@@ -409,6 +409,8 @@ class ResultsDirective(SphinxDirective):
         docs = Path(self.env.srcdir)
         family_file = docs.parent / "nsdrake" / "studies" / "families" / f"{family}.yaml"
         command_file = docs / "results" / family / "command"
+        if not command_file.exists():  # a further table its parent's command wrote (drive/filter)
+            command_file = command_file.parent.parent / "command"
         out = []
         if family_file.exists():  # a comparison family: its description, then its command
             spec = yaml.safe_load(family_file.read_text())

@@ -26,6 +26,7 @@ from nsdrake.control.validation import ControllerInputError
 from nsdrake.driver.bus import Bus, DrakeBus
 from nsdrake.driver.controller_side import _Log, build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
+from nsdrake.driver.realtime import RealtimeSettings, realtime_mode, realtime_settings
 from nsdrake.driver.simulated_driver import SimulatedDriver
 from nsdrake.driver.stop import ctrl_c_requests
 from nsdrake.driver.timing import (
@@ -69,18 +70,29 @@ class Drive:
     def __init__(self, loop: ControllerLoop, driver: SimulatedDriver | None, realtime_rate: float = 0.0):
         self.loop, self.driver, self.realtime_rate = loop, driver, realtime_rate
 
-    def run(self, *, pause_gc: bool = True, progress=None, stop=None) -> DriveRun:
+    def run(
+        self, *, pause_gc: bool = True, progress=None, stop=None, realtime: RealtimeSettings | None = None
+    ) -> DriveRun:
         """Runs to the scenario's duration, the first fault or Ctrl-C (which stops it at the
         next status, :mod:`nsdrake.driver.stop`). ``pause_gc``: the garbage collector off
         during the loop (:func:`nsdrake.driver.timing.collector_paused`). ``stop``: a
         :class:`nsdrake.driver.stop.StopRequest` the caller set up already (a Ctrl-C that
         came before the loop began then stops it before its first command); without one,
-        Ctrl-C is read from here on."""
+        Ctrl-C is read from here on. ``realtime``: the loop thread's real-time mode
+        (:mod:`nsdrake.driver.realtime`; the collector off with it); None: the scenario's
+        ``driver.realtime`` (off unless enabled)."""
         loop, driver = self.loop, self.driver
         duration = loop.drive.scenario.duration
         failure, interrupted, pauses = None, False, GcPauses()
         requests = contextlib.nullcontext(stop) if stop is not None else ctrl_c_requests()
-        with requests as stop, collector_paused(pause_gc), pauses.watching():
+        realtime = realtime or realtime_settings(loop.config.realtime)
+        pause_gc = pause_gc or realtime is not None
+        with (
+            requests as stop,
+            collector_paused(pause_gc),
+            realtime_mode(realtime, collector=False) as applied,
+            pauses.watching(),
+        ):
             loop.stop = stop
             try:
                 if driver is None:
@@ -92,7 +104,7 @@ class Drive:
             except Exception as e:  # noqa: BLE001 (anything else the loop met: one line, the folder kept)
                 t = loop.time if loop.started else None
                 failure = str(DriveFaultError(t, _unexpected(e), loop.commands))
-        timing = _timing(loop, pauses, pause_gc)
+        timing = _timing(loop, pauses, pause_gc) | {"realtime": applied.as_dict()}
         return DriveRun(loop=loop, driver=driver, timing=timing, failure=failure, interrupted=interrupted)
 
 

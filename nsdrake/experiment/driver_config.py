@@ -13,9 +13,43 @@ and ``nsdrake sim-driver`` read them.
 """
 
 import math
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, field
 
 FORCE_SOURCES = ("sensor", "external_torque")
+
+
+@dataclass
+class RealtimeConfig:
+    """The controller's loop thread in real time on a robot PC (nsdrake/driver/realtime.py;
+    ``nsdrake drive --realtime`` sets it too). Off by default: an ordinary PC runs the loop
+    as an ordinary thread. Each setting the OS does not allow (a user without the right to a
+    real-time priority or to lock memory, a core the process may not run on) is refused in
+    one line before anything is sent."""
+
+    # Run the loop thread at SCHED_FIFO `priority`, on `core`, with the process's memory
+    # locked and Python's garbage collector off [-].
+    enabled: bool = False
+    # The loop thread's SCHED_FIFO priority, 1 to 99 (the scheduler's range; the kernel's
+    # own watchdogs run at 99) [-].
+    priority: int = 80
+    # The core the loop thread is pinned to; -1: not pinned [-].
+    core: int = -1
+    # Lock the process's memory (mlockall): no page of it swapped out or faulted in while a
+    # command is due [-].
+    lock_memory: bool = True
+
+
+def realtime_settings_problem(priority, core) -> tuple[str, str] | None:
+    """(field, problem) when ``priority`` or ``core`` is no real-time setting at all,
+    whatever the OS allows (None: they are): the priority an integer in SCHED_FIFO's range,
+    the core an integer ≥ -1."""
+    low, high = os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO)
+    if not isinstance(priority, int) or isinstance(priority, bool) or not low <= priority <= high:
+        return "priority", f"must be an integer from {low} to {high} (SCHED_FIFO's range), got {priority!r}"
+    if not isinstance(core, int) or isinstance(core, bool) or core < -1:
+        return "core", f"must be a core's number (0, 1, ...), or -1 for none, got {core!r}"
+    return None
 
 
 @dataclass
@@ -71,6 +105,8 @@ class DriverConfig:
     # 1 kHz). A positive value is one bound for every joint, at most the smallest of
     # those [rad].
     max_joint_step: float = 0.0
+    # The loop thread in real time on a robot PC (off by default) [-].
+    realtime: RealtimeConfig = field(default_factory=RealtimeConfig)
 
 
 # Fields that were removed, and the one line that says what replaced them.
@@ -128,6 +164,9 @@ def driver_problems(driver: DriverConfig, control_period: float | None = None):
                 f"must be at least two control periods ({2 * control_period:g} s; a status comes once a "
                 f"period), got {driver.expire_sec!r}",
             )
+    problem = realtime_settings_problem(driver.realtime.priority, driver.realtime.core)
+    if problem:
+        yield f"realtime.{problem[0]}", problem[1]
 
 
 def _channel_problems(driver: DriverConfig):
