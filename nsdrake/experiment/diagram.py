@@ -221,6 +221,9 @@ def surface_path(scenario: Scenario, station: Station):
             force=r.force,
             force_ramp_time=r.force_ramp_time,
             max_overtravel=r.max_overtravel,
+            touch_speed=r.touch_speed,
+            slow_down_distance=r.slow_down_distance,
+            stop_time=r.stop_time,
         )
     else:
         centre, reach = arm_reach(station)
@@ -236,6 +239,9 @@ def surface_path(scenario: Scenario, station: Station):
             step_time=r.step_time if r.step_time > 0 else math.inf,
             step_force=r.step_force,
             max_overtravel=r.max_overtravel,
+            touch_speed=r.touch_speed,
+            slow_down_distance=r.slow_down_distance,
+            stop_time=r.stop_time,
             centre=centre,
             reach=(1.0 - r.reach_margin) * reach,
         )

@@ -8,7 +8,11 @@ gives, at time t and for a contact time t_c (∞ before contact):
   speed v_t from rest over ``blend_time``, the speed following a smoothstep so
   that the acceleration starts and ends at zero (no torque step);
 - normal to the plate (unit normal n): the same profile at the approach speed
-  v_a, frozen where contact was detected;
+  v_a, frozen where contact was detected; or (the Panda's scenarios) a guarded
+  approach whose speed falls to a touch speed before the surface
+  (:func:`approach_profile`), and which at contact comes to rest over ``stop_time``
+  from the speed it had (:func:`stop_profile`): a real arm's torque-rate limit does
+  not allow the damping's answer to a stop at once, nor the impact of a fast touch;
 - the desired normal force f_d: 0 before contact, then a smoothstep from 0 to
   ``force`` over ``force_ramp_time``; optionally a step to ``step_force`` at
   ``step_time`` after contact (the Eq. 26 experiment).
@@ -115,6 +119,64 @@ def ramp_profile(t: float, speed: float, blend_time: float) -> tuple[float, floa
     return speed * (t - 0.5 * blend_time), speed, 0.0
 
 
+def approach_profile(
+    t: float, speed: float, blend_time: float, touch_speed: float, slow_down_distance: float
+) -> tuple[float, float, float]:
+    """(r, ṙ, r̈) of the approach toward the surface: :func:`ramp_profile` at ``speed``;
+    with ``touch_speed`` > 0 (a guarded approach), the speed then falls to ``touch_speed``,
+    following the same smoothstep over ``blend_time``, and has reached it when r =
+    ``slow_down_distance``; it stays there until contact. The fall is a second ramp, of
+    speed − touch_speed, subtracted from the first from the time t_s it starts (r(t_s) =
+    d − (speed + touch_speed) · blend_time / 2). Needs touch_speed < speed and
+    d ≥ speed · blend_time + touch_speed · blend_time / 2 (checked where the path is built)."""
+    r, rd, rdd = ramp_profile(t, speed, blend_time)
+    if touch_speed <= 0.0:
+        return r, rd, rdd
+    t_s = (slow_down_distance - 0.5 * (speed + touch_speed) * blend_time) / speed + 0.5 * blend_time
+    s, sd, sdd = ramp_profile(t - t_s, speed - touch_speed, blend_time)
+    return r - s, rd - sd, rdd - sdd
+
+
+def stop_profile(t: float, speed: float, stop_time: float) -> tuple[float, float, float]:
+    """(r, ṙ, r̈), r(0) = 0, of a reference moving at ``speed`` at t = 0 that comes to rest
+    over ``stop_time``, ṙ = speed · (1 − smoothstep(t / stop_time)): the speed minus a
+    :func:`ramp_profile` of it. It travels speed · stop_time / 2 in all; stop_time = 0: at
+    rest at once (r = ṙ = r̈ = 0)."""
+    if stop_time <= 0.0:
+        return 0.0, 0.0, 0.0
+    if t >= stop_time:
+        return 0.5 * speed * stop_time, 0.0, 0.0
+    s, sd, sdd = ramp_profile(t, speed, stop_time)
+    return speed * t - s, speed - sd, -sdd
+
+
+def touch_problems(path) -> list[tuple[str, str | None]]:
+    """The guarded approach and the stop at contact (:func:`approach_profile`,
+    :func:`stop_profile`): touch_speed below approach_speed, a slow_down_distance long
+    enough for the speed to rise and fall (and only with a touch_speed), stop_time ≥ 0."""
+    problems = [
+        ("touch_speed", non_negative_problem(path.touch_speed)),
+        ("slow_down_distance", non_negative_problem(path.slow_down_distance)),
+        ("stop_time", non_negative_problem(path.stop_time)),
+    ]
+    if any(p for _, p in problems) or non_negative_problem(path.approach_speed):
+        return problems
+    v, v_t, b, d = path.approach_speed, path.touch_speed, path.blend_time, path.slow_down_distance
+    if v_t > 0.0 and v_t >= v:
+        problems.append(("touch_speed", f"must be below approach_speed ({v:g} m/s), got {v_t:g}"))
+    elif v_t > 0.0 and d < v * b + 0.5 * v_t * b:
+        problems.append((
+            "slow_down_distance",
+            f"must be at least {v * b + 0.5 * v_t * b:.4g} m (approach_speed x blend_time + "
+            f"touch_speed x blend_time / 2: the speed rises, then falls), got {d:g}",
+        ))  # fmt: skip
+    elif v_t == 0.0 and d > 0.0:
+        problems.append(
+            ("slow_down_distance", "needs a touch_speed > 0: without one the approach never slows")
+        )
+    return problems
+
+
 @dataclass(frozen=True)
 class ContactState:
     """The reference's view of the contact, from the measured normal force alone."""
@@ -123,6 +185,7 @@ class ContactState:
     r_contact: float = math.nan  # [m] normal offset of x_d frozen at that contact
     t_lost: float = math.inf  # [s] when that contact was declared lost; ∞: not lost
     t_low: float = math.inf  # [s] since when, in contact, the force has been below the threshold
+    v_contact: float = math.nan  # [m/s] normal speed of x_d at that contact; NaN: the approach's then
 
     @property
     def in_contact(self) -> bool:
@@ -154,12 +217,15 @@ class SlideAndPress:
     step_time: float = math.inf  # [s] after contact; ∞: no step
     step_force: float = 0.0  # [N] desired force after the step
     max_overtravel: float = 0.02  # [m] approach beyond a lost contact's surface, at most
+    touch_speed: float = 0.0  # [m/s] speed the approach slows to before the surface; 0: none
+    slow_down_distance: float = 0.0  # [m] approach travel at which it has slowed to touch_speed
+    stop_time: float = 0.0  # [s] the normal reference's stop at contact; 0: at once
     centre: np.ndarray | None = None  # (m,) centre of the reachable disc; None: no limit
     reach: float = math.inf  # [m] its radius
 
     def __post_init__(self):
         """Every field checked (:class:`TaskReferenceError` naming the first wrong one)."""
-        problems = _path_problems(self)
+        problems = _path_problems(self) + touch_problems(self)
         m = np.size(self.x0)
         problems += [("tangent_speed", finite_problem(self.tangent_speed))]
         step = None if self.step_time == math.inf else positive_problem(self.step_time)
@@ -198,19 +264,31 @@ class SlideAndPress:
         xddot_d = sdd * self.tangent + rdd * self.normal
         return x_d, xdot_d, xddot_d, f_d
 
+    def _approach(self, t: float) -> tuple[float, float, float]:
+        return approach_profile(
+            t, self.approach_speed, self.blend_time, self.touch_speed, self.slow_down_distance
+        )
+
     def _normal(self, t: float, state: ContactState) -> tuple[float, float, float]:
-        """(r, ṙ, r̈): the normal offset of x_d from x0."""
+        """(r, ṙ, r̈): the normal offset of x_d from x0. Before contact the approach; from
+        contact on, the reference comes to rest over ``stop_time`` from where it was and
+        the speed it had (:func:`stop_profile`; stop_time 0: it stops where contact was
+        detected); after a loss, it approaches again (at ``touch_speed`` if set), at most
+        ``max_overtravel`` beyond where the contact was, then holds."""
         if t < state.t_contact:
-            return ramp_profile(t, self.approach_speed, self.blend_time)
-        r_contact = state.r_contact
-        if math.isnan(r_contact):  # the first contact, given by its time alone
-            r_contact = ramp_profile(state.t_contact, self.approach_speed, self.blend_time)[0]
+            return self._approach(t)
+        r_contact, v_contact = state.r_contact, state.v_contact
+        if math.isnan(r_contact) or math.isnan(v_contact):  # the approach's, at the contact time
+            r_approach, v_contact = self._approach(state.t_contact)[:2]
+            r_contact = r_approach if math.isnan(r_contact) else r_contact
+        r, rd, rdd = stop_profile(min(t, state.t_lost) - state.t_contact, v_contact, self.stop_time)
         if t < state.t_lost:
-            return r_contact, 0.0, 0.0
-        r, rd, rdd = ramp_profile(t - state.t_lost, self.approach_speed, self.blend_time)
-        if r >= self.max_overtravel:
+            return r_contact + r, rd, rdd
+        again = self.touch_speed if self.touch_speed > 0.0 else self.approach_speed
+        dr, rd, rdd = ramp_profile(t - state.t_lost, again, self.blend_time)
+        if r + dr >= self.max_overtravel:
             return r_contact + self.max_overtravel, 0.0, 0.0
-        return r_contact + r, rd, rdd
+        return r_contact + r + dr, rd, rdd
 
     def _within_reach(self, offset, direction, u, ud, udd) -> tuple[float, float, float]:
         """(u, u̇, ü) of the motion x0 + offset + u·direction, stopped (u̇ = ü = 0) where it
@@ -243,20 +321,28 @@ class SlideAndPress:
 
 
 def update_contact(
-    state: ContactState, t: float, f_n: float, threshold: float, loss_time: float, r_now: float
+    state: ContactState,
+    t: float,
+    f_n: float,
+    threshold: float,
+    loss_time: float,
+    r_now: float,
+    v_now: float = math.nan,
 ) -> ContactState:
     """The contact state after a measured normal force f_n at time t: contact begins
-    when f_n reaches ``threshold`` (the normal reference frozen at its current offset
-    ``r_now``), and is lost once f_n has stayed below it for ``loss_time``."""
+    when f_n reaches ``threshold`` (the normal reference's offset ``r_now`` and speed
+    ``v_now`` kept: it stops from there), and is lost once f_n has stayed below it for
+    ``loss_time``."""
     if state.in_contact:
+        t_c, r_c, v_c = state.t_contact, state.r_contact, state.v_contact
         if f_n >= threshold:
-            return ContactState(state.t_contact, state.r_contact, math.inf, math.inf)
+            return ContactState(t_c, r_c, math.inf, math.inf, v_c)
         t_low = min(state.t_low, t)
         if t - t_low + 1e-9 >= loss_time:  # 1 ns of slack for the rounding of sample times
-            return ContactState(state.t_contact, state.r_contact, t, math.inf)
-        return ContactState(state.t_contact, state.r_contact, math.inf, t_low)
+            return ContactState(t_c, r_c, t, math.inf, v_c)
+        return ContactState(t_c, r_c, math.inf, t_low, v_c)
     if f_n >= threshold:
-        return ContactState(t, r_now, math.inf, math.inf)
+        return ContactState(t, r_now, math.inf, math.inf, v_now)
     return state
 
 
@@ -304,6 +390,9 @@ class CircleOnSurface:
     force: float  # [N]
     force_ramp_time: float  # [s]
     max_overtravel: float = 0.02  # [m] approach beyond a lost contact's surface, at most
+    touch_speed: float = 0.0  # [m/s] as SlideAndPress
+    slow_down_distance: float = 0.0  # [m] as SlideAndPress
+    stop_time: float = 0.0  # [s] as SlideAndPress
 
     def __post_init__(self):
         """Every field checked (:class:`TaskReferenceError` naming the first wrong one)."""
@@ -311,7 +400,7 @@ class CircleOnSurface:
             ("x0", vector_problem(self.x0, 3, "[x, y, z], the tool position on the task axes x, y, z"))
         ]
         if problems[0][1] is None:
-            problems = _path_problems(self)
+            problems = _path_problems(self) + touch_problems(self)
         problems += [
             ("radius", positive_problem(self.radius)),
             ("laps", positive_problem(self.laps)),
@@ -347,6 +436,9 @@ class CircleOnSurface:
             force=self.force,
             force_ramp_time=self.force_ramp_time,
             max_overtravel=self.max_overtravel,
+            touch_speed=self.touch_speed,
+            slow_down_distance=self.slow_down_distance,
+            stop_time=self.stop_time,
         )
 
     @cached_property
@@ -464,7 +556,7 @@ class PlainSurfaceReference:
 
     def reset(self) -> None:
         self.state, self.first = ContactState(), math.inf
-        self._t_previous, self._r_previous = None, 0.0
+        self._t_previous, self._r_previous, self._v_previous = None, 0.0, 0.0
 
     def tick(self, t: float, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """(x_d, ẋ_d, ẍ_d, f_d) at ``t`` [s] after the contact update with ``wrench`` [M; f]
@@ -482,11 +574,18 @@ class PlainSurfaceReference:
         if self._t_previous is not None:
             f_n = float(self.path.normal @ wrench[3:][self._rows])
             new = update_contact(
-                self.state, self._t_previous, f_n, self._threshold, self._loss_time, self._r_previous
+                self.state,
+                self._t_previous,
+                f_n,
+                self._threshold,
+                self._loss_time,
+                self._r_previous,
+                self._v_previous,
             )
             self.state, self.first = new, min(self.first, new.t_contact)
         out = self.path.at(t, state=self.state, t_first=self.first)
         self._t_previous, self._r_previous = t, float(out[0] @ self.path.normal) - self._offset0
+        self._v_previous = float(out[1] @ self.path.normal)
         return out
 
     @property

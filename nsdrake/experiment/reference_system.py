@@ -68,9 +68,10 @@ class SurfaceReferenceSystem(LeafSystem):
         m = reference.x0.shape[0]
         self._m = m
         self._wrench = self.DeclareVectorInputPort("measured_wrench", 6)
-        # [t_contact, r_contact, t_lost, t_low] of ContactState, then the first contact's time
+        # [t_contact, r_contact, t_lost, t_low, v_contact] of ContactState, then the first
+        # contact's time
         self._state = self.DeclareDiscreteState(
-            BasicVector([math.inf, math.nan, math.inf, math.inf, math.inf])
+            BasicVector([math.inf, math.nan, math.inf, math.inf, math.nan, math.inf])
         )
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self._reference = self.DeclareVectorOutputPort(
@@ -86,8 +87,8 @@ class SurfaceReferenceSystem(LeafSystem):
 
     def _contact(self, context) -> tuple[ContactState, float]:
         """The contact state and the first contact's time."""
-        t_contact, r_contact, t_lost, t_low, first = context.get_discrete_state(self._state).value()
-        return ContactState(t_contact, r_contact, t_lost, t_low), first
+        *fields, first = context.get_discrete_state(self._state).value()
+        return ContactState(*fields), first
 
     def _measured_wrench(self, context) -> np.ndarray:
         """The measured wrench, refused in one line naming the reference and the port when
@@ -114,13 +115,15 @@ class SurfaceReferenceSystem(LeafSystem):
     def _update(self, context, discrete_state):
         state, first = self._contact(context)
         f_n = float(self._ref.normal @ self._measured_wrench(context)[3:][self._rows])
-        # r, the normal offset of x_d now, from the output: computed (and cached) for this
-        # instant's torque already, so the path is not evaluated a second time.
-        x_d = self._reference.Eval(context)[: self._m]
+        # r and ṙ, the normal offset of x_d now and its speed, from the output: computed (and
+        # cached) for this instant's torque already, so the path is not evaluated a second time.
+        reference = self._reference.Eval(context)
+        x_d, xdot_d = reference[: self._m], reference[self._m : 2 * self._m]
         r_now = x_d @ self._ref.normal - self._ref.x0 @ self._ref.normal
-        new = update_contact(state, context.get_time(), f_n, self._threshold, self._loss_time, r_now)
+        v_now = float(xdot_d @ self._ref.normal)
+        new = update_contact(state, context.get_time(), f_n, self._threshold, self._loss_time, r_now, v_now)
         discrete_state.get_mutable_vector(self._state).SetFromVector(
-            [new.t_contact, new.r_contact, new.t_lost, new.t_low, min(first, new.t_contact)]
+            [new.t_contact, new.r_contact, new.t_lost, new.t_low, new.v_contact, min(first, new.t_contact)]
         )
 
 

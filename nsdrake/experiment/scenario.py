@@ -43,6 +43,7 @@ from nsdrake.control.validation import (
 )
 from nsdrake.experiment.driver_config import REMOVED_FIELDS, DriverConfig, driver_problems
 from nsdrake.experiment.push import PushConfig, push_problems
+from nsdrake.experiment.reference import touch_problems
 from nsdrake.realism.config import SHORTEST_STEP, RealismConfig, realism_problems, substeps
 from nsdrake.station.config import (
     CONTACT_APPROXIMATIONS,
@@ -90,6 +91,16 @@ class ReferenceConfig:
     approach_speed: float = 0.03
     # Time over which both speeds rise from rest (constant acceleration) [s].
     blend_time: float = 0.2
+    # A guarded approach: the speed it slows to before the surface (over blend_time, as it
+    # rose), and touches it at; 0: no slow-down, it touches at approach_speed [m/s].
+    touch_speed: float = 0.0
+    # Guarded approach: how far the approach has travelled when it has slowed to touch_speed;
+    # set it to the surface's distance less its uncertainty [m].
+    slow_down_distance: float = 0.0
+    # At contact the normal reference comes to rest over this time from the speed it had
+    # (1 - smoothstep), touch_speed x stop_time / 2 beyond where contact was detected; 0: it
+    # stops there at once (the paper's Fig. 3 task) [s].
+    stop_time: float = 0.0
     # Desired normal force once in contact, f_d [N].
     force: float = 10.0
     # Time over which f_d rises from 0 to its value after contact (smoothstep) [s].
@@ -659,7 +670,7 @@ def _reference_problems(s: Scenario) -> Iterator[tuple[str, str]]:
         ("reach_margin", fraction_problem(r.reach_margin)),
         ("step_time", finite_problem(r.step_time)),
     ]
-    for name, problem in checks:
+    for name, problem in checks + touch_problems(r):
         yield from _checked(f"reference.{name}", problem)
     if r.step_time > 0:
         yield from _checked("reference.step_force", positive_problem(r.step_force))

@@ -15,6 +15,9 @@ and whether it does, so that metrics.json and the report show pass/fail.
   every joint's closest approach to its position, speed and torque limits.
 - :func:`self_motion_metrics`: the elbow's swivel while the tool holds its pose and force
   (panda_self_motion, Eq. 11 on a real arm).
+- :func:`first_contact_metrics` (in both of these): the first contact's transition, which
+  the window leaves out: the force's peak while it settles and the time the tool was off
+  the surface after it; :func:`limit_metrics`: no row whose task torque was clipped.
 """
 
 from __future__ import annotations
@@ -40,6 +43,8 @@ NULL_SPACE_RELATIVE_BOUND = 0.05  # RMS ‖eⁿ‖ ≤ 5% of RMS ‖q̇_dⁿ‖ 
 NULL_SPACE_ABSOLUTE_BOUND = 1e-3  # … or 1e-3 rad/s, whichever is larger [rad/s]
 D_MIN_AFTER = 1.0  # [s] from this time on, d_min must stay above d_lim
 TORQUE_STEP_RATIO_BOUND = 2.0  # largest torque step at a switch ≤ 2 × the 99th percentile elsewhere
+CONTACT_PEAK_BOUND = FORCE_MAX_BOUND  # the force's peak while settling ≤ (1 + 10%) of f_d
+OFF_SURFACE_BOUND = 0.0  # [s] time off the surface after first contact (the tool bounced)
 CONTACT_ONSET_EXCLUDED = (-0.01, 0.3)  # [s] around first contact, excluded from the torque-step baseline
 
 
@@ -464,6 +469,39 @@ def _window(traces: Traces, contact_threshold: float) -> tuple[list[Metric], np.
     return metrics, window
 
 
+def first_contact_metrics(traces: Traces, contact_threshold: float) -> list[Metric]:
+    """The first contact's transition, from the first row whose normal force reaches the
+    threshold: ``contact_force_peak``, the largest measured normal force f_n before the
+    window starts (SETTLE_TIME later), bound (1 + 10%) of f_d; ``time_off_surface``, how
+    long f_n was ≤ 0 (the tool off the plate: it bounced) from then to the end of the run,
+    bound 0 s. Nothing when the tool never touched (:func:`_window` says so)."""
+    k0 = first_contact_index(traces, contact_threshold)
+    if k0 is None:
+        return []
+    t, f_n = traces["t"], traces["f_n"]
+    f_ref = float(np.max(traces["f_d"]))
+    settling = slice(k0, int(np.searchsorted(t, t[k0] + SETTLE_TIME)))
+    peak = float(np.max(f_n[settling]))
+    period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    off = float(np.count_nonzero(f_n[k0:] <= 0.0)) * period
+    return [
+        Metric(
+            "contact_force_peak",
+            peak,
+            "N",
+            f"<= f_d + {CONTACT_PEAK_BOUND:.0%} = {(1 + CONTACT_PEAK_BOUND) * f_ref:.4g} N",
+            peak <= (1 + CONTACT_PEAK_BOUND) * f_ref,
+        ),
+        Metric(
+            "time_off_surface",
+            off,
+            "s",
+            f"<= {OFF_SURFACE_BOUND:g} s (the tool never leaves the plate once it touched)",
+            off <= OFF_SURFACE_BOUND,
+        ),
+    ]
+
+
 def _force_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
     f_n, f_d = traces["f_n"][window], traces["f_d"][window]
     f_ref = float(np.max(f_d))
@@ -549,8 +587,15 @@ def limit_metrics(traces: Traces) -> list[Metric]:
             )
             passed = closest >= 0 if kind == "tau" else closest > 0
             metrics.append(Metric(f"{kind}_margin{i + 1}_min", closest, unit, bound, passed))
+    clipped = float(traces["saturated_joints"].max())
     metrics.append(
-        Metric("saturated_joints_max", float(traces["saturated_joints"].max()), "joints", "", None)
+        Metric(
+            "saturated_joints_max",
+            clipped,
+            "joints",
+            "0 (the task torque never clipped to the actuator limits)",
+            clipped == 0,
+        )
     )
     return metrics
 
@@ -578,7 +623,7 @@ def pose_metrics(
     metrics, window = _window(traces, contact_threshold)
     if window is None:
         return metrics
-    metrics += _force_metrics(traces, window)
+    metrics += first_contact_metrics(traces, contact_threshold) + _force_metrics(traces, window)
     rms_x = _rms(in_plane_errors(traces, normal, task_axes)[window])
     metrics.append(
         Metric("position_error_rms", rms_x, "m", f"<= {POSITION_RMS_BOUND:g} m", rms_x <= POSITION_RMS_BOUND)
@@ -624,6 +669,7 @@ def self_motion_metrics(
     metrics, window = _window(traces, contact_threshold)
     if window is None:
         return metrics
+    metrics += first_contact_metrics(traces, contact_threshold)
     swivel = traces["swivel"][window]
     travel = float(swivel.max() - swivel.min())
     metrics.append(

@@ -164,9 +164,15 @@ def test_priority_demo_every_branch_three_ways():
 
 
 @pytest.mark.slow
-def test_panda_wipe_through_contact_three_ways():
-    """panda_wipe to 1.5 s: contact at ≈ 1.27 s, where the torque-rate limit binds."""
-    named = assert_three_ways_agree(load_scenario("panda_wipe", duration=1.5))
+def test_panda_wipe_through_contact_three_ways(tmp_path):
+    """panda_wipe to 1.5 s with the unguarded first contact of before issue 35 (the approach
+    at 1.5 cm/s stopped at once when contact is detected, ≈ 1.27 s), where the torque-rate
+    limit binds (the shipped guarded contact never binds it)."""
+    unguarded = tmp_path / "unguarded.yaml"
+    unguarded.write_text(
+        "reference: {approach_speed: 0.015, touch_speed: 0.0, slow_down_distance: 0.0, stop_time: 0.0}\n"
+    )
+    named = assert_three_ways_agree(load_scenario("panda_wipe", config=unguarded, duration=1.5))
     assert np.min(named["saturation"][0]) < 1.0
 
 

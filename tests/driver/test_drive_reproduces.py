@@ -5,6 +5,7 @@ simulation"), and the gravity setting in both directions."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -27,22 +28,27 @@ def with_driver(scenario, **fields):
 
 def assert_same_traces(direct, driven, rtol: float):
     """Every column of the direct run's traces, in the driven run's, to ``rtol`` of the
-    column's largest magnitude (driven traces have more columns: f_*_measured, cmd*)."""
+    largest magnitude of its vector (the columns name1…nameN of one vector share it: a
+    vector's round-off is relative to the whole vector, and a component that stays near 0,
+    as e^n on joint 4 at 3e-8 rad/s through the gentle first contact, keeps the whole one's;
+    a column alone: its own). Driven traces have more columns: f_*_measured, cmd*."""
     assert len(direct) == len(driven)
     for name in direct.names:
         a, b = direct[name], driven[name]
-        scale = max(float(np.max(np.abs(a))), 1e-12)
+        prefix = re.fullmatch(r"(.*?\D)\d+", name)
+        vector = [n for n in direct.names if prefix and re.fullmatch(re.escape(prefix[1]) + r"\d+", n)]
+        scale = max([float(np.max(np.abs(direct[n]))) for n in vector or [name]] + [1e-12])
         assert np.max(np.abs(a - b)) <= rtol * scale, (name, float(np.max(np.abs(a - b))), scale)
 
 
 def test_a_short_drive_reproduces_the_direct_simulation():
-    """Through the approach, first contact (1.265 s) and the force ramp, every column (τ,
+    """Through the approach, first contact (1.44 s) and the force ramp, every column (τ,
     the reference, the diagnostics) to 1e-9. Catches the reference's contact update run
     at the wrong instant (at t_k instead of the previous tick's t_j, as Drake's periodic
     update runs it: contact declared a period early or late), a time base off by a period,
     g removed and added with different models, a wrench about the wrong point, a command
     answering an older status."""
-    scenario = load_scenario("panda_wipe", duration=1.6)
+    scenario = load_scenario("panda_wipe", duration=1.75)
     direct, _ = run(scenario)
     driven = run_simulated(scenario, realtime_rate=0.0)
     assert driven.failure is None

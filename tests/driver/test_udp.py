@@ -113,9 +113,10 @@ def pair_script(duration: float, out: str, config: str | None = None) -> str:
 
 
 def test_a_drive_over_udp_between_two_processes(tmp_path):
-    """nsdrake drive against nsdrake sim-driver over UDP, free-running at 1 kHz for 1.5 s
-    (through first contact, 1.265 s): the whole drive ends without a fault, on the robot's
-    clock (robot_utime; it ends at the first status at or after 1.5 s of it), one trace
+    """nsdrake drive against nsdrake sim-driver over UDP, free-running at 1 kHz for 1.75 s
+    (through first contact, 1.44 s, and the force ramp): the whole drive ends without a
+    fault, on the robot's clock (robot_utime; it ends at the first status at or after 1.75 s
+    of it), one trace
     row per command, and the tool reached the table. Catches a drive that cannot run over
     UDP between processes at all (a bus that drops statuses, DrakeLcm's one-message queue
     answering stale ones), the clock read from utime. (Which status is answered, and the
@@ -124,15 +125,16 @@ def test_a_drive_over_udp_between_two_processes(tmp_path):
     sides): this test runs in the fast subset beside the suite's workers, where the
     simulated driver, a Python simulation, stalls for tens of ms."""
     require_namespace()
-    (tmp_path / "c.yaml").write_text("driver: {expire_sec: 0.1}\n")
-    result = run_in_namespace(pair_script(1.5, "out", "c.yaml"), cwd=tmp_path, timeout=600)
+    (tmp_path / "c.yaml").write_text("driver: {expire_sec: 0.1}
+")
+    result = run_in_namespace(pair_script(1.75, "out", "c.yaml"), cwd=tmp_path, timeout=600)
     err = without_notices((tmp_path / "drive.err").read_text())
     assert result.returncode == 0, result.stderr
     timing = json.loads((tmp_path / "out" / "timing.json").read_text())
     assert "failure" not in timing, (timing.get("failure"), err)
-    # the robot's clock, to the period: the drive ends at the first status at or after 1.5 s
+    # the robot's clock, to the period: the drive ends at the first status at or after 1.75 s
     # (a tick that skipped periods at the end may land a few periods past it)
-    assert 1500 <= timing["periods"] <= 1500 + 200
+    assert 1750 <= timing["periods"] <= 1750 + 200
     assert timing["clock"] == "robot_utime"
     traces = Traces.read_csv(tmp_path / "out" / "traces.csv")
     assert len(traces) == timing["commands"]
