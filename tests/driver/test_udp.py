@@ -125,8 +125,7 @@ def test_a_drive_over_udp_between_two_processes(tmp_path):
     sides): this test runs in the fast subset beside the suite's workers, where the
     simulated driver, a Python simulation, stalls for tens of ms."""
     require_namespace()
-    (tmp_path / "c.yaml").write_text("driver: {expire_sec: 0.1}
-")
+    (tmp_path / "c.yaml").write_text("driver: {expire_sec: 0.1}\n")
     result = run_in_namespace(pair_script(1.75, "out", "c.yaml"), cwd=tmp_path, timeout=600)
     err = without_notices((tmp_path / "drive.err").read_text())
     assert result.returncode == 0, result.stderr
