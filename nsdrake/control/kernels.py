@@ -4,7 +4,16 @@ The controller's arithmetic runs in numba kernels (``@njit(cache=True)``). numba
 a kernel on its first call and keeps the machine code in ``__pycache__`` beside the
 source, so the first run after an install compiles and later runs load.
 
-Two things numba leaves to its user:
+Three things numba leaves to its user:
+
+- **Once for every configuration.** numba compiles a kernel anew for each new mix of
+  argument types, and a kernel that a run does not call is not compiled: a kernel
+  specialised per configuration, or one that only some scenarios reach, compiles again in
+  a later run. So the controller's stages take the configuration as values, never as
+  types (:func:`nsdrake.control.stages.run_stages`), and :func:`compile_kernels`, called
+  where a controller is built, compiles every kernel nsdrake calls from Python with the
+  types of its call sites, in one go: one compile per install covers a pose or a position
+  task, a sweep, joint limits, obstacles and any joint count (issue 36).
 
 - **A notice.** Compiling takes tens of seconds, during which a run prints nothing.
   :func:`announce_compiling` listens to numba's compile events and prints one line, once
