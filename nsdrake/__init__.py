@@ -14,6 +14,7 @@ from nsdrake.control import (
     ControllerStep,
     NullSpaceImpedanceController,
     Obstacle,
+    Payload,
 )
 from nsdrake.experiment.reference import CircleOnSurface, SlideAndPress, TaskReferenceError
 from nsdrake.experiment.reference_system import SurfaceReference
@@ -37,6 +38,7 @@ __all__ = [
     "NullSpaceImpedanceController",
     "ForceSensor",
     "Obstacle",
+    "Payload",
     "SlideAndPress",
     "SurfaceReference",
     "TaskReferenceError",

@@ -8,7 +8,9 @@
                        [--max-runs N]
     nsdrake drive SCENARIO (--lcm URL | --simulated-driver) [--config FILE.yaml] [--out DIR]
                            [--duration SECONDS] [--overwrite] [--realtime-rate RATE]
+                           [--realtime [--realtime-priority N] [--realtime-core N]]
     nsdrake sim-driver SCENARIO --lcm URL [--config FILE.yaml] [--duration SECONDS]
+                                [--realtime [--realtime-priority N] [--realtime-core N]]
     nsdrake list
 
 Every input problem ends with one line on stderr, "nsdrake: error: …", and exit
@@ -149,8 +151,9 @@ def _add_drive_parsers(sub) -> None:
         type=_rate,
         default=1.0,
         help="with --simulated-driver: the driver's pace against the wall clock "
-        "(1: real time; 0: as fast as possible)",
+        "(1: real time; 0: as fast as possible; at least a control period a second)",
     )
+    _add_realtime_options(drive, "the loop thread", " (overrides driver.realtime)")
     sim = sub.add_parser("sim-driver", help="run the simulated driver alone on an LCM bus, at real time")
     sim.add_argument("scenario", help="a shipped scenario of a 7-joint Panda (panda_wipe)")
     sim.add_argument("--lcm", metavar="URL", required=True, help="the LCM URL the controller talks on")
@@ -159,9 +162,8 @@ def _add_drive_parsers(sub) -> None:
     sim.add_argument(
         "--expire-sec",
         type=_positive("--expire-sec"),
-        default=0.05,
         help="a command older than this [s] is dropped and the robot damps (drake-franka-driver's "
-        "--expire_sec; default 0.05)",
+        "--expire_sec; default: the scenario's driver.expire_sec, 0.05 as shipped)",
     )
     sim.add_argument(
         "--low-pass-freq",
@@ -172,6 +174,28 @@ def _add_drive_parsers(sub) -> None:
     )
     sim.add_argument(
         "--no-rate-limit", action="store_true", help="turn libfranka's torque rate limiter (1000 N m/s) off"
+    )
+    _add_realtime_options(sim, "the driver's thread", "")
+
+
+def _add_realtime_options(parser, thread: str, overrides: str) -> None:
+    parser.add_argument(
+        "--realtime",
+        action="store_true",
+        help=f"run {thread} in real time: SCHED_FIFO, memory locked, the collector off "
+        f"(root or CAP_SYS_NICE and CAP_IPC_LOCK){overrides}",
+    )
+    parser.add_argument(
+        "--realtime-priority",
+        type=int,
+        metavar="N",
+        help=f"with --realtime: the SCHED_FIFO priority, 1-99 (default 80){overrides}",
+    )
+    parser.add_argument(
+        "--realtime-core",
+        type=int,
+        metavar="N",
+        help=f"with --realtime: the core {thread} is pinned to{overrides}",
     )
 
 
@@ -334,8 +358,7 @@ def _bus(url: str):
 
 
 def _drive(args) -> int:
-    from nsdrake.driver.run import prepare, write_drive_folder
-    from nsdrake.driver.timing import timing_line
+    from nsdrake.driver.realtime import realtime_process
 
     if args.lcm is not None and not args.lcm.strip():
         raise ScenarioError("--lcm: the URL is empty (an unset variable?); give the robot's LCM URL")
@@ -344,6 +367,16 @@ def _drive(args) -> int:
             "--realtime-rate: paces the simulated driver only; the robot's driver keeps its own time"
         )
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    realtime = _realtime(args, scenario.driver.realtime)
+    with realtime_process(realtime):  # before the bus (nsdrake/driver/realtime.py)
+        return _drive_locked(args, scenario, realtime)
+
+
+def _drive_locked(args, scenario, realtime) -> int:
+    from nsdrake.driver.run import prepare, write_drive_folder
+    from nsdrake.driver.stop import ctrl_c_requests
+    from nsdrake.driver.timing import timing_line
+
     lcm = _bus(args.lcm) if args.lcm else None
     # the simulated robot adds g itself, or (driver.robot_adds_gravity false) its driver removes it first
     drive = prepare(
@@ -351,12 +384,13 @@ def _drive(args) -> int:
     )  # every input error before the folder
     with _claimed(args.out, f"drive-{args.scenario}", args.overwrite) as out:
         where = "the simulated driver over memq://" if lcm is None else f"the driver at {args.lcm}"
-        print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
-        progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
-        try:
-            run = drive.run(progress=progress)
-        finally:
-            progress.end_line()
+        with ctrl_c_requests() as stop:  # from here on Ctrl-C stops the drive, which keeps its folder
+            print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
+            progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
+            try:
+                run = drive.run(progress=progress, stop=stop, realtime=realtime)
+            finally:
+                progress.end_line()
         result = write_drive_folder(run, out)
     if run.interrupted:
         print(f"nsdrake: {timing_line(run.timing)}")
@@ -379,15 +413,23 @@ def _drive(args) -> int:
 
 def _sim_driver(args) -> int:
     from nsdrake.driver.controller_side import check_drive_scenario
-    from nsdrake.driver.serve import SimulatedDriverStopError, serve_simulated_driver
-    from nsdrake.driver.stop import ctrl_c_requests
+    from nsdrake.driver.realtime import realtime_process
 
     scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
+    realtime = _realtime(args, None)  # the flags only: the scenario's driver.realtime is the controller's
     if args.lcm.startswith("memq://"):
         raise ScenarioError(
             "--lcm: memq:// is a bus inside one process; another process cannot reach the simulated "
             "driver there (nsdrake drive --simulated-driver runs both sides in one process)"
         )
+    with realtime_process(realtime):  # before the bus (nsdrake/driver/realtime.py)
+        return _serve(args, scenario, realtime)
+
+
+def _serve(args, scenario, realtime) -> int:
+    from nsdrake.driver.serve import SimulatedDriverStopError, serve_simulated_driver
+    from nsdrake.driver.stop import ctrl_c_requests
+
     lcm = _lcm(args.lcm)
     print(f"nsdrake: simulated driver for {args.scenario} on {args.lcm}; serving (Ctrl-C ends)", flush=True)
     progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
@@ -401,6 +443,7 @@ def _sim_driver(args) -> int:
                 rate_limit=not args.no_rate_limit,
                 progress=progress,
                 stop=stop,
+                realtime=realtime,
             )
         except SimulatedDriverStopError as e:
             progress.end_line()
@@ -413,6 +456,24 @@ def _sim_driver(args) -> int:
         print("nsdrake: simulated driver interrupted (Ctrl-C)", file=sys.stderr)
         return INTERRUPTED
     return 0
+
+
+def _realtime(args, config):
+    """The real-time settings of ``--realtime`` and ``config`` (the scenario's
+    ``driver.realtime``; None for sim-driver), checked against what the OS allows: one
+    line before anything is simulated or sent (nsdrake/driver/realtime.py)."""
+    from nsdrake.driver.realtime import RealtimeError, realtime_problem, realtime_settings
+
+    try:
+        settings = realtime_settings(
+            config, flag=args.realtime, priority=args.realtime_priority, core=args.realtime_core
+        )
+    except RealtimeError as e:
+        raise ScenarioError(str(e)) from None
+    problem = settings and realtime_problem(settings)
+    if problem:
+        raise ScenarioError(problem)
+    return settings
 
 
 INTERRUPTED = ctrl_c.INTERRUPTED

@@ -15,8 +15,10 @@ line per family: ``unchanged``, or ``changed`` with
 the variants whose rows differ (then copy the rows into the page, and check its prose).
 
 A family run is CPU-heavy (minutes per family): prefix ``nice`` on a shared machine.
-Exit status: 0 if every command succeeded (changed or not), 1 if one failed, 2 for a
-family without a results folder.
+``--runs`` relative is taken from the folder the script is run in (not the checkout's);
+nothing is written outside RUNS and docs/results. The last line says how many families
+were regenerated and the exit status, which agree: 0 if every command succeeded (changed
+or not), 1 if one failed (its line says why), 2 for a family without a results folder.
 """
 
 from __future__ import annotations
@@ -67,41 +69,70 @@ def regenerate(family: str, runs: Path) -> tuple[str, bool]:
         [sys.executable, *args, "--out", str(out), *(["--overwrite"] if args[0] == "-m" else [])], cwd=ROOT
     )
     new = out / "table.md"
-    if done.returncode != 0 or not new.exists():
+    if done.returncode != 0:
         return f"{family}: FAILED (exit {done.returncode}); the committed table is left as it was", False
+    if not new.exists():
+        why = f"the command exited 0 but wrote no {new}"
+        return f"{family}: FAILED ({why}); the committed table is left as it was", False
     committed = RESULTS / family / "table.md"
     old_text = committed.read_text() if committed.exists() else ""
     new_text = new.read_text()
     committed.write_text(new_text)
+    nested = _copy_nested_tables(family, out)
     for image in (RESULTS / family).glob("*.png"):  # the figures a page shows, refreshed with it
         if (out / image.name).exists():
             image.write_bytes((out / image.name).read_bytes())
+    also = f"; also wrote {', '.join(nested)} (copy their rows into the page)" if nested else ""
     if new_text == old_text:
-        return f"{family}: unchanged", True
+        return f"{family}: unchanged{also}", True
     old, now = table_rows(old_text), table_rows(new_text)
     differ = [name for name in now if old.get(name) != now[name]] + [n for n in old if n not in now]
     what = "; rows: " + ", ".join(differ) if differ else " (header or description only)"
-    return f"{family}: changed{what}", True
+    return f"{family}: changed{what}{also}", True
+
+
+def _copy_nested_tables(family: str, out: Path) -> list[str]:
+    """The further tables one command wrote beside its own (``out/NAME/table.md``, e.g.
+    bench_drive.py's filter/ and soak/), copied to docs/results/FAMILY/NAME/table.md; their
+    paths."""
+    copied = []
+    for table in sorted(out.glob("*/table.md")):
+        target = RESULTS / family / table.parent.name / "table.md"
+        target.parent.mkdir(exist_ok=True)
+        target.write_text(table.read_text())
+        copied.append(target.relative_to(ROOT).as_posix())
+    return copied
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--family", required=True, help="a family with a docs/results folder, or all")
     parser.add_argument(
-        "--runs", type=Path, default=ROOT / "runs" / "results", help="where the runs are kept"
+        "--runs",
+        type=Path,
+        default=ROOT / "runs" / "results",
+        help="where the runs are kept (a relative path is from the folder the script is run in)",
     )
     args = parser.parse_args()
+    runs = args.runs.expanduser().resolve()  # from where the script is run, not the checkout it runs in
     known = result_families()
     if args.family != "all" and args.family not in known:
         print(
-            f"--family: no docs/results/{args.family}/command; the families with results: {', '.join(known)}"
+            f"--family: no docs/results/{args.family}/command; the families with results: "
+            f"{', '.join(known)}; exit 2"
         )
         return 2
     lines, ok = [], True
     for family in known if args.family == "all" else [args.family]:
-        line, good = regenerate(family, args.runs)
+        line, good = regenerate(family, runs)
         lines.append(line)
         ok &= good
+    failed = sum(1 for line in lines if ": FAILED" in line)
+    lines.append(
+        f"{len(lines) - failed} of {len(lines)} regenerated; exit 0"
+        if ok
+        else f"{failed} of {len(lines)} FAILED; exit 1"
+    )
     print("\n".join(lines))
     return 0 if ok else 1
 

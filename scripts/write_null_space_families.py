@@ -30,7 +30,8 @@ NAMES = {
 }
 PANDA_OMEGA, FIG3_OMEGA = 20.0, 50.0  # [rad/s] the scenarios' K_n / 2 (40 and 100)
 BANDWIDTHS = (5.0, 10.0, 20.0, 40.0, 80.0)  # [rad/s] null_space_bandwidth's sweep
-OFF_PATH = {"panda_joint4": 0.3}  # [rad] q_d's offset off the self-motion: the elbow bent further
+# [rad] q_d's offset off the self-motion: joint 4 toward straight (from -2.4), the elbow opens
+OFF_PATH = {"panda_joint4": 0.3}
 PUSH = {"body": "panda_link4", "force": [0.0, 20.0, 0.0], "start_time": 3.5, "duration": 0.05}
 NO_RATE_LIMIT = {
     f"panda_joint{k}": 1e9 for k in range(1, 8)
@@ -128,7 +129,8 @@ def main() -> None:
         f"  {FIG3_OMEGA:g} on fig3),\n"
         "  about critically damped and stable at the control period (damping_ratio and pole_radius_T\n"
         "  per row). Tasks: panda_wipe, q_d moved along the self-motion (panda_self_motion) and off it\n"
-        "  (panda_off_path: the elbow 0.3 rad further bent), fig3, and a 20 N, 50 ms push on the\n"
+        "  (panda_off_path: joint 4 0.3 rad toward straight, the elbow opened), fig3, and a 20 N,\n"
+        "  50 ms push on the\n"
         "  Panda's elbow with and without the 1000 N m/s torque-rate limit.\n"
         "scenario: panda_wipe\nmeasure: null_space_laws\nvariants:\n"
     ]

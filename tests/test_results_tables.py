@@ -64,7 +64,7 @@ def differences(readme: str, root: Path) -> list[str]:
                 min(len(copy), len(expected)),
             )
             problems.append(f"{path}: the page's copy differs from line {first + 1} of its table")
-    for file in sorted((root / "docs" / "results").glob("*/table.md")):
+    for file in sorted((root / "docs" / "results").glob("**/table.md")):  # drive/filter/ too
         path = file.relative_to(root).as_posix()
         if path not in copies:
             problems.append(f"{path}: not copied into any page (no marker)")
@@ -120,3 +120,86 @@ def test_the_regenerate_script_refuses_an_unknown_family():
     )
     assert done.returncode == 2
     assert done.stdout.startswith("--family: no docs/results/no_such_family/command")
+
+
+def test_the_regenerate_script_writes_a_relative_runs_folder_where_it_is_run(tmp_path, monkeypatch):
+    """``--runs REL`` from another folder: the run goes to that folder's REL (it went into
+    the checkout, then the script looked for the table where it is run, printed "FAILED
+    (exit 0)" and exited 1 although the run had succeeded), the committed table is
+    refreshed, nothing is written in the checkout, and the last line agrees with the exit
+    status. A stand-in family whose command writes a table, so no simulation runs."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import regenerate_results as script
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    results = tmp_path / "docs" / "results"
+    (results / "standin").mkdir(parents=True)
+    (results / "standin" / "command").write_text("nsdrake compare standin\n")
+    (results / "standin" / "table.md").write_text("# standin\n| variant | x |\n| - | - |\n| a | 1 |\n")
+    writes = (
+        "import pathlib, sys; out = pathlib.Path(sys.argv[sys.argv.index('--out') + 1]); "
+        "out.mkdir(parents=True); "
+        "(out / 'table.md').write_text('# standin\\n| variant | x |\\n| - | - |\\n| a | 2 |\\n')"
+    )
+    monkeypatch.setattr(script, "RESULTS", results)
+    monkeypatch.setattr(script, "read_command", lambda family: ["-c", writes])
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    relative = f"runs-{tmp_path.name}"
+    monkeypatch.setattr(sys, "argv", ["regenerate_results.py", "--family", "standin", "--runs", relative])
+    lines = []
+    monkeypatch.setattr("builtins.print", lambda text="": lines.extend(str(text).splitlines()))
+    try:
+        code = script.main()
+        assert not (ROOT / relative).exists()  # nothing in the checkout
+    finally:
+        if (ROOT / relative).exists():
+            import shutil
+
+            shutil.rmtree(ROOT / relative)
+    assert (elsewhere / relative / "standin" / "table.md").exists()
+    assert "| a | 2 |" in (results / "standin" / "table.md").read_text()
+    assert code == 0 and lines == ["standin: changed; rows: a", "1 of 1 regenerated; exit 0"], (code, lines)
+
+
+def test_the_regenerate_scripts_last_line_says_a_failure_and_its_exit_status(tmp_path, monkeypatch):
+    """A command that exits 0 without writing its table is a failure: its line says so
+    (not "FAILED (exit 0)"), the last line says exit 1, and main returns 1."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import regenerate_results as script
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    results = tmp_path / "results"
+    (results / "standin").mkdir(parents=True)
+    (results / "standin" / "command").write_text("nsdrake compare standin\n")
+    monkeypatch.setattr(script, "RESULTS", results)
+    monkeypatch.setattr(script, "read_command", lambda family: ["-c", "pass"])
+    monkeypatch.setattr(
+        sys, "argv", ["regenerate_results.py", "--family", "standin", "--runs", str(tmp_path / "runs")]
+    )
+    lines = []
+    monkeypatch.setattr("builtins.print", lambda text="": lines.extend(str(text).splitlines()))
+    assert script.main() == 1
+    assert lines[0].startswith("standin: FAILED (the command exited 0 but wrote no "), lines
+    assert lines[-1] == "1 of 1 FAILED; exit 1", lines
+
+
+def test_a_further_table_a_command_wrote_is_checked_too(tmp_path):
+    """A table in a results folder's subfolder (bench_drive.py's filter/ and soak/, which
+    docs/results/drive/command writes beside its own) must be copied into a page like any
+    other: left out, or copied with a digit changed, it is caught. Catches a check that
+    looks one folder deep only."""
+    nested = tmp_path / "docs" / "results" / "drive" / "filter" / "table.md"
+    nested.parent.mkdir(parents=True)
+    nested.write_text("# filter\n\n| low-pass | force error |\n|---|---|\n| 30 Hz | 11.101 N |\n")
+    assert differences("no table here\n", tmp_path) == [
+        "docs/results/drive/filter/table.md: not copied into any page (no marker)"
+    ]
+    page = "<!-- table: docs/results/drive/filter/table.md -->\n| low-pass | force error |\n|---|---|\n"
+    assert differences(page + "| 30 Hz | 11.101 N |\n", tmp_path) == []
+    assert differences(page + "| 30 Hz | 11.109 N |\n", tmp_path)[0].endswith(
+        "differs from line 3 of its table"
+    )

@@ -143,8 +143,13 @@ def field_docs(cls) -> list[FieldDoc]:
     return docs
 
 
+SPHINX_ROLE = re.compile(r":(?:py:)?(?:mod|func|class|data|meth|attr|obj|exc):`~?([^`]+)`")
+
+
 def inline(text: str) -> list[nodes.Node]:
-    """Plain text with ``code`` and `code` spans as literals."""
+    """Plain text with ``code`` and `code` spans as literals; a Python role of a docstring
+    (:mod:`nsdrake.x`) is shown as its target, a literal (never the raw role)."""
+    text = SPHINX_ROLE.sub(r"``\1``", text)
     parts = re.split(r"``([^`]+)``|`([^`]+)`", text)
     out = []
     for i, part in enumerate(parts):
@@ -336,8 +341,9 @@ class PortsDirective(SphinxDirective):
                         f"not built, built {sorted(built - set(documented))} not documented",
                         location=self.get_location(),
                     )
-        rows = []
+        tables = []  # one table of inputs, one of outputs: the port name alone in its column
         for kind, names in (("in", inputs), ("out", outputs)):
+            rows = []
             for name in names:
                 if name not in described[kind]:
                     logger.warning(
@@ -345,15 +351,16 @@ class PortsDirective(SphinxDirective):
                     )
                     continue
                 size, unit, text = described[kind][name]
-                rows.append(
-                    [
-                        [nodes.Text(kind + " "), nodes.literal(name, name)],
-                        [nodes.Text(size)],
-                        [nodes.Text(unit)],
-                        inline(text),
-                    ]
-                )
-        return [table(["port", "size", "unit", "meaning (the class's docstring)"], rows, [24, 10, 12, 54])]
+                meaning = inline(text)
+                if name == "mode":  # every mode column links the page of Fig. 1's tree
+                    link = nodes.reference("", "Fig. 1's decision tree", refuri="decision_tree.html")
+                    meaning += [nodes.Text(" ("), link, nodes.Text(")")]
+                rows.append([[nodes.literal(name, name)], [nodes.Text(size)], [nodes.Text(unit)], meaning])
+            title = "input port" if kind == "in" else "output port"
+            tables.append(
+                table([title, "size", "unit", "meaning (the class's docstring)"], rows, [28, 8, 10, 54])
+            )
+        return tables
 
 
 class PydrakeSystemDirective(SphinxDirective):
@@ -385,9 +392,10 @@ class ResultsDirective(SphinxDirective):
     """``.. nsdrake-results:: FAMILY``: the family's description (its file in
     nsdrake/studies/families/), the command that measures it, and its table: the
     ``table.md`` that command wrote, committed as docs/results/FAMILY/table.md. For a
-    benchmark's table (no family file) the command is docs/results/FAMILY/command. Until that
-    file is committed, the directive's content (the README's table, or nothing) is shown
-    under a note saying so."""
+    benchmark's table (no family file) the command is docs/results/FAMILY/command. The
+    directive's content (the page's copy of the table, for readers of the source) is not
+    rendered; a missing table.md is a warning (an error under ``sphinx-build -W``), never a
+    placeholder on the site."""
 
     required_arguments = 1
     has_content = True
@@ -401,6 +409,8 @@ class ResultsDirective(SphinxDirective):
         docs = Path(self.env.srcdir)
         family_file = docs.parent / "nsdrake" / "studies" / "families" / f"{family}.yaml"
         command_file = docs / "results" / family / "command"
+        if not command_file.exists():  # a further table its parent's command wrote (drive/filter)
+            command_file = command_file.parent.parent / "command"
         out = []
         if family_file.exists():  # a comparison family: its description, then its command
             spec = yaml.safe_load(family_file.read_text())
@@ -415,18 +425,114 @@ class ResultsDirective(SphinxDirective):
         if table_file.exists():
             self.env.note_dependency(str(table_file))
             text = table_file.read_text().splitlines()
+            if text and text[0].startswith("# "):  # the file's title: the page's section has one
+                text = text[1:]
+            if family_file.exists():  # the description is the family file's, shown above
+                text = text[next((k for k, line in enumerate(text) if line.startswith("|")), len(text)) :]
             self.state.nested_parse(StringList(text, source=str(table_file)), 0, container)
-        else:
-            note = nodes.note()
-            message = f"docs/results/{family}/table.md is not committed yet; " + (
-                "the table below is the README's copy." if self.content else f"run ``{command}`` for it."
+        else:  # a page asks for a table nobody committed: an error under -W, no placeholder
+            logger.warning(
+                f"docs/results/{family}/table.md does not exist: run "
+                f"'python scripts/regenerate_results.py --family {family}' and commit it",
+                location=self.get_location(),
             )
-            note += nodes.paragraph("", "", *inline(message))
-            container += note
-            if self.content:
-                self.state.nested_parse(self.content, self.content_offset, container)
         out.append(container)
         return out
+
+
+# --- a figure in the prose, from its table -------------------------------------------------
+
+FIGURE = re.compile(r"^(?P<written>.+?)\s*<(?P<target>[^<>]+)>$", re.S)
+NUMBER = re.compile(r"^(?P<number>[−-]?\d+(?:[.,]\d+)?(?:e[−-]?\d+)?)(?:\s*(?P<unit>.*?))?$")
+PREFIXES = {"": 1.0, "k": 1e3, "m": 1e-3, "µ": 1e-6, "n": 1e-9}
+FIGURE_ROLE = re.compile(r"\{nsdrake-figure\}`([^`]+)`")
+
+
+def results_table(root, name: str) -> tuple[list[str], list[list[str]]]:
+    """docs/results/NAME/table.md: (its header's cells, its rows' cells)."""
+    from pathlib import Path
+
+    path = Path(root) / "docs" / "results" / name / "table.md"
+    if not path.exists():
+        raise ValueError(f"docs/results/{name}/table.md does not exist")
+    lines = [line for line in path.read_text().splitlines() if line.startswith("|")]
+    cells = [[c.strip() for c in line.strip().strip("|").split("|")] for line in lines]
+    return cells[0], cells[2:]
+
+
+def parse_number(text: str) -> tuple[float, int, str] | None:
+    """'375 µs' → (375.0, 0 decimals, 'µs'); None for text that is not a number (and unit)."""
+    match = NUMBER.match(text.strip().replace("\u2009", "").replace("−", "-"))
+    if not match:
+        return None
+    number = match.group("number").replace(",", ".")
+    mantissa = number.lower().split("e")[0]
+    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+    return float(number), decimals, (match.group("unit") or "").strip()
+
+
+def figure_problem(root, written: str, target: str) -> str | None:
+    """Why ``written`` is not the figure ``target`` names (None when it is). The target is
+    ``RESULTS | ROW | COLUMN [| UNIT]``: the table docs/results/RESULTS/table.md, the one row
+    whose first cell is ROW (else the one whose first cell contains it), the column headed
+    COLUMN. The written figure is that
+    cell rounded to the decimals written ('99.7%' for a cell '99.70%'); a cell that is a
+    bare number needs UNIT, the cell's unit ('m'), and the written figure may carry a
+    prefix of it ('62.9 µm'; '%' for a UNIT '1'); a cell of prose must contain the written
+    text word for word."""
+    parts = [p.strip() for p in target.split("|")]
+    if len(parts) not in (3, 4):
+        return f"'{target}': not RESULTS | ROW | COLUMN [| UNIT]"
+    name, row_key, column, unit = (*parts, "")[:4]
+    try:
+        header, rows = results_table(root, name)
+    except ValueError as error:
+        return str(error)
+    if column not in header:
+        return f"docs/results/{name}/table.md has no column '{column}'"
+    found = [row for row in rows if row[0] == row_key] or [row for row in rows if row_key in row[0]]
+    if len(found) != 1:
+        return f"docs/results/{name}/table.md: {len(found)} rows contain '{row_key}' (one needed)"
+    cell = found[0][header.index(column)]
+    have, want = parse_number(cell), parse_number(written)
+    if have is None or want is None:
+        if re.search(rf"(?<![\w.]){re.escape(written)}(?![\w])", cell):
+            return None
+        return f"'{written}' is not in docs/results/{name}/table.md's '{column}' of '{row_key}': '{cell}'"
+    value, _, cell_unit = have
+    number, decimals, written_unit = want
+    if cell_unit:
+        scale = 1.0 if written_unit == cell_unit else None
+    elif unit == "1" and written_unit == "%":
+        scale = 0.01
+    else:
+        prefix = written_unit[: len(written_unit) - len(unit)] if written_unit.endswith(unit) else None
+        scale = PREFIXES.get(prefix) if unit or not written_unit else None
+    if scale is None:
+        return f"'{written}': its unit is not the cell's ('{cell}', unit '{cell_unit or unit}')"
+    if abs(value / scale - number) > 0.5 * 10.0**-decimals * (1 + 1e-9):
+        return f"'{written}' is not '{cell}' (docs/results/{name}/table.md, '{row_key}', '{column}')"
+    return None
+
+
+def figure_role(name, rawtext, text, lineno, inliner, options=None, content=None):
+    """``{nsdrake-figure}`375 µs <drive | silence bound 200 | CPU p99.9>```: the figure as
+    written, checked at build against the table it comes from (``figure_problem``); a
+    figure that differs is a warning (an error under ``sphinx-build -W``)."""
+    from pathlib import Path
+
+    env = inliner.document.settings.env
+    match = FIGURE.match(text)
+    problem = "not 'FIGURE <RESULTS | ROW | COLUMN>'" if not match else None
+    if match:
+        root = Path(env.srcdir).parent
+        problem = figure_problem(root, match.group("written"), match.group("target"))
+        name_of = match.group("target").split("|")[0].strip()
+        env.note_dependency(str(root / "docs" / "results" / name_of / "table.md"))
+    if problem:
+        logger.warning(f"nsdrake-figure: {problem}", location=(env.docname, lineno))
+    written = match.group("written") if match else text
+    return [nodes.inline(rawtext, written, classes=["nsdrake-figure"])], []
 
 
 def setup(app):
@@ -435,6 +541,7 @@ def setup(app):
     app.add_directive("nsdrake-fields", FieldsDirective)
     app.add_directive("nsdrake-fields-table", FieldsTableDirective)
     app.add_directive("nsdrake-results", ResultsDirective)
+    app.add_role("nsdrake-figure", figure_role)
     app.connect("autodoc-process-docstring", append_fields)
     return {"parallel_read_safe": True, "parallel_write_safe": True, "version": "1"}
 

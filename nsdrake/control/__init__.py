@@ -6,7 +6,8 @@ scenarios or reports. It imports nothing else of nsdrake.
   (Eqs. 14, 21, 23), ``gradient_projection`` (Eqs. 28–30), ``criteria/`` (Eqs. 31–33 and
   more), ``priority`` (Fig. 1), ``actuator_limits``, ``orientation``, ``smoothing``;
 - ``config`` (ControllerConfig) and ``model`` (ControllerModel: the controller's own model
-  of the arm and its obstacles);
+  of the arm and its obstacles), ``model_files`` (model files as vendors ship them, a tool
+  Payload) and ``pinocchio_tree`` (Pinocchio's model from the plant Drake parsed);
 - ``stages`` (the controller's tick as one ordered sequence of compiled stages), ``layout``
   and ``plan`` (its arrays and constants), ``kernels`` (the compiled code's cache);
 - ``systems/``, the LeafSystems over those stages, ``controller``
@@ -26,6 +27,7 @@ from nsdrake.control.controller import (  # noqa: E402
     without_null_space_task,
 )
 from nsdrake.control.model import ControllerModel, Obstacle  # noqa: E402
+from nsdrake.control.model_files import Payload  # noqa: E402
 from nsdrake.control.step import ControllerStep, StepResult  # noqa: E402
 from nsdrake.control.validation import ControllerInputError  # noqa: E402
 
@@ -37,6 +39,7 @@ __all__ = [
     "ControllerStep",
     "NullSpaceImpedanceController",
     "Obstacle",
+    "Payload",
     "StepResult",
     "without_null_space_task",
 ]

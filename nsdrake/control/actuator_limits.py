@@ -9,8 +9,11 @@ actuators' range. So τ₀ gives way first:
 
 for each joint's window [lo_j, hi_j] = [−τ_max, τ_max] ∩ [τ_prev − ρ_max T, τ_prev + ρ_max T]
 (:func:`torque_window`). Each joint allows an interval of s (:func:`scale_interval`),
-S is their intersection with [0, 1], an interval too. Since J H⁻¹ τ₀ = 0 (Eq. 11),
-scaling τ₀ leaves the task untouched; only the null-space velocity tracking slows down.
+S is their intersection with [0, 1], an interval too. For a τ₀ with J H⁻¹ τ₀ = 0 (Eq. 11:
+the paper's law, the dynamically consistent posture PDs) scaling τ₀ leaves the task
+untouched; only the null-space velocity tracking slows down. A τ₀ outside that null space
+(the kinematic posture PD's, projected with I − Jᵀ(Jᵀ)⁺) accelerates the task, and scaling it
+changes that disturbance too.
 
 S may hold only positive s: the rate window is centred on the previous torque, which
 already holds s τ₀, so when |τ₀_j| > ρ_max T the task torque alone lies outside joint

@@ -78,7 +78,7 @@ class NullSpaceConfig:
 
 @dataclass
 class ObstacleCriterionConfig:
-    """Obstacle avoidance, Eq. 31 (nsdrake/criteria/obstacle.py): p = −⅓ Σ max(0, d_∞ − d)³."""
+    """Obstacle avoidance, Eq. 31 (nsdrake/control/criteria/obstacle.py): p = −⅓ Σ max(0, d_∞ − d)³."""
 
     # Step gain K of Eq. 30; >= 0, a positive gain pushes the links away [rad/s per m³/(kg m²)].
     gain: float = 0.0
@@ -104,7 +104,7 @@ class ManipulabilityCriterionConfig:
 
 @dataclass
 class JointLimitsCriterionConfig:
-    """Joint-limit avoidance (nsdrake/criteria/joint_limits.py): p = −⅓ Σ max(0, ρ − margin)³,
+    """Joint-limit avoidance (nsdrake/control/criteria/joint_limits.py): p = −⅓ Σ max(0, ρ − margin)³,
     the limits read from the controller's model."""
 
     # Step gain K of Eq. 30; >= 0, a positive gain pushes the joints away from their limits
@@ -127,7 +127,7 @@ class CriteriaConfig:
 
 @dataclass
 class SelectorConfig:
-    """Fig. 1's decision tree (nsdrake/priority.py)."""
+    """Fig. 1's decision tree (nsdrake/control/priority.py)."""
 
     # A link closer than this to an obstacle puts obstacle avoidance on level 2 [m].
     d_lim: float = 0.05
@@ -208,7 +208,7 @@ class DesiredNullSpaceConfig:
 
 @dataclass
 class ActuatorLimitsConfig:
-    """Drive limits, enforced with the primary task first (nsdrake/actuator_limits.py)."""
+    """Drive limits, enforced with the primary task first (nsdrake/control/actuator_limits.py)."""
 
     # Largest |τ| per joint, keyed by joint name; missing joints take the model's actuator
     # effort limit (URDF <limit effort>), unlimited if it has none [N m].

@@ -82,7 +82,7 @@ class NullSpaceImpedanceController(Diagram):
 
     J_Tᵀ W_T is Eq. 6's Jᵀ F for the whole measured wrench moved to the tool point
     (:mod:`nsdrake.control.impedance`); q̈_dⁿ is the backward difference of q̇_dⁿ over one
-    period. With an exact model the closed loop is
+    period. With an exact model the closed loop is::
 
         (ẍ_d − ẍ) + K_v (ẋ_d − ẋ) + K_p (x_d − x) + n K_f (f_d − f_n) = 0    (Eq. 10)
         ėⁿ = −K_n eⁿ + J̄ J (J̄̇ J + J̄ J̇) q̇ − N H⁻¹ C eⁿ                      (Eq. 22)
@@ -150,7 +150,9 @@ class NullSpaceImpedanceController(Diagram):
     evaluated (it would change nothing). Every input is checked when it is used: a value
     that is not finite (or a zero ``desired_orientation``) raises
     :class:`nsdrake.control.validation.ControllerInputError` naming the port, its entry and
-    the time, before any torque is computed from it.
+    the time, before any torque is computed from it, and an input it needs that was never
+    connected nor fixed raises it naming the port (``desired_orientation``). Nothing is
+    held or assumed: every input but the optional ones is read at every evaluation.
 
     Outputs:
 

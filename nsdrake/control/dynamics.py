@@ -14,7 +14,7 @@ computes it from a Drake ``MultibodyPlant``:
   symbols, the one for which Ḣ − 2C is skew-symmetric (used by Eq. 24). Drake
   gives b(q, v) = C(q, v) v, a quadratic form in v whose polarisation is
   C(q, v) e, so column j is C e_j = (b(q, v + s e_j) − b(q, v − s e_j)) / (4 s)
-  for any s > 0 (READING_NOTES). Then Ḣ = C + Cᵀ.
+  for any s > 0 (b is quadratic in v). Then Ḣ = C + Cᵀ.
 - J is the spatial Jacobian of the tool point T in the world, restricted to the
   task axes: the rows of its translational part J_v (velocity of T) for the
   translational axes ``x``, ``y``, ``z``, then the rows of its angular part J_w

@@ -25,7 +25,7 @@ direction in which the tool pushes on the plate and f_n = nᵀF:
 
 K_p = k_p,t (I − n nᵀ) + k_p,n n nᵀ and likewise K_v: stiffness and damping
 along the plate (t) and normal to it (n). Eq. 8 is written with the signs of
-Eq. 10 (READING_NOTES: the OCR's (ẋ − ẋ_d), (x − x_d) are sign slips).
+Eq. 10 (the printed text's (ẋ − ẋ_d), (x − x_d) in Eq. 8 are sign slips of its OCR).
 
 Along the plate this is Eq. 8: the friction force μ f_n is part of F, so the
 Jᵀ F term cancels it and it leaves no position error.

@@ -4,26 +4,29 @@ A :class:`ControllerModel` owns a Drake ``MultibodyPlant`` of the arm (and, for
 obstacle avoidance, a ``SceneGraph`` holding the arm's collision geometry and the
 obstacles it should keep away from), the tool frame and the task axes. It is what
 a controller on a real robot has: a model of the arm and of its surroundings,
-read from a URDF, and nothing from the simulator.
+read from its model file (URDF, SDF or Drake model directives, with meshes and
+packages: :mod:`nsdrake.control.model_files`), and nothing from the simulator.
 
 Model terms (H, C q̇, g, C, J) come from one of two libraries:
 
 - ``"drake"``: the plant's own calls (:class:`nsdrake.control.dynamics.ArmModel`), C by
   polarisation of the bias term;
-- ``"pinocchio"``: Pinocchio (``pip install pin``) built from the same URDF, C from
+- ``"pinocchio"``: Pinocchio (``pip install pin``) built from the same plant
+  (:mod:`nsdrake.control.pinocchio_tree`), C from
   ``computeCoriolisMatrix`` (the Christoffel matrix, Ḣ = C + Cᵀ), about ten times
   faster. At construction H, g, C q̇ and the tool Jacobian of both libraries are
   compared at a few seeded random states; a mismatch is refused with a one-line
   error naming the term (:class:`ModelMismatchError`).
 
-``"auto"`` takes Pinocchio when it is installed and the model came from a URDF.
+``"auto"`` takes Pinocchio when it is installed and the model came from a model file
+or URDF text (:meth:`ControllerModel.from_file`, :meth:`ControllerModel.from_urdf`).
 """
 
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,6 +40,14 @@ from pydrake.systems.framework import DiagramBuilder
 
 from nsdrake.control.criteria.obstacle import proximity_geometries
 from nsdrake.control.dynamics import ArmModel, RobotTerms
+from nsdrake.control.model_files import (
+    Payload,
+    add_payload,
+    model_file_problem,
+    parse_model_file,
+    payload_problem,
+)
+from nsdrake.control.pinocchio_tree import pinocchio_model
 from nsdrake.control.urdf_checks import parse_urdf, urdf_problems
 from nsdrake.control.validation import (
     ControllerConfigError,
@@ -67,7 +78,8 @@ class Obstacle:
 class ControllerModel:
     """The controller's model of the arm and its surroundings (module docstring).
 
-    Build it with :meth:`from_urdf` (obstacle avoidance and Pinocchio possible) or
+    Build it with :meth:`from_file` or :meth:`from_urdf` (obstacle avoidance, Pinocchio and
+    a payload possible) or
     :meth:`from_plant` (a finalized plant of your own, Drake terms, no obstacles).
 
     Attributes:
@@ -86,7 +98,7 @@ class ControllerModel:
         task_axes: Sequence[str],
         scene_graph: SceneGraph | None = None,
         diagram=None,
-        urdf_text: str | None = None,
+        fast_terms: bool = False,
         dynamics: str = "auto",
     ):
         _check_arguments(plant, tool_frame, task_axes, dynamics)
@@ -112,8 +124,47 @@ class ControllerModel:
             arm_bodies = [plant.get_body(b).index() for b in _moving_bodies(plant) if b != tool]
             self.link_geometries = proximity_geometries(inspector, plant, arm_bodies)
             self.obstacle_geometries = proximity_geometries(inspector, plant, [world])
-        self._pinocchio = _pinocchio_dynamics(urdf_text, self.arm, dynamics)
+        self._pinocchio = _pinocchio_dynamics(fast_terms, self.arm, dynamics)
         self.dynamics = "pinocchio" if self._pinocchio else "drake"
+
+    @classmethod
+    def from_file(
+        cls,
+        path: str | Path,
+        *,
+        tool_frame: str,
+        task_axes: Sequence[str],
+        packages: Mapping[str, str | Path] | None = None,
+        gravity: Sequence[float] = (0.0, 0.0, -9.81),
+        obstacles: Sequence[Obstacle] = (),
+        payload: Payload | None = None,
+        dynamics: str = "auto",
+    ) -> ControllerModel:
+        """The arm of a model file as its vendor ships it: a URDF, an SDF or Drake model
+        directives (``.dmd.yaml``), parsed by Drake from the file, so relative mesh URIs
+        resolve from its folder and ``package://`` from ``packages`` ({name: folder}), the
+        nearest ``package.xml`` above the file and ``ROS_PACKAGE_PATH``
+        (:mod:`nsdrake.control.model_files`). The file welds the arm to the world. A
+        ``payload`` (:class:`nsdrake.control.model_files.Payload`) is welded to the tool
+        frame. Otherwise as :meth:`from_urdf`: the same fast terms (Pinocchio, built from the
+        plant Drake parsed: :mod:`nsdrake.control.pinocchio_tree`) and obstacle avoidance
+        against the model's collision geometry (an ``.obj`` mesh as its convex hull)."""
+        problem = model_file_problem(path)
+        if problem:
+            raise ControllerConfigError("model_file", problem)
+        if str(path).lower().endswith(".urdf"):
+            _urdf_text(Path(path))  # the URDF rules, before Drake reads it
+        where = f"model_file: {Path(path).name}"
+        return cls._parsed(
+            lambda plant: parse_model_file(plant, path, packages, "model_file"),
+            where,
+            tool_frame=tool_frame,
+            task_axes=task_axes,
+            gravity=gravity,
+            obstacles=obstacles,
+            payload=payload,
+            dynamics=dynamics,
+        )
 
     @classmethod
     def from_urdf(
@@ -124,29 +175,69 @@ class ControllerModel:
         task_axes: Sequence[str],
         gravity: Sequence[float] = (0.0, 0.0, -9.81),
         obstacles: Sequence[Obstacle] = (),
+        payload: Payload | None = None,
         dynamics: str = "auto",
     ) -> ControllerModel:
         """The arm of a URDF, welded to the world by the file itself, with ``obstacles``
         fixed in the world and ``gravity`` [m/s²]. ``urdf``: a ``Path``, or a ``str`` that
-        is the URDF's text (it holds a "<" or a line break) or else a path. The URDF is
+        is the URDF's text (it holds a "<" or a line break) or else a path (a ``.urdf`` path
+        goes to :meth:`from_file`: meshes and packages resolve from the file; another name is
+        read and parsed as text). The URDF is
         checked before Drake or Pinocchio reads it (:mod:`nsdrake.control.urdf_checks`);
         every problem is a one-line :class:`ControllerConfigError` naming the argument."""
         text, where = _urdf_text(urdf)
+        if where != "controller_model" and str(urdf).lower().endswith(".urdf"):  # Drake parses the file
+            return cls.from_file(
+                urdf,
+                tool_frame=tool_frame,
+                task_axes=task_axes,
+                gravity=gravity,
+                obstacles=obstacles,
+                payload=payload,
+                dynamics=dynamics,
+            )
+
+        def add(plant):
+            try:
+                Parser(plant).AddModelsFromString(text, "urdf")
+            except RuntimeError as e:
+                raise ControllerConfigError(where, f"Drake cannot parse it: {_cut(e)}") from None
+
+        return cls._parsed(
+            add,
+            where,
+            tool_frame=tool_frame,
+            task_axes=task_axes,
+            gravity=gravity,
+            obstacles=obstacles,
+            payload=payload,
+            dynamics=dynamics,
+        )
+
+    @classmethod
+    def _parsed(cls, add_models, where, *, tool_frame, task_axes, gravity, obstacles, payload, dynamics):
+        """The model of what ``add_models(plant)`` parses, with obstacles, payload and gravity."""
         problem = gravity_problem(gravity)
         if problem:
             raise ControllerConfigError("gravity", problem)
         check_obstacles(obstacles)
+        problem = None if payload is None else payload_problem(payload)
+        if problem:
+            raise ControllerConfigError("payload", problem)
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
         plant.set_name("controller_model")
-        try:
-            Parser(plant).AddModelsFromString(text, "urdf")
-        except RuntimeError as e:
-            raise ControllerConfigError(where, f"Drake cannot parse it: {_cut(e)}") from None
+        add_models(plant)
         for ob in obstacles:
             plant.RegisterCollisionGeometry(
                 plant.world_body(), ob.X_WO, ob.shape, ob.name, ProximityProperties()
             )
+        if payload is not None:
+            if not isinstance(tool_frame, str) or not plant.HasFrameNamed(tool_frame):
+                raise ControllerConfigError(
+                    "tool_frame", f"the controller model has no frame named {show(tool_frame)}"
+                )
+            add_payload(plant, plant.GetFrameByName(tool_frame), payload)
         plant.mutable_gravity_field().set_gravity_vector(np.asarray(gravity, dtype=float))
         try:
             plant.Finalize()
@@ -159,7 +250,7 @@ class ControllerModel:
             task_axes=task_axes,
             scene_graph=scene_graph,
             diagram=diagram,
-            urdf_text=text,
+            fast_terms=True,
             dynamics=dynamics,
         )
 
@@ -296,24 +387,27 @@ _SHAPE_SIZES = {
 }
 
 
-def _pinocchio_dynamics(urdf_text: str | None, arm: ArmModel, dynamics: str):
-    """Pinocchio's terms, checked against Drake's, when asked for (or, for "auto", when the
-    URDF is at hand and Pinocchio installed and able to read it); else None (Drake's)."""
-    if dynamics == "pinocchio" and urdf_text is None:
+def _pinocchio_dynamics(fast_terms: bool, arm: ArmModel, dynamics: str):
+    """Pinocchio's terms, built from the model's plant (:mod:`nsdrake.control.pinocchio_tree`)
+    and checked against Drake's, when asked for (or, for "auto", when the model came from a
+    file or URDF text and Pinocchio is installed and can represent the arm); else None."""
+    if dynamics == "pinocchio" and not fast_terms:
         raise ControllerConfigError(
-            "dynamics", "Pinocchio dynamics need the model's URDF: build it with ControllerModel.from_urdf"
+            "dynamics",
+            "Pinocchio dynamics need the model's file: build it with ControllerModel.from_file or from_urdf",
         )
-    if dynamics == "drake" or urdf_text is None or (dynamics == "auto" and not _has_pinocchio()):
+    if dynamics == "drake" or not fast_terms or (dynamics == "auto" and not _has_pinocchio()):
         return None
     try:
-        pinocchio = PinocchioDynamics(urdf_text, arm, arm.plant.gravity_field().gravity_vector())
+        model = pinocchio_model(arm.plant, frames=[arm.tool_frame])
+        pinocchio = PinocchioDynamics(model, arm, arm.plant.gravity_field().gravity_vector())
     except ControllerConfigError:
         raise
-    except ValueError as e:  # Pinocchio's URDF reader is stricter than Drake's (e.g. <limit>)
+    except ValueError as e:  # a joint Pinocchio's model here does not take
         if dynamics == "auto":
             return None  # the same terms from Drake
         raise ControllerConfigError(
-            "controller_model", f"Pinocchio cannot read the URDF: {_cut(e)}"
+            "controller_model", f"Pinocchio cannot model the arm: {_cut(e)}"
         ) from None
     check_agreement(pinocchio, arm)
     return pinocchio
@@ -393,17 +487,18 @@ def _stacked_placements(placements):
 class PinocchioDynamics:
     """Model terms from Pinocchio, in the joint order of the Drake ``arm``."""
 
-    def __init__(self, urdf_text: str, arm: ArmModel, gravity: np.ndarray):
+    def __init__(self, source, arm: ArmModel, gravity: np.ndarray):
+        """``source``: a ``pinocchio.Model`` of the arm, or the arm's URDF text."""
         import pinocchio as pin
 
         self._pin = pin
-        self._model = pin.buildModelFromXML(pinocchio_urdf(urdf_text))
+        self._model = pin.buildModelFromXML(pinocchio_urdf(source)) if isinstance(source, str) else source
         self._model.gravity.linear = np.asarray(gravity, dtype=float)
         self._data = self._model.createData()
         name = arm.tool_frame.name()
         if not self._model.existFrame(name):
             raise ModelMismatchError(
-                "controller_model", f"Pinocchio's model of the URDF has no frame '{name}'"
+                "controller_model", f"Pinocchio's model of the arm has no frame '{name}'"
             )
         self._tool = self._model.getFrameId(name)
         if self._model.nq != arm.n or self._model.nv != arm.n:
@@ -540,5 +635,5 @@ def check_agreement(pinocchio: PinocchioDynamics, arm: ArmModel, states: int = 3
                 raise ModelMismatchError(
                     "controller_model",
                     f"the controller model's {name} from Pinocchio differs from Drake's by {error:.3g} "
-                    f"at q = {np.round(q, 3).tolist()}: the two libraries read the URDF differently",
+                    f"at q = {np.round(q, 3).tolist()}: the two libraries model the arm differently",
                 )

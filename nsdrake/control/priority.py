@@ -1,6 +1,6 @@
 """Switching task priorities (Section 3.5, Fig. 1) and multi-level task priority.
 
-Fig. 1's decision tree (its drawing is missing from the text; READING_NOTES):
+Fig. 1's decision tree (its drawing is missing from the text; docs/decision_tree.md describes it):
 level 1 is always the primary task (position and force). Then
 
 - a link closer to an obstacle than d_lim      → obstacle avoidance on level 2 (mode 1);

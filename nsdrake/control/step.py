@@ -20,15 +20,18 @@ In steady state a call allocates no Python object that outlives it (the result's
 arrays are views into one buffer, rewritten by the next call), so Python's garbage
 collector never has work to do on its account.
 
-Every call checks its arguments before anything is computed: their sizes (the copy into
-the step's input buffer, with the lengths compared), then one compiled pass over all of
-them for a value that is not finite (:func:`nsdrake.control.validation.inputs_problem`);
+Every call checks its arguments before anything is computed: real numbers
+(:func:`nsdrake.control.validation.is_real_array`), their sizes (the copy into the
+step's input buffer, with the lengths compared), ``t`` one period on (or whole periods:
+:meth:`ControllerStep.step`), then one compiled pass over all of them for a value that
+is not finite (:func:`nsdrake.control.validation.inputs_problem`);
 a wrong one raises :class:`nsdrake.control.validation.ControllerInputError` naming the
 argument (and the joint or entry), and the step's state is left as it was.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from pathlib import Path
@@ -55,10 +58,16 @@ from nsdrake.control.validation import (
     finite_problem,
     inputs_problem,
     is_number,
+    is_real_array,
     show,
     validate_controller,
     vector_size_problem,
 )
+
+# [-] how far from a whole number of periods the advance of t may be, in periods: float
+# rounding of k T or of t += T (1e-13 s after 1000 s at 1 kHz), never a late tick of a loop
+# that reads a wall clock (give such a loop's t as k T, its tick count).
+TIME_SLACK = 1e-3
 
 
 class StepResult:
@@ -143,6 +152,8 @@ class ControllerStep:
         self._terms = plan.allocate_terms()
         self._m_t = m_t
         self._n = n
+        self._period = config.period
+        self._slack = TIME_SLACK * config.period  # [s] rounding of t, far below a period
         joints, axes = list(model.joint_names), list(model.arm.task_axes[:m_t])
         parts = [("t", 1), ("q", joints), ("v", joints), ("wrench", 6)]
         parts += [(name, axes) for name in ("x_d", "xdot_d", "xddot_d")] + [("f_d", 1)]
@@ -174,6 +185,7 @@ class ControllerStep:
         ):
             part[:] = value
         self._t_previous = None
+        self._rotation_needed = self.plan.m_r > 0  # R_d, ω_d, ω̇_d: given again after a reset
         self._thread = None  # the next call's thread owns the step (class docstring)
 
     def _claim(self) -> None:
@@ -208,41 +220,75 @@ class ControllerStep:
         velocity order), the measured wrench [M; f] (6) [N m, N] (as the ``measured_wrench``
         port), the desired x_d, ẋ_d, ẍ_d (m_t each) [m, m/s, m/s²] and f_d [N]; with
         rotational task axes the desired orientation R_d as a quaternion [w, x, y, z] and
-        ω_d, ω̇_d (3 each) [rad/s, rad/s²] (kept from the previous call when None). Without a
-        force axis (``normal`` None) ``wrench`` and ``f_d`` may be None (zero), as the
-        controller's optional ports. ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], when
-        given, replaces the configured source's, as the controller's input of that name.
+        ω_d, ω̇_d (3 each) [rad/s, rad/s²]: held from the previous call when None, so the
+        first call after the step was made or :meth:`reset` must give all three (refused
+        otherwise). Nothing else is held. Without a force axis (``normal`` None) ``wrench``
+        and ``f_d`` may be None (zero), as the controller's optional ports.
+        ``desired_null_space_velocity`` q̇_dⁿ (n) [rad/s], when given, replaces the
+        configured source's at this call, as the controller's input of that name.
+
+        Numbers are real numbers or arrays of them (text, booleans, complex values refused;
+        integers taken). ``t`` is the tick's time k T (T = ``config.period``): the first
+        call's any finite time, each later one a whole number of periods after the
+        previous call's (the same time, a time between periods or an earlier one refused);
+        two or more periods on skips the ticks between (taken, as nsdrake's drive skips
+        the statuses it could not answer: the q̈_dⁿ feed-forward and the torque-rate limit
+        take the last call's state as one period old; a loop that calls every 2T runs the
+        gains at a period they were not checked for: give config.period its period).
+        docs/own_diagram.md, "The contract".
         Returns :attr:`result`, rewritten in place."""
         if self._thread != threading.get_ident():
             self._claim()
-        m_t, n, plan, c = self._m_t, self._n, self.plan, self._buffers.commands
-        try:  # the sizes; numpy's copy refuses any other shape but a scalar's or a 1-vector's
-            if len(q) != n or len(v) != n or len(x_d) != m_t or len(xdot_d) != m_t or len(xddot_d) != m_t:
-                raise _RefusedError
-            if self._t_previous is not None and not t >= self._t_previous:
-                raise _RefusedError
-            self._inputs[0] = t + 0.0  # a number (numpy would read the text "0.1")
-            self._q[:], self._v[:] = q, v
-            if wrench is None or f_d is None or not plan.has_force_axis:
-                self._optional_force(wrench, f_d)
-            else:
-                if len(wrench) != 6:
-                    raise _RefusedError
-                c[:6], c[6 + 3 * m_t] = wrench, f_d + 0.0
-            c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
-            rotation = R_d is not None or omega_d is not None or omegadot_d is not None
-            if rotation:
-                self._rotation(R_d, omega_d, omegadot_d)
-        except (TypeError, ValueError, IndexError, _RefusedError):
+        try:
+            t = self._take(t, q, v, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d)
+        except (
+            TypeError,
+            ValueError,
+            IndexError,
+            OverflowError,
+            _RefusedError,
+        ):  # an int beyond float's range
             raise self._refuse(self._argument_problem(locals())) from None
         problem = inputs_problem(self._inputs, self._names, self._quaternion)
         if problem is None and desired_null_space_velocity is not None:
             qdot, problem = self._prescribed_velocity(desired_null_space_velocity)
         if problem is not None:
             raise self._refuse(problem)
-        if rotation:  # kept for the calls that pass None
-            self._kept_rotation[:] = c[7 + 3 * m_t :]
+        if R_d is not None or omega_d is not None or omegadot_d is not None:  # held for calls passing None
+            self._kept_rotation[:] = self._buffers.commands[7 + 3 * self._m_t :]
+            self._rotation_needed = False
         return self._tick(t, None if desired_null_space_velocity is None else qdot)
+
+    def _take(self, t, q, v, wrench, x_d, xdot_d, xddot_d, f_d, R_d, omega_d, omegadot_d) -> float:
+        """The arguments into the step's input buffer, their types, sizes and ``t`` checked
+        (anything else raises, and :meth:`_argument_problem` says what); returns t as a float
+        (an integer t would make numba compile the kernels anew for int)."""
+        m_t, n, plan, c = self._m_t, self._n, self.plan, self._buffers.commands
+        if not (is_number(t) and is_real_array(q) and is_real_array(v) and is_real_array(x_d)
+                and is_real_array(xdot_d) and is_real_array(xddot_d)):  # fmt: skip
+            raise _RefusedError  # text, booleans, complex values (validation.is_real_array)
+        if len(q) != n or len(v) != n or len(x_d) != m_t or len(xdot_d) != m_t or len(xddot_d) != m_t:
+            raise _RefusedError  # numpy's copy would take a scalar, or a 1-vector, for any size
+        t = float(t)
+        previous = self._t_previous
+        if (
+            previous is not None
+            and not abs(t - previous - self._period) <= self._slack
+            and self._time_problem(t)
+        ):
+            raise _RefusedError  # not one period on, nor whole periods (skipped ticks)
+        self._inputs[0] = t
+        self._q[:], self._v[:] = q, v
+        if wrench is None or f_d is None or not plan.has_force_axis:
+            self._optional_force(wrench, f_d)
+        else:
+            if not (is_real_array(wrench) and is_number(f_d)) or len(wrench) != 6:
+                raise _RefusedError
+            c[:6], c[6 + 3 * m_t] = wrench, f_d
+        c[6 : 6 + m_t], c[6 + m_t : 6 + 2 * m_t], c[6 + 2 * m_t : 6 + 3 * m_t] = x_d, xdot_d, xddot_d
+        if R_d is not None or omega_d is not None or omegadot_d is not None or self._rotation_needed:
+            self._rotation(R_d, omega_d, omegadot_d)
+        return t
 
     def _tick(self, t: float, qdot: np.ndarray | None) -> StepResult:
         """The stages on the checked inputs (``qdot``: a prescribed q̇_dⁿ, or None)."""
@@ -271,21 +317,53 @@ class ControllerStep:
         if wrench is None:
             c[:6] = 0.0
         else:
-            if len(wrench) != 6:
+            if not is_real_array(wrench) or len(wrench) != 6:
                 raise _RefusedError
             c[:6] = wrench
         c[6 + 3 * m_t] = 0.0
 
     def _rotation(self, R_d, omega_d, omegadot_d) -> None:
-        """R_d, ω_d, ω̇_d (each kept from the previous call when None)."""
+        """R_d, ω_d, ω̇_d (each held from the previous call when None; all three needed by
+        the first call since construction or :meth:`reset`)."""
         if not self.plan.m_r:
             raise _RefusedError
         c, o = self._buffers.commands, 7 + 3 * self._m_t
         for value, start, size in ((R_d, o, 4), (omega_d, o + 4, 3), (omegadot_d, o + 7, 3)):
-            if value is not None:
-                if len(value) != size:
+            if value is None:
+                if self._rotation_needed:  # never given: nothing to hold
+                    raise _RefusedError
+            else:
+                if not is_real_array(value) or len(value) != size:
                     raise _RefusedError
                 c[start : start + size] = value
+
+    def _time_problem(self, t: float) -> str | None:
+        """Why ``t``, not the previous call's plus one period T, is refused, or None: earlier
+        or the same (refused), not a whole number of periods later (refused), or k ≥ 2
+        periods later (taken: k − 1 ticks skipped, as nsdrake's drive skips the statuses a
+        late tick could not answer, nsdrake/driver/loop.py; the state is the last call's,
+        and this call's q̈_dⁿ feed-forward and torque-rate limit take it as one period old).
+        Skips are taken however many in a row: a late loop skips at every call for as long
+        as it is late, which a loop at half the rate cannot be told from here (the drive
+        tells them apart by its statuses' own clock, driver.faults.slow_stream_problem)."""
+        previous, T = self._t_previous, self._period
+        if not math.isfinite(t):
+            return f"t {finite_problem(t)} [s]"
+        if t < previous:
+            return f"t = {t:g} s is before the previous call's {previous:g} s: reset() to start over"
+        periods = (t - previous) / T
+        k = round(periods)
+        if abs(periods - k) * T > self._slack:
+            return (
+                f"t = {t:g} s is {periods:.4g} periods after the previous call's {previous:g} s: t must "
+                f"advance by whole periods T = {T:g} s (config.period), the controller's sampled time"
+            )
+        if k == 0:
+            return (
+                f"t = {t:g} s is the previous call's time again: each call is one tick, t advancing by "
+                f"the period T = {T:g} s (config.period)"
+            )
+        return None
 
     def _prescribed_velocity(self, qdot) -> tuple[np.ndarray, str | None]:
         """q̇_dⁿ as an array, and why it cannot be taken (or None)."""
@@ -310,8 +388,10 @@ class ControllerStep:
         problem = finite_problem(t)
         if problem:
             return f"t {problem} [s]"
-        if self._t_previous is not None and t < self._t_previous:
-            return f"t = {t:g} s is before the previous call's {self._t_previous:g} s: reset() to start over"
+        if self._t_previous is not None:
+            problem = self._time_problem(float(t))
+            if problem:
+                return problem
         joints = list(self.model.joint_names)
         expected = [
             ("q", n, f"{n} joint positions [rad], the joints {joints}"),
@@ -344,6 +424,12 @@ class ControllerStep:
             value = arguments[name]
             if value is not None and not plan.m_r:
                 return f"{name} is given, but the task has no rotational axes: pass None"
+            if value is None and self._rotation_needed:
+                axes = list(self.model.arm.task_axes[m_t:])
+                return (
+                    f"{name} is None on the first call (since the step was made or reset()), but the task "
+                    f"has rotational axes {axes}: give {what}; later calls may pass None to hold it"
+                )
             problem = None if value is None else vector_size_problem(value, size, what)
             if problem:
                 return f"{name} {problem}"

@@ -1,4 +1,4 @@
-"""What a URDF must be before Drake or Pinocchio reads it: the one home of these rules,
+"""What a URDF (or an SDF's links) must be before Drake or Pinocchio reads it: the one home of these rules,
 for the controller's model (:meth:`nsdrake.ControllerModel.from_urdf`) and the simulated
 station's model files (:mod:`nsdrake.station.model_checks`).
 
@@ -82,16 +82,54 @@ def _link_problem(link) -> str | None:
 
 def _inertial_problem(inertial) -> str | None:
     mass = inertial.find("mass")
-    if mass is not None:
-        values = _numbers(mass.get("value", "0"))
+    inertia = inertial.find("inertia")
+    get = None
+    if inertia is not None:
+        get = {k: _numbers(inertia.get(k, "0") or "0")[0] for k in INERTIA_ENTRIES}
+    return _mass_and_inertia_problem(None if mass is None else mass.get("value", "0"), get)
+
+
+INERTIA_ENTRIES = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
+
+
+_SDF_DEFAULTS = {"ixx": "1", "iyy": "1", "izz": "1", "ixy": "0", "ixz": "0", "iyz": "0"}  # SDFormat's
+
+
+def sdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
+    """(where, problem) for every SDF <link> whose <inertial> has a mass ≤ 0 or an impossible
+    inertia (Drake's SDF parser only warns, and simulates a "repaired" 1 kg body instead)."""
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        if inertial is None:
+            continue
+        mass, inertia = inertial.find("mass"), inertial.find("inertia")
+        get = None
+        try:
+            if inertia is not None:
+                get = {k: _numbers(_text(inertia.find(k)) or _SDF_DEFAULTS[k])[0] for k in INERTIA_ENTRIES}
+            problem = _mass_and_inertia_problem(None if mass is None else _text(mass), get)
+        except _NotANumberError as e:
+            problem = str(e)
+        if problem:
+            yield f"link '{link.get('name')}'", problem
+
+
+def _text(element) -> str:
+    return "" if element is None or element.text is None else element.text.strip()
+
+
+def _mass_and_inertia_problem(mass_text: str | None, get: dict | None) -> str | None:
+    """A mass (its text; None: not given) that is not one number > 0, or an inertia
+    ({ixx: …}; None: not given) that is not positive definite or breaks the triangle
+    inequality."""
+    if mass_text is not None:
+        values = _numbers(mass_text or "0")
         if len(values) != 1:
-            return f"mass '{mass.get('value')}' must be one number"
+            return f"mass '{mass_text}' must be one number"
         if not values[0] > 0 or not math.isfinite(values[0]):
             return f"mass {values[0]:g} kg must be > 0"
-    inertia = inertial.find("inertia")
-    if inertia is None:
+    if get is None:
         return None
-    get = {k: _numbers(inertia.get(k, "0") or "0")[0] for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")}
     I = np.array(
         [
             [get["ixx"], get["ixy"], get["ixz"]],

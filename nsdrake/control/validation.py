@@ -44,6 +44,7 @@ NULL_SPACE_LAWS = (
     "dynamically_consistent_posture_pd",
     "dynamically_consistent_torque_pd",
 )
+REAL_KINDS = "iuf"  # numpy's dtype kinds of real numbers: signed and unsigned integers, floats
 SHOW_LENGTH = 80  # [characters] longest echo of a user's value in an error message
 # [m/s²] the largest gravity a model may have: 100 g (Earth's 9.81, Jupiter's 24.8; an arm
 # in a centrifuge test at most some tens of g). Beyond it the model terms are dominated by
@@ -121,13 +122,25 @@ def show(value) -> str:
 
 def is_number(value) -> bool:
     """A real number (numpy's too), not a bool nor a string."""
+    if type(value) in _PLAIN_NUMBERS:  # the usual case, without the ABC's isinstance (per tick)
+        return True
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
+_PLAIN_NUMBERS = frozenset((float, int, np.float64, np.int64))
+
+
 def finite_problem(value) -> str | None:
-    if not is_number(value) or not math.isfinite(value):
+    if not is_number(value) or not _finite(value):
         return f"must be a finite number, got {show(value)}"
     return None
+
+
+def _finite(value) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an int beyond float's range (10**400)
+        return False
 
 
 def positive_problem(value) -> str | None:
@@ -164,15 +177,65 @@ def fraction_problem(value) -> str | None:
     return problem
 
 
-def vector_size_problem(value, size: int, what: str) -> str | None:
-    """``value`` is ``size`` numbers; ``what`` says what they are ("[x, y, z]")."""
+def is_real_array(value) -> bool:
+    """``value`` is real numbers: a real number (:func:`is_number`), a numpy array of
+    integers or floats, or a list or tuple (nested or not) of real numbers. Text (numpy
+    would read "0.4" as 0.4), booleans (True as 1), complex values (their imaginary part
+    dropped), None and object arrays are not. The one rule of every public numeric
+    argument, its shape checked after it (:func:`vector_size_problem`); integers are
+    taken, and converted to float before any compiled code sees them."""
+    if type(value) is np.ndarray or isinstance(value, np.ndarray):
+        return value.dtype.kind in REAL_KINDS
+    if isinstance(value, (list, tuple)):
+        return all(is_real_array(v) for v in value)
+    return is_number(value)
+
+
+def is_index_array(value) -> bool:
+    """``value`` is indices: a numpy array of integers, or a list or tuple of integers
+    (Python's or numpy's). Not booleans (numpy would take [True, False] as the rows
+    [1, 0]), not floats, even whole ones ([0.0, 1.0]: an index is counted, not measured)."""
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "iu"
+    if isinstance(value, (list, tuple)):
+        return all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) for v in value)
+    return False
+
+
+def real_problem(value, what: str) -> str | None:
+    """Why ``value`` is not real numbers (:func:`is_real_array`), naming ``what`` it must
+    be and what was given instead (text, booleans, complex values, objects), or None."""
+    if is_real_array(value):
+        return None
+    return f"must be {what} as real numbers ({_kind(value)} refused), got {show(value)}"
+
+
+def _kind(value) -> str:
+    """What a refused value is made of, in words."""
+    kinds = {"U": "text", "S": "text", "b": "booleans", "c": "complex values", "O": "objects"}
+    if value is None or isinstance(value, (str, bytes)):
+        return "None" if value is None else "text"
     try:
-        array = np.asarray(value, dtype=float)
+        kind = np.asarray(value).dtype.kind
     except (TypeError, ValueError):
-        return f"must be {what}, got {show(value)}"
-    if array.shape != (size,):
-        return f"must be {what}, got {show(value)}"
-    return None
+        return "a ragged or unknown value"
+    if kind in REAL_KINDS:  # numpy made numbers of a list with a bool among them
+        return "booleans"
+    return kinds.get(kind, type(value).__name__)
+
+
+def vector_size_problem(value, size: int, what: str) -> str | None:
+    """``value`` is ``size`` real numbers (:func:`is_real_array`); ``what`` says what they
+    are ("[x, y, z]")."""
+    problem = real_problem(value, what)
+    if problem is None:
+        try:
+            shape = np.shape(value)
+        except ValueError:  # a ragged list
+            shape = None
+        if shape != (size,):
+            problem = f"must be {what}, got {show(value)}"
+    return problem
 
 
 def vector_problem(value, size: int, what: str) -> str | None:

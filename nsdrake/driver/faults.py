@@ -20,17 +20,39 @@ def start_problem(q: np.ndarray, q0: np.ndarray, tolerance: float, joint_names) 
 
 
 def jump_problem(
-    q: np.ndarray, q_previous: np.ndarray, max_step: float, periods: int, joint_names
+    q: np.ndarray, q_previous: np.ndarray, allowance: np.ndarray, periods: int, joint_names, why: str
 ) -> str | None:
-    """A joint that moved more than ``max_step`` per period over the ``periods`` since
-    the previous status: a jump no real arm makes (the worst joint named)."""
+    """A joint that moved more than its ``allowance`` [rad] (one per joint, for the
+    ``periods`` since the previous status; ``why`` says where it comes from) since the
+    previous status: a jump no Panda makes (the worst joint, by its excess, named)."""
     step = np.abs(np.subtract(q, q_previous))
-    if step.max() <= max_step * periods:
+    excess = step - allowance
+    worst = int(np.argmax(excess))
+    if excess[worst] <= 0.0:
         return None
-    worst = int(np.argmax(step))
     return (
-        f"{joint_names[worst]} moved {step[worst]:.4g} rad in {periods} period(s) "
-        f"(driver.max_joint_step {max_step:g} rad per period)"
+        f"{joint_names[worst]} moved {step[worst]:.4g} rad in {periods} period(s), more than the "
+        f"{allowance[worst]:.4g} rad {why}"
+    )
+
+
+def velocity_mismatch_problem(
+    q: np.ndarray, q_previous: np.ndarray, v: np.ndarray, v_previous: np.ndarray, elapsed: float,
+    allowance: float, joint_names,
+) -> str | None:  # fmt: skip
+    """A joint whose position change over ``elapsed`` [s] differs from the trapezoid of its
+    two reported velocities, (q̇_prev + q̇) Δt / 2, by more than ``allowance`` [rad]: a
+    position and a velocity that cannot both be the robot's (the worst joint named)."""
+    moved = np.subtract(q, q_previous)
+    expected = 0.5 * elapsed * np.add(v, v_previous)
+    mismatch = np.abs(moved - expected)
+    worst = int(np.argmax(mismatch))
+    if mismatch[worst] <= allowance:
+        return None
+    return (
+        f"{joint_names[worst]} moved {moved[worst]:.4g} rad in {elapsed * 1e3:g} ms while its reported "
+        f"velocity ({v_previous[worst]:.4g} then {v[worst]:.4g} rad/s) says {expected[worst]:.4g} rad: "
+        f"they disagree by more than {allowance:.3g} rad (nsdrake/driver/panda.py)"
     )
 
 
@@ -62,7 +84,7 @@ def clock_problem(
     if gap > bound_periods * period_us:
         return (
             f"its {name} jumped {gap * 1e-3:.3f} ms ({gap / period_us:.1f} periods) from the previous "
-            f"status's (driver.status_timeout_periods {bound_periods:g})"
+            f"status's (the silence bound: {bound_periods:g} periods, driver.expire_sec)"
         )
     return None
 

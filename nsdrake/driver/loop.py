@@ -6,15 +6,16 @@ status k:
 1. arrives (the bus delivers every queued message, :mod:`nsdrake.driver.bus`; each one's
    arrival is stamped on the wall clock) and every status received since the last tick
    is checked in order: decodable, its clock (``robot_utime`` where the driver sends
-   it, else ``utime``) advancing by half a period to ``driver.status_timeout_periods``
-   periods (:func:`nsdrake.driver.faults.clock_problem`);
+   it, else ``utime``) advancing by half a period to the silence bound, ``driver.expire_sec``
+   in periods (:func:`nsdrake.driver.faults.clock_problem`);
 2. the newest is taken (the others are counted in ``skipped``: a missed period is a
    skipped tick, never replayed). Its age is then at most a period plus the time the
    bus took to deliver it: every status that arrived is read before one is chosen (a
    stamp taken when the loop reads a message says nothing more, since the loop reads
    the socket itself), and none queued before the controller was ready is answered
    (:meth:`ControllerLoop.ready`);
-3. its q, q̇ (and τ_ext) are checked (finite, within the Panda's limits, no jump), the
+3. its q, q̇ (and τ_ext) are checked (finite, within the Panda's limits, no move faster than
+   its velocity limits allow and none its reported velocity does not explain), the
    controller's time set from its clock (:func:`nsdrake.driver.faults.elapsed_periods`,
    re-anchored every tick), the wrench taken (the newest force-torque message, which
    must have arrived within the silence bound) and the controller side ticks once
@@ -23,6 +24,8 @@ status k:
 
 Silence is the wall-clock time since the last status arrived (not counting the
 controller's own compute: a status that arrived during a long tick is not silence).
+A status two periods or more after the one answered before, within the bound, is a
+glitch: counted by its length (``gap_counts``, :data:`nsdrake.driver.timing.GAP_BINS`).
 A fault (:class:`DriveFaultError`) or Ctrl-C (:mod:`nsdrake.driver.stop`) stops
 commanding at once: nothing is sent after it.
 """
@@ -42,11 +45,20 @@ from nsdrake.driver.faults import (
     jump_problem,
     slow_stream_problem,
     start_problem,
+    velocity_mismatch_problem,
 )
-from nsdrake.driver.panda import ENVELOPE_CENTRE, ENVELOPE_HALF_WIDTH, NUM_JOINTS, limit_problem
+from nsdrake.driver.panda import (
+    ENVELOPE_CENTRE,
+    ENVELOPE_HALF_WIDTH,
+    NUM_JOINTS,
+    joint_step_allowance,
+    limit_problem,
+    velocity_mismatch_allowance,
+)
 from nsdrake.driver.stop import StopRequest
-from nsdrake.driver.timing import TickTimes
+from nsdrake.driver.timing import GAP_BINS, TickTimes, gap_bin
 from nsdrake.driver.wire import CommandBuffer, ForceTorqueBuffer, StatusBuffer
+from nsdrake.experiment.driver_config import silence_bound_periods
 
 SUCCESS_RATE_WINDOW = 100  # libfranka's control_command_success_rate is over its last 100 cycles
 ROBOT_MODE_MOVE = 2  # lcmt_panda_status.kMove: the only mode in which a Panda takes torque commands
@@ -106,7 +118,8 @@ class ControllerLoop:
         self.config = c = scenario.driver
         self.period = scenario.control_period
         self.period_us = round(self.period * 1e6)
-        self.bound = c.status_timeout_periods * self.period  # [s] the silence bound
+        self.bound_periods = silence_bound_periods(c, self.period)  # the silence bound, in periods
+        self.bound = self.bound_periods * self.period  # [s]
         self.commands = 0
         self.periods = 0  # control periods since the first status, on the robot's clock
         self.skipped = 0
@@ -133,7 +146,10 @@ class ControllerLoop:
         )
         self._measured = np.zeros((3, NUM_JOINTS))
         self._q, self._v, self._tau_ext = self._measured
-        self._q_last = np.zeros(NUM_JOINTS)
+        self._q_last, self._v_last = np.zeros(NUM_JOINTS), np.zeros(NUM_JOINTS)
+        # glitches: answered statuses 2, 3-10, 11-50, over 50 periods after the previous one
+        self.gap_counts = np.zeros(len(GAP_BINS), dtype=np.int64)
+        self.longest_gap = 0  # [periods] the longest of them (0: none)
         self._deviation = np.zeros((2, NUM_JOINTS))
 
         self._wrench = np.zeros(6)
@@ -169,10 +185,65 @@ class ControllerLoop:
         """The controller is ready: what arrived before now is discarded (a status queued
         during the warm-up or the folder's claim is stale), and ``start()`` waits for a
         status that arrives after this call."""
-        self.bus.handle(0)
+        self._handle(0)
         self._inbox.clear()
         self._force_torque = None
         self._ready = True
+
+    def _handle(self, timeout_ms: int) -> int:
+        """``bus.handle``, with Ctrl-C told from a failing bus: SIGINT during the wait makes
+        LCM's select() return EINTR, which the ``lcm`` package raises as an OSError
+        ("lcm_handle_timeout() returned -1"), before or after the handler set the stop flag
+        (Python runs it at its next check). So on an OSError: Ctrl-C if the flag is set,
+        else one more try (another signal's EINTR passes), and the bus's own error if that
+        fails too (a socket that is really broken fails again)."""
+        try:
+            return self.bus.handle(timeout_ms)
+        except OSError:
+            self._check_stop()
+            try:
+                return self.bus.handle(0)
+            except OSError:
+                self._check_stop()
+                raise
+
+    def _check_motion(self, periods: int) -> None:
+        """The status just loaded against the previous one answered, ``periods`` apart: a
+        glitch counted (two periods or more; beyond the silence bound a fault, also when
+        each status came on time and the controller itself was late: the driver has
+        expired its command meanwhile, and a command now would be a torque step from the
+        damping that the controller's rate limiter never saw), then no joint moved more
+        than its velocity limit allows (or than ``driver.max_joint_step`` per period, when
+        set), and every joint's move agrees with its reported velocities
+        (nsdrake/driver/panda.py's bounds)."""
+        if periods >= 2:
+            if periods > self.bound_periods:  # every status was on time, the controller was not
+                raise self._fault(
+                    f"status refused: {periods} periods since the status answered before it, beyond "
+                    f"{self._bound_words()}: the driver has dropped the last command and damped"
+                )
+            self.gap_counts[gap_bin(periods)] += 1
+            self.longest_gap = max(self.longest_gap, periods)
+        elapsed = periods * self.period
+        step = self.config.max_joint_step
+        if step > 0:
+            allowance = np.full(NUM_JOINTS, step * periods)
+            why = f"of driver.max_joint_step {step:g} rad per period"
+        else:
+            allowance = joint_step_allowance(elapsed)
+            why = "its velocity limit allows (nsdrake/driver/panda.py)"
+        problem = jump_problem(self._q, self._q_last, allowance, periods, self._names, why)
+        if problem is None:
+            problem = velocity_mismatch_problem(
+                self._q, self._q_last, self._v, self._v_last, elapsed, velocity_mismatch_allowance(elapsed),
+                self._names,
+            )  # fmt: skip
+        if problem:
+            raise self._fault(f"status refused: {problem}")
+
+    def _bound_words(self) -> str:
+        expire = self.config.expire_sec
+        return f"the silence bound: driver.expire_sec {expire:g} s, {self.bound_periods:g} periods"
 
     def start(self) -> None:
         """``ready()`` (unless called already), then waits (up to
@@ -187,7 +258,7 @@ class ControllerLoop:
             remaining = deadline - self._clock()
             if remaining <= 0:
                 raise self._fault(self._silence_at_start())
-            self.bus.handle(max(1, min(100, int(remaining * 1e3))))
+            self._handle(max(1, min(100, int(remaining * 1e3))))
         self._check_stop()
         arrival, wall, cpu, data = self._inbox[-1]
         self.skipped += len(self._inbox) - 1
@@ -207,7 +278,7 @@ class ControllerLoop:
         """Until the inbox holds a status; silence beyond the bound, on the wall clock from
         the last status's arrival, is a fault."""
         deadline = self._last_arrival + self.bound
-        self.bus.handle(0)
+        self._handle(0)
         waited = not self._inbox
         while not self._inbox:
             self._check_stop()
@@ -215,18 +286,17 @@ class ControllerLoop:
             if now > deadline:
                 # drained once more first: a status that arrived while this thread was
                 # descheduled between the last drain and the clock's reading is not silence
-                self.bus.handle(0)
+                self._handle(0)
                 if self._inbox:
                     break
                 self.longest_silence = max(self.longest_silence, now - self._last_arrival)
                 raise self._fault(
                     f"no lcmt_panda_status on {self.config.status_channel} for "
-                    f"{(now - self._last_arrival) * 1e3:.1f} ms "
-                    f"(driver.status_timeout_periods {self.config.status_timeout_periods:g} periods)"
+                    f"{(now - self._last_arrival) * 1e3:.1f} ms ({self._bound_words()})"
                 )
             remaining = deadline - now
-            self.bus.handle(1 if remaining > 1e-3 else 0)
-            self.bus.handle(0)  # the force-torque message of the same instant, and any newer status
+            self._handle(1 if remaining > 1e-3 else 0)
+            self._handle(0)  # the force-torque message of the same instant, and any newer status
         if waited:
             self.longest_silence = max(self.longest_silence, self._inbox[0][0] - self._last_arrival)
 
@@ -249,7 +319,7 @@ class ControllerLoop:
                 self._last_clock,
                 self._anchor,
                 self.period_us,
-                self.config.status_timeout_periods,
+                self.bound_periods,
                 self.clock_name,
             )
             if problem:
@@ -270,13 +340,9 @@ class ControllerLoop:
         self.skipped += len(inbox) - 1
         inbox.clear()
         periods = elapsed_periods(self._last_clock, self._anchor, self.period_us)
-        self._q_last[:] = self._q
+        self._q_last[:], self._v_last[:] = self._q, self._v
         self._load(data, "status refused: ", checked=True)  # decodable: checked with its clock above
-        problem = jump_problem(
-            self._q, self._q_last, self.config.max_joint_step, periods - self.periods, self._names
-        )
-        if problem:
-            raise self._fault(f"status refused: {problem}")
+        self._check_motion(periods - self.periods)
         self.periods = periods
         self.time = periods * self.period
         self._answer(data, arrival, wall, cpu)
@@ -345,7 +411,7 @@ class ControllerLoop:
         if silent > self.bound:
             raise self._fault(
                 f"no lcmt_force_torque on {self.config.force_torque_channel} for {silent * 1e3:.1f} ms "
-                f"(driver.status_timeout_periods {self.config.status_timeout_periods:g} periods)"
+                f"({self._bound_words()})"
             )
         return self._wrench_message.wrench
 

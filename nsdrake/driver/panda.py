@@ -91,3 +91,59 @@ def limit_problem(q: np.ndarray, v: np.ndarray, joint_names) -> str | None:
         f"{joint_names[k]} moves at {v[k]:.4g} rad/s, beyond the Panda's limit {VELOCITY_LIMIT[k]:g} rad/s "
         f"by more than {VELOCITY_MARGIN:.0%}"
     )
+
+
+# A status's position against Franka's velocity limits and against its own reported velocity
+# (nsdrake.driver.faults.jump_problem, velocity_mismatch_problem). Both allow the sensing noise
+# of the two readings compared (POSITION_NOISE each); the second also the velocity's noise and
+# what a joint accelerating at ACCELERATION_BOUND moves apart from the trapezoid of the two
+# reported velocities (at most a Δt²/4). ACCELERATION_BOUND is five times Franka's largest
+# published joint acceleration (20 rad/s², joints 6–7): a contact's impact accelerates joints
+# faster than a planned motion may. At 1 kHz and one period the second rule allows 2.4e-4 rad:
+# a position that creeps at 0.3 rad/s while its velocity reads zero is refused.
+POSITION_NOISE = 1e-4  # [rad] per reading
+VELOCITY_NOISE = 1e-2  # [rad/s] per reading
+ACCELERATION_BOUND = 100.0  # [rad/s²]
+
+
+def joint_step_allowance(elapsed: float) -> np.ndarray:
+    """The most each joint may move in ``elapsed`` [s] [rad]: its velocity limit with
+    VELOCITY_MARGIN, plus the noise of two readings."""
+    return VELOCITY_LIMIT * (1.0 + VELOCITY_MARGIN) * elapsed + 2.0 * POSITION_NOISE
+
+
+def slowest_joint_speed() -> float:
+    """The smallest of Franka's published joint velocity limits [rad/s]."""
+    return float(VELOCITY_LIMIT.min())
+
+
+def velocity_mismatch_allowance(elapsed: float) -> float:
+    """The most a joint's position change over ``elapsed`` [s] may differ from the
+    trapezoid of its two reported velocities [rad] (the constants above)."""
+    return 2.0 * POSITION_NOISE + VELOCITY_NOISE * elapsed + ACCELERATION_BOUND * elapsed**2 / 4.0
+
+
+START_TOLERANCE_PERIODS = 2  # driver.start_tolerance's bound, in periods at the slowest joint's limit
+
+
+def panda_driver_problems(driver, period: float):
+    """Yields (field, problem) for the scenario's ``driver`` settings (a
+    :class:`nsdrake.experiment.driver_config.DriverConfig`) beyond what the Panda allows at
+    the control period [s]: ``start_tolerance`` above what its slowest joints move in
+    START_TOLERANCE_PERIODS periods at their velocity limit (the field's comment argues
+    the bound), ``max_joint_step`` above one period's allowance of the slowest joint."""
+    tolerance = START_TOLERANCE_PERIODS * slowest_joint_speed() * period
+    if driver.start_tolerance > tolerance:
+        yield (
+            "start_tolerance",
+            f"must be at most {tolerance:.4g} rad (what the Panda's slowest joints move in "
+            f"{START_TOLERANCE_PERIODS} control periods at their velocity limit), "
+            f"got {driver.start_tolerance!r}",
+        )
+    step = float(joint_step_allowance(period).min())
+    if driver.max_joint_step > step:
+        yield (
+            "max_joint_step",
+            f"must be at most {step:.4g} rad (a period at the slowest joint's velocity limit, with the "
+            f"margins of nsdrake/driver/panda.py), got {driver.max_joint_step!r}",
+        )

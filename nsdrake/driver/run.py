@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,11 +26,19 @@ from nsdrake.control.validation import ControllerInputError
 from nsdrake.driver.bus import Bus, DrakeBus
 from nsdrake.driver.controller_side import _Log, build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
+from nsdrake.driver.realtime import RealtimeSettings, realtime_mode, realtime_settings
 from nsdrake.driver.simulated_driver import SimulatedDriver
 from nsdrake.driver.stop import ctrl_c_requests
-from nsdrake.driver.timing import GcPauses, collector_paused, timing_line, timing_summary, write_timing
+from nsdrake.driver.timing import (
+    GcPauses,
+    collector_paused,
+    gap_summary,
+    timing_line,
+    timing_summary,
+    write_timing,
+)
 from nsdrake.experiment.output import declare, record_written
-from nsdrake.experiment.scenario import Scenario
+from nsdrake.experiment.scenario import Scenario, ScenarioError
 from nsdrake.experiment.simulate import collect_traces
 from nsdrake.experiment.traces import Traces
 from nsdrake.reporting.metrics import contact_events, write_metrics
@@ -57,29 +67,44 @@ class Drive:
     both sides share this process (:func:`prepare`). Every problem with the scenario was
     raised while building it, before anything listens or sends."""
 
-    def __init__(self, loop: ControllerLoop, driver: SimulatedDriver | None):
-        self.loop, self.driver = loop, driver
+    def __init__(self, loop: ControllerLoop, driver: SimulatedDriver | None, realtime_rate: float = 0.0):
+        self.loop, self.driver, self.realtime_rate = loop, driver, realtime_rate
 
-    def run(self, *, pause_gc: bool = True, progress=None) -> DriveRun:
+    def run(
+        self, *, pause_gc: bool = True, progress=None, stop=None, realtime: RealtimeSettings | None = None
+    ) -> DriveRun:
         """Runs to the scenario's duration, the first fault or Ctrl-C (which stops it at the
         next status, :mod:`nsdrake.driver.stop`). ``pause_gc``: the garbage collector off
-        during the loop (:func:`nsdrake.driver.timing.collector_paused`)."""
+        during the loop (:func:`nsdrake.driver.timing.collector_paused`). ``stop``: a
+        :class:`nsdrake.driver.stop.StopRequest` the caller set up already (a Ctrl-C that
+        came before the loop began then stops it before its first command); without one,
+        Ctrl-C is read from here on. ``realtime``: the loop thread's real-time mode
+        (:mod:`nsdrake.driver.realtime`; the collector off with it); None: the scenario's
+        ``driver.realtime`` (off unless enabled)."""
         loop, driver = self.loop, self.driver
         duration = loop.drive.scenario.duration
         failure, interrupted, pauses = None, False, GcPauses()
-        with collector_paused(pause_gc), pauses.watching(), ctrl_c_requests() as stop:
+        requests = contextlib.nullcontext(stop) if stop is not None else ctrl_c_requests()
+        realtime = realtime or realtime_settings(loop.config.realtime)
+        pause_gc = pause_gc or realtime is not None
+        with (
+            requests as stop,
+            collector_paused(pause_gc),
+            realtime_mode(realtime, collector=False) as applied,
+            pauses.watching(),
+        ):
             loop.stop = stop
             try:
                 if driver is None:
                     loop.run(duration, progress=progress)
                 else:
-                    _lockstep(loop, driver, duration, progress)
+                    _lockstep(loop, driver, duration, progress, Pacer(self.realtime_rate, stop))
             except DriveFaultError as e:
                 failure, interrupted = str(e), isinstance(e, DriveInterruptedError)
             except Exception as e:  # noqa: BLE001 (anything else the loop met: one line, the folder kept)
                 t = loop.time if loop.started else None
                 failure = str(DriveFaultError(t, _unexpected(e), loop.commands))
-        timing = _timing(loop, pauses, pause_gc)
+        timing = _timing(loop, pauses, pause_gc) | {"realtime": applied.as_dict()}
         return DriveRun(loop=loop, driver=driver, timing=timing, failure=failure, interrupted=interrupted)
 
 
@@ -96,13 +121,53 @@ def _unexpected(error: Exception) -> str:
     return " ".join(problem.split())
 
 
-def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, progress) -> None:
-    """Status, command, step: the driver publishes, the controller answers, the driver steps."""
+MAX_PACING_SLEEP = 1.0  # [s] the longest a paced step may wait for the wall clock
+PACING_SLICE = 0.02  # [s] the pacing sleeps in slices this long, reading Ctrl-C's flag between them
+
+
+def pacing_problem(realtime_rate: float, period: float) -> str | None:
+    """Why ``realtime_rate`` cannot pace a drive of control period ``period`` [s] (None:
+    it can): each step would wait more than MAX_PACING_SLEEP for the wall clock."""
+    if realtime_rate > 0 and period / realtime_rate > MAX_PACING_SLEEP:
+        return (
+            f"{realtime_rate:g} would wait {period / realtime_rate:.3g} s of wall clock for each "
+            f"{period * 1e3:g} ms control period; give at least {period / MAX_PACING_SLEEP:g} "
+            "(1: real time; 0: as fast as possible)"
+        )
+    return None
+
+
+class Pacer:
+    """The simulated driver's pace against the wall clock: ``wait(t)`` sleeps until the
+    wall clock is t / ``rate`` [s] after the first call (never when behind; rate 0: never),
+    in slices of PACING_SLICE, returning early once ``stop`` (Ctrl-C's flag) is set. Why
+    not Drake's Simulator pacing: it sleeps in C++, where a Python signal handler cannot
+    run, so a slow rate left Ctrl-C unanswered."""
+
+    def __init__(self, rate: float, stop):
+        self.rate, self.stop, self._start = rate, stop, None
+
+    def wait(self, t: float) -> None:
+        if self.rate <= 0:
+            return
+        now = time.perf_counter()
+        if self._start is None:
+            self._start = now - t / self.rate
+        target = self._start + t / self.rate
+        while now < target and not self.stop.requested:
+            time.sleep(min(PACING_SLICE, target - now))
+            now = time.perf_counter()
+
+
+def _lockstep(loop: ControllerLoop, driver: SimulatedDriver, duration: float, progress, pacer: Pacer) -> None:
+    """Status, command, step: the driver publishes, the controller answers, the driver
+    steps, paced by ``pacer``."""
     loop.ready()
     driver.start()
     loop.start()
     while loop.time < duration - 0.5 * loop.period:
         driver.step()
+        pacer.wait(driver.time)
         loop.tick()
         if progress is not None and loop.periods % 1000 == 0:
             progress(loop.time / duration)
@@ -117,15 +182,19 @@ def prepare(
 ) -> Drive:
     """The controller side on ``bus``; without one, the controller side and the simulated
     driver in this process over ``memq://``, the driver paced at ``realtime_rate`` (1: the
-    robot's real time; 0: as fast as possible) and adding g to the command when
+    robot's real time; 0: as fast as possible; one refused that waits over a second a
+    period, :func:`pacing_problem`) and adding g to the command when
     ``robot_adds_gravity`` (the controller side follows ``scenario.driver.robot_adds_gravity``)."""
+    problem = None if bus is not None else pacing_problem(realtime_rate, scenario.control_period)
+    if problem:
+        raise ScenarioError(f"--realtime-rate: {problem}")
     side = build_controller_side(scenario)  # the scenario's problems first
     if bus is not None:
         return Drive(ControllerLoop(side, bus), None)
     lcm = DrakeLcm("memq://")
-    driver = SimulatedDriver(scenario, lcm, adds_gravity=robot_adds_gravity, realtime_rate=realtime_rate)
+    driver = SimulatedDriver(scenario, lcm, adds_gravity=robot_adds_gravity)  # paced by the Drive (Pacer)
     loop = ControllerLoop(side, DrakeBus(lcm), clock=lambda: driver.time)  # lockstep: the robot's time
-    return Drive(loop, driver)
+    return Drive(loop, driver, realtime_rate)
 
 
 def run_simulated(scenario: Scenario, *, pause_gc: bool = True, progress=None, **options) -> DriveRun:
@@ -149,6 +218,8 @@ def _timing(loop: ControllerLoop, pauses: GcPauses, paused: bool) -> dict:
         gc_disabled=paused,
         gc_collections=pauses.count,
         gc_longest_pause_us=pauses.longest * 1e6,
+        silence_bound_periods=loop.bound_periods,
+        **gap_summary(loop.gap_counts, loop.longest_gap),
     )
 
 

@@ -41,6 +41,7 @@ from drake import lcmt_panda_command, lcmt_panda_status
 from pydrake.lcm import DrakeLcm, DrakeLcmInterface
 
 from nsdrake.driver.panda import NUM_JOINTS, TORQUE_RATE_LIMIT
+from nsdrake.driver.realtime import RealtimeSettings, realtime_mode
 from nsdrake.driver.simulated_driver import SimulatedDriver
 from nsdrake.experiment.scenario import Scenario
 
@@ -67,6 +68,11 @@ class ServeResult:
     commanded_periods: int = 0
     commanded_fresh: int = 0
     ages: dict[int, int] = field(default_factory=dict)  # periods between the applied command's status and now
+    # the robot's clock [µs] of the statuses the first and the last command received answered
+    # (None: not among the last 50 published): the controller's own time should end at their difference
+    answered_robot_us: list[int | None] = field(default_factory=lambda: [None, None])
+    # the serving thread's scheduling and locked memory, read back (nsdrake.driver.realtime.Applied)
+    realtime: dict = field(default_factory=dict)
 
     @property
     def fresh_fraction(self) -> float:
@@ -80,8 +86,25 @@ class ServeResult:
             f"{self.periods} periods after the first command, {self.commands} commands received; "
             f"{self.fresh} applied a fresh command, {self.stale} a stale one, "
             f"{self.expired} fell back to damping; the driver itself started {self.behind} periods late"
+            + self._answered()
+            + _realtime_note(self.realtime)
             + (f"; {self.undecodable} undecodable command messages dropped" if self.undecodable else "")
         )
+
+    def _answered(self) -> str:
+        first, last = self.answered_robot_us
+        if first is None or last is None:
+            return ""
+        return f"; the commands answered the statuses from robot time {first} µs to {last} µs"
+
+
+def _realtime_note(applied: dict) -> str:
+    if applied.get("policy") != "SCHED_FIFO":
+        return ""
+    return (
+        f"; real-time: SCHED_FIFO {applied['priority']} on cores {applied['cores']}, "
+        f"{applied['memory_locked_kb'] // 1024} MB locked"
+    )
 
 
 class SimulatedDriverStopError(RuntimeError):
@@ -123,17 +146,22 @@ def serve_simulated_driver(
     lcm: DrakeLcmInterface,
     *,
     duration: float | None = None,
-    expire_sec: float = 0.05,
+    expire_sec: float | None = None,
     low_pass_freq: float = 30.0,
     rate_limit: bool = True,
     progress=None,
     stop=None,
     clock=time.perf_counter,
     wall_utime=lambda: time.time_ns() // 1000,
+    realtime: RealtimeSettings | None = None,
 ) -> ServeResult:
     """The simulated driver on ``lcm`` (module docstring) for ``duration`` [s] (default the
-    scenario's) after the first command; ``stop``: a :class:`nsdrake.driver.stop.StopRequest`
-    that ends it at the next period."""
+    scenario's) after the first command; ``expire_sec`` [s] default the scenario's
+    ``driver.expire_sec`` (the controller's silence bound: the same number on both sides);
+    ``stop``: a :class:`nsdrake.driver.stop.StopRequest` that ends it at the next period;
+    ``realtime``: the serving thread in real time (:mod:`nsdrake.driver.realtime`:
+    SCHED_FIFO, a core, memory locked, the collector off)."""
+    expire_sec = scenario.driver.expire_sec if expire_sec is None else expire_sec
     server = _Server(scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime)
     duration = scenario.duration if duration is None else duration
     period = server.period
@@ -143,7 +171,8 @@ def serve_simulated_driver(
     # controller's silence bound; the loop's own young objects are still collected
     gc.collect()
     gc.freeze()
-    with idle_cpus_polling():
+    with idle_cpus_polling(), realtime_mode(realtime) as applied:
+        server.result.realtime = applied.as_dict()
         try:
             next_time = clock()
             while server.first is None or server.driver.time < server.first + duration - 0.5 * period:
@@ -208,6 +237,7 @@ class _Server:
         self.result, self.recent = ServeResult(), []
         self.command, self.applied = None, np.zeros(NUM_JOINTS)
         self.published: list[int] = []  # utime of each status published
+        self.published_robot: list[int] = []  # … and its robot_utime
         self.first = None
 
     def _on_command(self, data: bytes) -> None:
@@ -233,6 +263,7 @@ class _Server:
                 status.robot_mode = ROBOT_MODE_MOVE
                 status.control_command_success_rate = float(np.mean(self.recent)) if self.recent else 1.0
                 self.published.append(status.utime)
+                self.published_robot.append(status.robot_utime)
                 data = status.encode()
             self.lcm.Publish(channel, data)
         self.outgoing.clear()
@@ -249,6 +280,7 @@ class _Server:
             problem = command_problem(self.command)
             if problem:
                 raise SimulatedDriverStopError(problem, self.result)
+            self._answered(self.command.utime)
             if self.first is None:
                 self.first = self.driver.time
         if self.command is not None and abs(self.wall_utime() - self.command.utime) > self.expire_us:
@@ -264,6 +296,15 @@ class _Server:
             self._count(got_command)
         self.driver.apply_torque(torque, utime=self.published[-1] if self.published else 0)
         self.driver.advance()
+
+    def _answered(self, utime: int) -> None:
+        """The robot time of the status a command received answers, kept for the first and the last."""
+        recent = self.published[-50:]
+        if utime in recent:
+            robot = self.published_robot[len(self.published) - len(recent) + recent.index(utime)]
+            answered = self.result.answered_robot_us
+            answered[0] = robot if answered[0] is None else answered[0]
+            answered[1] = robot
 
     def _count(self, got_command: bool) -> None:
         result, command = self.result, self.command

@@ -11,6 +11,23 @@ from pathlib import Path
 
 import numpy as np
 
+# Glitches (issue 35): statuses answered two periods or more after the previous one answered,
+# within the silence bound, by their distance in periods: (label, first, last).
+GAP_BINS = (("2", 2, 2), ("3-10", 3, 10), ("11-50", 11, 50), ("over 50", 51, None))
+
+
+def gap_bin(periods: int) -> int:
+    """The index in :data:`GAP_BINS` of a gap of ``periods`` (>= 2) periods."""
+    return 0 if periods <= 2 else 1 if periods <= 10 else 2 if periods <= 50 else 3
+
+
+def gap_summary(counts, longest: int) -> dict:
+    """timing.json's ``gaps`` (how many of each bin) and ``longest_gap_periods``."""
+    return {
+        "gaps": {label: int(n) for (label, _, _), n in zip(GAP_BINS, counts, strict=True)},
+        "longest_gap_periods": int(longest),
+    }
+
 
 class TickTimes:
     """Compute times of the ticks, preallocated so that recording allocates nothing: the
@@ -67,6 +84,7 @@ def timing_line(summary: dict) -> str:
         f"{summary['over_period']} over the {summary['period_us']:.0f} µs period"
         + (f" (its CPU time: p99.9 {summary['cpu_p999_us']:.0f} µs)" if "cpu_p999_us" in summary else "")
         + (f"; {summary['statuses_skipped']} statuses skipped" if summary.get("statuses_skipped") else "")
+        + _gaps_note(summary.get("gaps"), summary.get("longest_gap_periods"))
         + (
             f"; longest silence {summary['longest_silence_us'] / 1e3:.1f} ms"
             if summary.get("longest_silence_us")
@@ -74,6 +92,14 @@ def timing_line(summary: dict) -> str:
         )
         + _success_rate_note(summary.get("control_command_success_rate_min"))
     )
+
+
+def _gaps_note(gaps: dict | None, longest: int | None) -> str:
+    """The glitches: how many gaps of each length, the longest (nothing without any)."""
+    if not gaps or not any(gaps.values()):
+        return ""
+    counts = ", ".join(f"{n} of {label}" for label, n in gaps.items() if n)
+    return f"; late statuses: {counts} periods, the longest {longest} periods"
 
 
 def _success_rate_note(rate: float | None) -> str:

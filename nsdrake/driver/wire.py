@@ -16,7 +16,8 @@ an 8-byte type fingerprint, then the fields in order, big-endian. For 7 joints:
   joint_torque double[7] @28, control_mode_expected int8 @84;
 - ``lcmt_force_torque`` (64 bytes): timestamp int64 @8 [ms], fx fy fz tx ty tz @16.
 
-tests/driver/test_wire.py checks every field against Drake's own ``decode``/``encode``.
+The driver tests decode the commands this module encodes with Drake's own ``decode``
+(tests/driver/bad_driver.py, tests/driver/fake_bus.py); no test compares every field yet.
 """
 
 from __future__ import annotations

@@ -102,19 +102,24 @@ def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> Co
 
 
 def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
-    """The controller's own model: the arm's URDF, the gravity of the scenario, and the
-    plate and obstacles where the station put them. With ``realism.model_error``, the
-    URDF's link and tool masses (and inertias) scaled by (1 + mass_error)."""
-    urdf = station.arm_file
-    if scenario.realism.model_error.enabled:
-        urdf = scale_urdf_masses(Path(urdf).read_text(), 1.0 + scenario.realism.model_error.mass_error)
-    return ControllerModel.from_urdf(
-        urdf,
+    """The controller's own model: the arm's model file (its packages as the station's), the
+    gravity of the scenario, the payload when it is declared, and the plate and obstacles
+    where the station put them. With ``realism.model_error``, the URDF's link and tool
+    masses (and inertias) scaled by (1 + mass_error)."""
+    payload = station.payload if station.payload_declared else None
+    common = dict(
         tool_frame=scenario.arm.tool_frame,
         task_axes=scenario.task.axes,
         gravity=station.gravity,
         obstacles=station_obstacles(station),
+        payload=payload,
     )
+    if scenario.realism.model_error.enabled:
+        text = scale_urdf_masses(
+            Path(station.arm_file).read_text(), 1.0 + scenario.realism.model_error.mass_error
+        )
+        return ControllerModel.from_urdf(text, **common)
+    return ControllerModel.from_file(station.arm_file, packages=station.packages, **common)
 
 
 def controller_structure(scenario: Scenario, auto: str = "systems") -> str:

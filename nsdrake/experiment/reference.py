@@ -30,6 +30,8 @@ import numpy as np
 from nsdrake.control.smoothing import smoothstep
 from nsdrake.control.validation import (
     finite_problem,
+    is_index_array,
+    is_number,
     non_negative_problem,
     positive_problem,
     show,
@@ -56,7 +58,7 @@ def _raise_first(where: str, problems) -> None:
 
 def _direction_problem(value, size: int) -> str | None:
     """``value`` is a unit direction of ``size`` entries."""
-    problem = vector_problem(value, size, f"a unit direction of {size} numbers")
+    problem = vector_problem(value, size, f"a unit direction of {size} numbers (one per axis of x0)")
     if problem is None and abs(float(np.linalg.norm(value)) - 1.0) > UNIT_TOLERANCE:
         problem = f"must be a unit direction (norm 1), got norm {float(np.linalg.norm(value)):.6g}"
     return problem
@@ -76,7 +78,8 @@ def _path_problems(path) -> list[tuple[str, str | None]]:
         return [("x0", f"must be the tool position, finite numbers on the task axes, got {show(path.x0)}")]
     m = x0.size
     problems = [("normal", _direction_problem(path.normal, m))]
-    no_slide = getattr(path, "tangent_speed", None) == 0.0  # SlideAndPress without the slide: t may be 0
+    speed = getattr(path, "tangent_speed", None)
+    no_slide = is_number(speed) and speed == 0.0  # SlideAndPress without the slide: t may be 0
     tangent = np.asarray(path.tangent, dtype=float) if vector_problem(path.tangent, m, "") is None else None
     if not (no_slide and tangent is not None and not tangent.any()):
         problems.append(("tangent", _direction_problem(path.tangent, m)))
@@ -398,20 +401,23 @@ def reference_problem(reference, task_rows, contact_threshold, period, loss_time
     :class:`nsdrake.experiment.reference_system.SurfaceReferenceSystem` and
     :class:`PlainSurfaceReference` cannot take, or None: ``reference`` a path with ``at``,
     ``x0`` and ``normal`` (:class:`SlideAndPress`, :class:`CircleOnSurface`), ``task_rows``
-    one distinct force row (0, 1, 2: x, y, z) per axis of the path, and positive, finite
+    one distinct force row (0, 1, 2: x, y, z) per axis of the path, given as integer
+    indices (:func:`nsdrake.control.validation.is_index_array`: booleans, which numpy
+    takes as the rows 1 and 0, and floats refused), and positive, finite
     ``contact_threshold``, ``period`` and ``loss_time``."""
     if not all(hasattr(reference, name) for name in ("at", "x0", "normal")):
         return "reference", f"must be a SlideAndPress or a CircleOnSurface, got {type(reference).__name__}"
     m = np.size(reference.x0)
-    try:
-        rows = np.asarray(task_rows)
-        valid = rows.shape == (m,) and all(float(r).is_integer() and 0 <= r <= 2 for r in rows.tolist())
-    except (TypeError, ValueError):
-        valid = False
-    if not valid or len(set(rows.tolist())) != m:
+    rows = np.asarray(task_rows) if is_index_array(task_rows) else None
+    if (
+        rows is None
+        or rows.shape != (m,)
+        or not np.all((rows >= 0) & (rows <= 2))
+        or len(set(rows.tolist())) != m
+    ):
         return "task_rows", (
-            f"must be {m} distinct rows of the measured force (0, 1, 2: x, y, z), one per axis of "
-            f"the reference's x0, got {show(task_rows)}"
+            f"must be {m} distinct rows of the measured force as indices (0, 1, 2: x, y, z; "
+            f"integers, not booleans or floats), one per axis of the reference's x0, got {show(task_rows)}"
         )
     for name, value in (
         ("contact_threshold", contact_threshold),
@@ -451,7 +457,7 @@ class PlainSurfaceReference:
         problem = reference_problem(reference, task_rows, contact_threshold, period, loss_time)
         if problem is not None:
             raise TaskReferenceError(f"PlainSurfaceReference.{problem[0]}", problem[1])
-        self.path, self._rows = reference, np.asarray(task_rows)
+        self.path, self._rows = reference, np.asarray(task_rows, dtype=int)
         self._threshold, self._loss_time = contact_threshold, loss_time
         self._offset0 = float(reference.x0 @ reference.normal)
         self.reset()
@@ -462,7 +468,17 @@ class PlainSurfaceReference:
 
     def tick(self, t: float, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """(x_d, ẋ_d, ẍ_d, f_d) at ``t`` [s] after the contact update with ``wrench`` [M; f]
-        (6) [N m, N] (class docstring)."""
+        (6) [N m, N] (class docstring). Refuses (:class:`TaskReferenceError`) a ``t`` that is
+        not a finite number or is before the previous tick's, and a wrench that is not 6
+        finite real numbers."""
+        problem = finite_problem(t) or vector_problem(wrench, 6, "[M; f] (6) [N m, N]")
+        if problem is None and self._t_previous is not None and t < self._t_previous:
+            problem = (
+                f"t = {t:g} s is before the previous tick's {self._t_previous:g} s: reset() to start over"
+            )
+        if problem is not None:
+            where = "t" if finite_problem(t) or problem.startswith("t =") else "wrench"
+            raise TaskReferenceError(f"PlainSurfaceReference.tick.{where}", problem)
         if self._t_previous is not None:
             f_n = float(self.path.normal @ wrench[3:][self._rows])
             new = update_contact(

@@ -9,6 +9,7 @@ from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
 from nsdrake.control.leaf_system import LeafSystem
+from nsdrake.control.validation import entry_names, inputs_problem
 from nsdrake.experiment.reference import (
     CircleOnSurface,
     ContactState,
@@ -17,6 +18,8 @@ from nsdrake.experiment.reference import (
     reference_problem,
     update_contact,
 )
+
+WRENCH_NAMES = entry_names([("measured_wrench", 6)])
 
 
 class SurfaceReferenceSystem(LeafSystem):
@@ -41,7 +44,8 @@ class SurfaceReferenceSystem(LeafSystem):
     and 1 while in contact, 0 before it and after it was lost (one port, evaluated
     once per tick; :class:`SurfaceReference` splits it into named ports, :meth:`output_parts`).
     Arguments it cannot take (:func:`nsdrake.experiment.reference.reference_problem`) raise
-    :class:`nsdrake.experiment.reference.TaskReferenceError` (a ValueError) in one line.
+    :class:`nsdrake.experiment.reference.TaskReferenceError` (a ValueError) in one line, as
+    does a ``measured_wrench`` not connected or not finite at an update.
     """
 
     def __init__(
@@ -85,6 +89,23 @@ class SurfaceReferenceSystem(LeafSystem):
         t_contact, r_contact, t_lost, t_low, first = context.get_discrete_state(self._state).value()
         return ContactState(t_contact, r_contact, t_lost, t_low), first
 
+    def _measured_wrench(self, context) -> np.ndarray:
+        """The measured wrench, refused in one line naming the reference and the port when
+        it is not connected or not finite (a NaN force never reaches the threshold: contact
+        would silently never be detected)."""
+        where = (
+            f"{self.GetSystemPathname().rsplit('::', 1)[0] or 'reference'} at t = {context.get_time():g} s"
+        )
+        if not self._wrench.HasValue(context):
+            raise TaskReferenceError(
+                where, "measured_wrench is not connected (connect the force sensor's wrench)"
+            )
+        wrench = self._wrench.Eval(context)
+        problem = inputs_problem(wrench, WRENCH_NAMES)
+        if problem is not None:
+            raise TaskReferenceError(where, problem)
+        return wrench
+
     def _calc(self, context, output):
         state, first = self._contact(context)
         x_d, xdot_d, xddot_d, f_d = self._ref.at(context.get_time(), state=state, t_first=first)
@@ -92,7 +113,7 @@ class SurfaceReferenceSystem(LeafSystem):
 
     def _update(self, context, discrete_state):
         state, first = self._contact(context)
-        f_n = float(self._ref.normal @ self._wrench.Eval(context)[3:][self._rows])
+        f_n = float(self._ref.normal @ self._measured_wrench(context)[3:][self._rows])
         # r, the normal offset of x_d now, from the output: computed (and cached) for this
         # instant's torque already, so the path is not evaluated a second time.
         x_d = self._reference.Eval(context)[: self._m]

@@ -41,7 +41,7 @@ from nsdrake.control.validation import (
     positive_problem,
     task_axes_problem,
 )
-from nsdrake.experiment.driver_config import DriverConfig, driver_problems
+from nsdrake.experiment.driver_config import REMOVED_FIELDS, DriverConfig, driver_problems
 from nsdrake.experiment.push import PushConfig, push_problems
 from nsdrake.realism.config import SHORTEST_STEP, RealismConfig, realism_problems, substeps
 from nsdrake.station.config import (
@@ -128,7 +128,7 @@ CONTROLLER_STRUCTURES = ("auto", "systems", "fused")
 
 @dataclass
 class DivergenceConfig:
-    """When a run counts as diverged and is stopped (nsdrake/simulate.py)."""
+    """When a run counts as diverged and is stopped (nsdrake/experiment/simulate.py)."""
 
     # Any joint faster than this [rad/s].
     max_joint_speed: float = 100.0
@@ -188,7 +188,7 @@ class Scenario:
     divergence: DivergenceConfig = field(default_factory=DivergenceConfig)
     # An external force pulse on a link (nsdrake/experiment/push.py); off by default.
     push: PushConfig = field(default_factory=PushConfig)
-    # Effects of the real robot, each off by default (nsdrake/realism.py: the realism ladder).
+    # Effects of the real robot, each off by default (nsdrake/realism/: the realism ladder).
     realism: RealismConfig = field(default_factory=RealismConfig)
     # How the controller's stages run (NullSpaceImpedanceController's ``fused``): systems,
     # the paper's named systems (diagram.svg shows them); fused, the same stages in one
@@ -368,6 +368,8 @@ def check_shape(data, schema, where: str) -> str | None:
         fields = {f.name: f for f in dataclasses.fields(schema) if f.metadata.get("yaml", True)}
         for key, value in data.items():
             path = f"{where}.{_name(key)}" if where else _name(key)
+            if key not in fields and schema is DriverConfig and key in REMOVED_FIELDS:
+                return f"{path}: {REMOVED_FIELDS[key]}"
             if key not in fields:
                 return f"{path}: unknown field; valid fields here are {', '.join(fields)}"
             problem = check_shape(value, hints[key], path)
@@ -441,8 +443,12 @@ def _read(path: Path, defaults: Scenario | None) -> Scenario:
         raise ScenarioError(f"{path}: {_cut(e)}") from None
 
 
-def load_scenario(name: str, config: str | Path | None = None, duration: float | None = None) -> Scenario:
-    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated.
+def load_scenario(
+    name: str, config: str | Path | None = None, duration: float | None = None, *, validated: bool = True
+) -> Scenario:
+    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated
+    (unless ``validated`` is False: a base that more overrides follow, validated after them,
+    as a compare variant's).
 
     ``duration`` (command line) overrides the files. Raises ScenarioError.
     """
@@ -459,7 +465,8 @@ def load_scenario(name: str, config: str | Path | None = None, duration: float |
     if duration is not None:
         scenario = dataclasses.replace(scenario, duration=duration)
         check_positive(scenario.source, "--duration", duration)
-    validate(scenario)
+    if validated:
+        validate(scenario)
     return scenario
 
 
@@ -527,7 +534,7 @@ def scenario_problems(s: Scenario, *, push_within_run: bool = True) -> Iterator[
     yield from _checked("divergence.max_torque", positive_problem(s.divergence.max_torque))
     for where, problem in realism_problems(s.realism, s.control_period):
         yield f"realism.{where}", problem
-    for where, problem in driver_problems(s.driver):
+    for where, problem in driver_problems(s.driver, s.control_period):
         yield f"driver.{where}", problem
     yield from _step_problems(s)
     yield from _obstacle_problems(s)
@@ -588,6 +595,7 @@ def _arm_and_plate_problems(s: Scenario) -> Iterator[tuple[str, str]]:
             yield from _checked(f"arm.{table}.{_name(name)}", finite_problem(value))
     if not s.arm.initial_positions:
         yield "arm.initial_positions", "must give a position for every joint"
+    yield from _payload_problems(s.arm.payload)
     if len(s.plate.position) != 3:
         yield "plate.position", f"must be [x, y, z], got {_show(s.plate.position)}"
     for i, value in enumerate(s.plate.position):
@@ -599,6 +607,21 @@ def _arm_and_plate_problems(s: Scenario) -> Iterator[tuple[str, str]]:
         "contact.approximation", choice_problem(s.contact.approximation, CONTACT_APPROXIMATIONS)
     )
     yield from _checked("contact.model", choice_problem(s.contact.model, CONTACT_MODELS))
+
+
+def _payload_problems(p) -> Iterator[tuple[str, str]]:
+    """The payload's fields one by one (its physical validity: the station's Payload check)."""
+    yield from _checked("arm.payload.mass", finite_problem(p.mass) or non_negative_problem(p.mass))
+    if len(p.com) != 3:
+        yield "arm.payload.com", f"must be [x, y, z] in the tool frame, got {_show(p.com)}"
+    if len(p.inertia) not in (0, 6):
+        yield (
+            "arm.payload.inertia",
+            f"must be [ixx, iyy, izz, ixy, ixz, iyz] or empty, got {_show(p.inertia)}",
+        )
+    for name in ("com", "inertia"):
+        for i, value in enumerate(getattr(p, name)):
+            yield from _checked(f"arm.payload.{name}[{i}]", finite_problem(value))
 
 
 def _task_and_report_problems(s: Scenario) -> Iterator[tuple[str, str]]:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -54,6 +55,114 @@ class Metric:
         d = asdict(self)
         d["value"] = _json_number(self.value)
         return d
+
+
+# What each metric measures, in words a reader of the report needs (no column names):
+# (a pattern of metric names, its description). {1} is the pattern's first group.
+# The window is WINDOW_WORDS.
+WINDOW_WORDS = f"from {SETTLE_TIME:g} s after first contact to the end of the run"
+DESCRIPTIONS: tuple[tuple[str, str], ...] = (
+    (r"first_contact_time", "when the contact force first reached the contact threshold (the tool touches)"),
+    (r"window_start", f"start of the measuring window ({WINDOW_WORDS})"),
+    (r"window_rows", "control periods in the measuring window (how many samples the figures below average)"),
+    (r"normal_force_min", "smallest contact force in the window (0: the tool left the surface)"),
+    (r"force_error_rms", "RMS of the contact force's error (measured minus desired) in the window"),
+    (r"force_error_max", "largest contact force error in the window"),
+    (r"tangential_position_error_rms", "RMS of the tool's position error along the plate in the window"),
+    (r"position_error_rms", "RMS of the tool's position error along the surface in the window"),
+    (r"position_error_max", "largest distance of the tool from where it should hold, while the elbow moves"),
+    (r"orientation_error_rms", "RMS of the tool's orientation error (rotation angle) in the window"),
+    (r"orientation_error_max", "largest orientation error of the tool in the window"),
+    (
+        r"null_space_command_rms",
+        "RMS of the commanded null-space joint velocity q̇_dⁿ (what the arm's "
+        "self-motion is asked to do) in the window",
+    ),
+    (
+        r"null_space_error_rms",
+        "RMS of the null-space velocity error eⁿ = q̇_dⁿ − N q̇ (how closely the "
+        "self-motion follows its command, Eq. 14) in the window",
+    ),
+    (r"d_min_after_(.+)s", "closest distance of any link to an obstacle after the first {1} s"),
+    (r"d_plate_min", "closest distance of any link (not the tool) to the plate over the run"),
+    (r"d_(.+)_min", "closest distance of any link to the obstacle '{1}' over the run"),
+    (
+        r"forbidden_contacts_max",
+        "most contacts at once between the arm and anything but the tool on the surface",
+    ),
+    (
+        r"p_tau_end_without_null_space_task",
+        "the same at the end of a second run with no null-space command "
+        "(q̇_dⁿ = 0): what the null space has to improve on",
+    ),
+    (
+        r"p_tau_end",
+        "joint-torque criterion ‖Jᵀ F_d‖² (Eq. 32) at the end of the run: lower means the "
+        "joints carry the contact force with less torque",
+    ),
+    (r"joint_speed_ratio_max", "largest joint speed over the run as a share of that joint's speed limit"),
+    (r"modes_visited", "how many of Fig. 1's modes (which criterion is on level 2) the run visited"),
+    (r"mode(\d)_time", "time spent in mode {1} of Fig. 1's decision tree"),
+    (
+        r"mode(\d)_(.+)_change_min",
+        "in each stretch of mode {1} long enough to judge, how much {2} "
+        "improved (the smallest improvement; > 0: it improved in every stretch)",
+    ),
+    (r"mode_switches", "how many times the mode (Fig. 1's decision tree) switched"),
+    (
+        r"torque_step_p99_elsewhere",
+        "99th percentile of the joint torque's change from one control period to "
+        "the next, away from switches and first contact: the run's ordinary torque steps",
+    ),
+    (
+        r"torque_step_at_switch_max",
+        "largest joint-torque change between two control periods just after a "
+        "mode switch (a switch must not kick the arm)",
+    ),
+    (r"q_margin(\d+)_min", "joint {1}'s closest approach to its position limits (> 0: never reached)"),
+    (r"v_margin(\d+)_min", "joint {1}'s closest approach to its speed limit (> 0: never reached)"),
+    (r"tau_margin(\d+)_min", "joint {1}'s closest approach to its torque limit (>= 0: never exceeded)"),
+    (
+        r"saturated_joints_max_in_window",
+        "most joints whose task torque had to be clipped to the actuator limits at once, in the window",
+    ),
+    (
+        r"saturated_joints_max",
+        "most joints whose task torque had to be clipped to the actuator limits at once",
+    ),
+    (
+        r"swivel_range",
+        "how far the elbow swivelled about the shoulder–wrist line while the tool held its pose",
+    ),
+)
+
+
+# A mode's criterion (the traces' column) in words.
+CRITERION_WORDS = {
+    "d_min": "the closest link–obstacle distance",
+    "p_tau": "the joint-torque criterion",
+    "w": "the manipulability",
+    "q_margin": "the smallest joint-limit margin",
+}
+
+
+def describe(name: str) -> str:
+    """What the metric ``name`` measures, in words (DESCRIPTIONS); "" for a name without one."""
+    for pattern, text in DESCRIPTIONS:
+        match = re.fullmatch(pattern, name)
+        if match:
+            for k, group in enumerate(match.groups(), start=1):
+                text = text.replace(f"{{{k}}}", CRITERION_WORDS.get(group, group))
+            return text
+    return ""
+
+
+UNIT_WORDS = {"N^2 m^2": "N² m²", "m^2": "m²", "-": "ratio", "rows": "control periods"}
+
+
+def unit_words(unit: str) -> str:
+    """A metric's unit as a reader writes it (N² m², not N^2 m^2)."""
+    return UNIT_WORDS.get(unit, unit)
 
 
 def _json_number(x: float):
@@ -159,7 +268,7 @@ def _null_space_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
             "null_space_error_rms",
             rms_en,
             "rad/s",
-            f"<= max(5% of RMS ||qns|| , 1e-3 rad/s) = {bound:.3g} rad/s",
+            f"<= max(5% of RMS ||q̇_dⁿ||, 1e-3 rad/s) = {bound:.3g} rad/s",
             rms_en <= bound,
         ),
     ]

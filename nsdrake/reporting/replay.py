@@ -18,11 +18,56 @@ from pathlib import Path
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram
 
+# Appended to Meshcat's static page: once the recording's animation is loaded, show it
+# at t = 0, paused, with a play button and the time in a bar at the top of the window and
+# Meshcat's own controls (Animations: play, pause, the time slider) open. Meshcat alone
+# opens the page on the animation's last frame with its controls folded away.
+START_AT_ZERO = """
+<div id="nsdrake-replay-bar" style="position:fixed;top:0;left:0;z-index:10;margin:8px;padding:6px 10px;
+ background:rgba(255,255,255,0.92);border-radius:6px;font:14px system-ui,sans-serif;color:#222">
+ <button id="nsdrake-play" type="button" style="font-size:15px;padding:2px 12px">&#9654; play</button>
+ <span id="nsdrake-time" style="margin-left:8px;font-variant-numeric:tabular-nums">t = 0.000 s</span>
+</div>
+<script>
+(function () {
+  const button = document.getElementById("nsdrake-play");
+  const label = document.getElementById("nsdrake-time");
+  const animator = () => viewer.animator;
+  const now = () => animator().actions.reduce((t, a) => Math.max(t, a.time), 0);
+  let shown = false;
+  function showStart() {
+    if (shown || !(animator().duration > 0)) return;
+    shown = true;
+    animator().pause();
+    animator().reset();  // every action back to t = 0, the scene drawn there
+    viewer.gui.open();
+    animator().folder.open();
+  }
+  button.addEventListener("click", () => {
+    if (animator().playing) { animator().pause(); } else { animator().play(); }
+  });
+  (function tick() {
+    showStart();
+    if (shown) {
+      button.innerHTML = animator().playing ? "&#10074;&#10074; pause" : "&#9654; play";
+      label.textContent = "t = " + now().toFixed(3) + " s of " + animator().duration.toFixed(3) + " s";
+    }
+    requestAnimationFrame(tick);
+  })();
+})();
+</script>
+"""
+
 
 def write_replay(meshcat: Meshcat, path: Path) -> Path:
-    """Saves the scene and its published recording as one self-contained HTML file."""
+    """Saves the scene and its published recording as one self-contained HTML file, which
+    opens at t = 0 with its play button in view (START_AT_ZERO)."""
     path = Path(path)
-    path.write_text(meshcat.StaticHtml(), encoding="utf-8")
+    page = meshcat.StaticHtml()
+    end = page.rfind("</body>")
+    if end < 0:
+        raise ValueError("Meshcat's static page has no </body>: cannot add the replay's play bar")
+    path.write_text(page[:end] + START_AT_ZERO + page[end:], encoding="utf-8")
     return path
 
 

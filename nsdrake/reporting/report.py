@@ -15,7 +15,7 @@ import html
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from nsdrake.reporting.metrics import Metric
+from nsdrake.reporting.metrics import Metric, describe, unit_words
 from nsdrake.reporting.replay import DiagramPicture
 
 _STYLE = """
@@ -38,7 +38,30 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: now
 .diagram svg { width: 2400px; max-width: none; height: auto; }
 pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto; font-size: 0.85em; }
 .muted { color: #666; font-size: 0.9em; }
+.name { color: #777; font-size: 0.8em; }
+figcaption { color: #444; font-size: 0.9em; margin: 0.2em 0 1.2em; }
+details > summary { cursor: pointer; margin: 0.6em 0; }
 """
+
+# What each plot shows, under it; a plot with the mode links the modes' section.
+PLOT_CAPTIONS = {
+    "fig3.png": "Fig. 3's panels: the contact force against its setpoint, the tool's position along the "
+    'plate, the null-space velocity error and, at the bottom, the <a href="#modes">mode</a> (which '
+    "criterion is on level 2) with the closest link–obstacle distance d_min and the manipulability w.",
+    "priority.png": 'Fig. 1\'s switching: the <a href="#modes">mode</a> over time, and each criterion '
+    "while its mode has it on level 2 (it should improve there), with the torque steps at switches.",
+    "pose.png": "The pose task: force, the tool's path on the surface, position and orientation errors, "
+    'obstacle distances, joint-limit margins, and the elbow\'s swivel with the <a href="#modes">mode</a>.',
+}
+
+# Fig. 1's modes: which criterion the null space serves first (level 2).
+MODE_WORDS = {
+    0: "no criterion configured",
+    1: "obstacle avoidance",
+    2: "joint-torque minimisation",
+    3: "manipulability maximisation",
+    4: "joint-limit avoidance",
+}
 
 
 def _e(x) -> str:
@@ -79,9 +102,12 @@ def _metric_rows(metrics: Sequence[Metric]) -> str:
             verdict = '<td class="pass">&#10003; pass</td>'
         else:
             verdict = '<td class="fail">&#10007; FAIL</td>'
+        words = describe(m.name) or m.name
+        link = ' (<a href="#modes">modes</a>)' if m.name.startswith("mode") else ""
         rows.append(
-            f'<tr data-metric="{_e(m.name)}"><td><code>{_e(m.name)}</code></td>'
-            f'<td class="num">{_e(f"{m.value:.6g}")}</td><td>{_e(m.unit)}</td>'
+            f'<tr data-metric="{_e(m.name)}"><td>{_e(words)}{link}<br>'
+            f'<code class="name">{_e(m.name)}</code></td>'
+            f'<td class="num">{_e(f"{m.value:.6g}")}</td><td>{_e(unit_words(m.unit))}</td>'
             f"<td>{_e(m.bound) if m.bound else '&mdash;'}</td>{verdict}</tr>"
         )
     return "\n".join(rows)
@@ -109,9 +135,14 @@ def render_report(
     files: Iterable[str],
     notes: Iterable[str] = (),
     failure: str | None = None,
+    defaults: dict | None = None,
+    modes: Sequence[int] = (),
 ) -> str:
     """The report page as a string; paths in ``replay`` and ``files`` are relative links.
-    ``failure``: why the run stopped early (it is then marked failed)."""
+    ``failure``: why the run stopped early (it is then marked failed). ``defaults``: the
+    parameters of a scenario that sets nothing (the scenario table shows first what
+    ``parameters`` changes from them, the rest folded away). ``modes``: the modes of Fig. 1
+    the run visited, in order (the modes' section explains them)."""
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -124,19 +155,51 @@ def render_report(
     if replay:
         parts.append(
             f'<p>&#9654; <a id="replay-link" href="{_e(replay)}">Replay in 3D</a> '
-            '<span class="muted">(Meshcat: the arm, the plate and the contact force; '
-            "time slider under Open Controls &rarr; Animations)</span></p>"
+            '<span class="muted">(Meshcat: the arm, the plate and the contact force; it opens at '
+            "t = 0 with its play button and time slider at the top)</span></p>"
         )
     parts += [f'<p class="muted">{_e(note)}</p>' for note in notes]
     parts += [
         '<h2 id="metrics">Metrics</h2>',
-        "<table><thead><tr><th>metric</th><th>value</th><th>unit</th><th>bound</th>"
+        '<p class="muted">Each figure is computed from traces.csv (metrics.json holds the same); the '
+        "grey name is its key in metrics.json.</p>",
+        "<table><thead><tr><th>what it measures</th><th>value</th><th>unit</th><th>bound</th>"
         "<th>result</th></tr></thead><tbody>",
         _metric_rows(metrics),
         "</tbody></table>",
     ]
-    parts += _plot_section(plots) + _diagram_section(diagram) + _scenario_and_files(parameters, files)
+    parts += _plot_section(plots) + _modes_section(modes, parameters)
+    parts += _diagram_section(diagram) + _scenario_and_files(parameters, files, defaults)
     return "\n".join(p for p in parts if p)
+
+
+def _modes_section(modes: Sequence[int], parameters: dict) -> list[str]:
+    """Fig. 1's decision tree in words, with this scenario's thresholds, and the modes the
+    run visited; nothing for a run without a mode column."""
+    if not modes:
+        return []
+    selector = parameters.get("desired_null_space", {}).get("selector", {})
+    value = lambda key: _e(_format_value(selector.get(key, "?")))  # noqa: E731
+    visited = " &rarr; ".join(f"{m} ({_e(MODE_WORDS.get(m, '?'))})" for m in modes)
+    return [
+        '<h2 id="modes">Modes: Fig. 1\'s decision tree</h2>',
+        "<p>Every control period the controller picks which secondary criterion the null space "
+        "serves first (level 2; level 1 is always the position and force task). The first test "
+        "that holds sets the mode, the <code>mode</code> column of traces.csv:</p><ol>",
+        f"<li>a link closer to an obstacle than d_lim = {value('d_lim')} m &rarr; <b>1</b>, obstacle "
+        "avoidance;</li>",
+        f"<li>else a joint closer to a limit than q_lim = {value('q_lim')} rad (0: never) &rarr; "
+        "<b>4</b>, joint-limit avoidance;</li>",
+        f"<li>else the manipulability below w_lim = {value('w_lim')} m² &rarr; <b>3</b>, "
+        "manipulability maximisation;</li>",
+        "<li>else &rarr; <b>2</b>, joint-torque minimisation.</li></ol>",
+        f"<p>Hysteresis: mode 1 is left only beyond d_lim + {value('d_band')} m, mode 4 beyond "
+        f"q_lim + {value('q_band')} rad, mode 3 above w_lim + {value('w_band')} m²; after a switch "
+        f"the null-space command blends to the new order over {value('blend_time')} s. Mode 0: no "
+        "criterion configured. The other criteria take the lower levels (the documentation's page "
+        "docs/decision_tree.md has the order of each mode).</p>",
+        f"<p>This run: {visited}.</p>",
+    ]
 
 
 def _banner(metrics: Sequence[Metric], failure: str | None) -> str:
@@ -162,7 +225,8 @@ def _plot_section(plots: Iterable[Path]) -> list[str]:
     if not plots:
         return []
     return ['<h2 id="plots">Plots</h2>'] + [
-        f'<div class="figure"><img alt="{_e(Path(plot).name)}" src="{_png_data_uri(plot)}"></div>'
+        f'<figure class="figure"><img alt="{_e(Path(plot).name)}" src="{_png_data_uri(plot)}">'
+        f"<figcaption>{PLOT_CAPTIONS.get(Path(plot).name, _e(Path(plot).name))}</figcaption></figure>"
         for plot in plots
     ]
 
@@ -187,17 +251,37 @@ def _diagram_section(diagram: DiagramPicture | None) -> list[str]:
     return parts
 
 
-def _scenario_and_files(parameters: dict, files: Iterable[str]) -> list[str]:
-    """The scenario's parameters as a table, the links to the run's files, the footer."""
+def _parameter_rows(rows: list[tuple[str, object]]) -> str:
+    return "\n".join(
+        f"<tr><td><code>{_e(name)}</code></td><td>{_e(_format_value(value))}</td></tr>"
+        for name, value in rows
+    )
+
+
+def _scenario_and_files(parameters: dict, files: Iterable[str], defaults: dict | None = None) -> list[str]:
+    """The scenario's parameters (what it changes from the defaults first, the rest folded
+    away), the links to the run's files, the footer."""
     generated = datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
-    return [
-        '<h2 id="scenario">Scenario</h2>',
-        "<table><thead><tr><th>parameter</th><th>value</th></tr></thead><tbody>",
-        "\n".join(
-            f"<tr><td><code>{_e(name)}</code></td><td>{_e(_format_value(value))}</td></tr>"
-            for name, value in flatten(parameters)
-        ),
-        "</tbody></table>",
+    rows = flatten(parameters)
+    default = dict(flatten(defaults)) if defaults is not None else {}
+    changed = [(n, v) for n, v in rows if defaults is None or n not in default or default[n] != v]
+    unchanged = [(n, v) for n, v in rows if defaults is not None and n in default and default[n] == v]
+    head = "<table><thead><tr><th>parameter</th><th>value</th></tr></thead><tbody>"
+    parts = ['<h2 id="scenario">Scenario</h2>']
+    if defaults is not None:
+        parts.append(
+            f'<p class="muted">What this scenario sets: the {len(changed)} parameters that differ from '
+            "nsdrake's defaults (scenario.yaml holds every one; docs/scenario_fields.md explains each).</p>"
+        )
+    parts += [head, _parameter_rows(changed), "</tbody></table>"]
+    if unchanged:
+        parts += [
+            f"<details><summary>The other {len(unchanged)} parameters, at their defaults</summary>",
+            head,
+            _parameter_rows(unchanged),
+            "</tbody></table></details>",
+        ]
+    return parts + [
         '<h2 id="files">Files</h2><ul>',
         "\n".join(f'<li><a href="{_e(name)}">{_e(name)}</a></li>' for name in files),
         "</ul>",

@@ -1,7 +1,7 @@
 """One run of a scenario into an output folder: traces, metrics, plots, the
 diagram's picture, the 3D replay and the HTML report.
 
-(The output folder rules are in nsdrake/output.py; their names are re-exported here.)
+(The output folder rules are in nsdrake/experiment/output.py; their names are re-exported here.)
 """
 
 from __future__ import annotations
@@ -154,14 +154,18 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
     if failure:
         extra["failure"] = failure
     write_metrics(out / "metrics.json", metrics, extra)
-    plots = write_plots(scenario, sim.built, traces, sim.baseline, out)
+    title = run_title(scenario, traces, events, failure)
+    plots = write_plots(scenario, sim.built, traces, sim.baseline, out, title=title)
     notes = [contact_note(events)] if any(e == "lost" for e, _ in events) else []
     notes += [picture.note] if picture.note else []
     write_report(
         out,
-        title=f"nsdrake run {out.resolve().name}",
-        description=f"{scenario.description} (scenario: {scenario.source or 'built in code'})",
+        title=title,
+        description=f"The scenario ({scenario.source or 'built in code'}, folder {out.resolve().name}): "
+        f"{scenario.description}",
         parameters=yaml.safe_load(scenario_yaml(scenario)),
+        defaults=yaml.safe_load(scenario_yaml(Scenario())),
+        modes=modes_in_order(traces),
         metrics=metrics,
         plots=plots,
         diagram=picture,
@@ -209,6 +213,41 @@ def _simulate(scenario: Scenario, out: Path, progress, meshcat, live: bool) -> _
     return _Simulated(built, Traces.read_csv(baseline_csv), None, False)
 
 
+def modes_in_order(traces: Traces) -> list[int]:
+    """The modes of Fig. 1 the run went through, in order, a mode repeated when the run
+    returned to it; [] for traces without a mode column."""
+    if "mode" not in traces or len(traces) == 0:
+        return []
+    mode = traces["mode"].astype(int)
+    return [int(m) for k, m in enumerate(mode) if k == 0 or m != mode[k - 1]]
+
+
+def run_title(
+    scenario: Scenario, traces: Traces, events: list[tuple[str, float]], failure: str | None
+) -> str:
+    """The report's title, from what the run did (not what the scenario meant it to do):
+    how long it ran, whether and when the tool touched, which criteria the null space
+    served (Fig. 1's modes), and a failure."""
+    from nsdrake.reporting.report import MODE_WORDS
+
+    source = scenario.source or "a scenario built in code"
+    name = Path(source).stem if source.endswith((".yaml", ".yml")) else source
+    t_end = float(traces["t"][-1]) if len(traces) else 0.0
+    parts = [f"{name}, {t_end:.3g} s"]
+    touched = [t for e, t in events if e == "contact"]
+    if scenario.reference.force > 0 or touched:
+        parts.append(f"contact from t = {touched[0]:.3g} s" if touched else "the tool never touched")
+    modes = modes_in_order(traces)
+    if len(modes) == 1:
+        parts.append(f"level 2: {MODE_WORDS.get(modes[0], '?')} throughout (mode {modes[0]})")
+    elif modes:
+        parts.append("level 2: " + " → ".join(f"{MODE_WORDS.get(m, '?')} ({m})" for m in modes[:6]))
+        parts[-1] += " …" if len(modes) > 6 else ""
+    if failure:
+        parts.append("FAILED")
+    return "; ".join(parts)
+
+
 def contact_note(events: list[tuple[str, float]]) -> str:
     """One line: when contact was made, lost and regained."""
     words = {"contact": "made", "lost": "lost"}
@@ -220,8 +259,12 @@ def contact_note(events: list[tuple[str, float]]) -> str:
     return "contact " + ", ".join(parts) + " (the force command falls to 0 while contact is lost)"
 
 
-def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | None, out: Path) -> list[Path]:
-    """fig3.png, priority.png and pose.png, as the scenario's checks ask (none for an empty trace)."""
+def write_plots(
+    scenario: Scenario, built, traces: Traces, baseline: Traces | None, out: Path, title: str | None = None
+) -> list[Path]:
+    """fig3.png, priority.png and pose.png, as the scenario's checks ask (none for an empty trace),
+    titled ``title`` (what the run did: :func:`run_title`; default the scenario's description)."""
+    title = scenario.description if title is None else title
     if len(traces) < 2:
         return []
     k0 = first_contact_index(traces, scenario.reference.contact_threshold)
@@ -233,7 +276,7 @@ def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | No
             traces,
             out / "fig3.png",
             task_axes=built.station.arm_model.task_axes[: built.station.arm_model.m_t],
-            title=scenario.description,
+            title=title,
             baseline=baseline,
             contact_time=contact_time,
             selector=scenario.desired_null_space.selector,
@@ -243,7 +286,7 @@ def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | No
         plot_priority(
             traces,
             out / "priority.png",
-            title=scenario.description,
+            title=title,
             selector=scenario.desired_null_space.selector,
         )
     if {"pose", "self_motion"} & set(scenario.report.checks):
@@ -254,7 +297,7 @@ def write_plots(scenario: Scenario, built, traces: Traces, baseline: Traces | No
             out / "pose.png",
             normal=built.station.normal,
             task_axes=arm.task_axes[: arm.m_t],
-            title=scenario.description,
+            title=title,
             baseline=baseline,
             contact_time=contact_time,
             d_lim=scenario.desired_null_space.selector.d_lim,

@@ -14,9 +14,33 @@ class StationError(ValueError):
 
 
 @dataclass
+class PayloadConfig:
+    """What the tool carries (a gripper, a part), welded to the tool frame in the simulated
+    plant and, when ``declared``, in the controller's model too."""
+
+    # Its mass; 0: no payload [kg].
+    mass: float = 0.0
+    # Its centre of mass in the tool frame [m].
+    com: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # Its rotational inertia about the centre of mass, in the tool frame's axes, as
+    # [ixx, iyy, izz, ixy, ixz, iyz]; empty: a point mass [kg m²].
+    inertia: list[float] = field(default_factory=list)
+    # Whether the controller is told (false: the arm carries a payload its controller does
+    # not know about, and the tool sags by what the impedance lets it) [-].
+    declared: bool = True
+
+
+@dataclass
 class ArmConfig:
-    # Model file: a shipped model name (urdf/) or a path relative to the scenario file [-].
+    # Model file: a shipped model name (urdf/) or a path relative to the scenario file; a URDF,
+    # an SDF or Drake model directives (.dmd.yaml), parsed from the file (its meshes' relative
+    # URIs resolve from its folder) [-].
     urdf: str = "arm4.urdf"
+    # package:// URIs: {package name: folder}, folders relative to the scenario file; the
+    # nearest package.xml above the model file and ROS_PACKAGE_PATH are searched too [-].
+    packages: dict[str, str] = field(default_factory=dict)
+    # A payload on the tool frame; none by default.
+    payload: PayloadConfig = field(default_factory=PayloadConfig)
     # Frame of the arm whose origin is the task point (the tool tip) [-].
     tool_frame: str = "tool"
     # Joint positions at t = 0, keyed by joint name; every joint must be given [rad].

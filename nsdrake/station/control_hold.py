@@ -8,6 +8,22 @@ import numpy as np
 from pydrake.systems.framework import BasicVector
 
 from nsdrake.control.leaf_system import LeafSystem
+from nsdrake.control.validation import positive_problem, show, switch_problem
+from nsdrake.station.config import StationError
+
+
+def _arguments_problem(size, period, delay_periods, direct_feedthrough) -> str | None:
+    """Why ControlHold cannot take its arguments, naming the first wrong one, or None:
+    ``size`` and ``delay_periods`` counts (integers, not booleans), ``period`` a positive
+    finite number [s], ``direct_feedthrough`` true or false."""
+    for name, value, least in (("size", size, 1), ("delay_periods", delay_periods, 0)):
+        if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)) or value < least:
+            return f"{name} must be an integer >= {least}, got {show(value)}"
+    problem = positive_problem(period)
+    if problem:
+        return f"period {problem} [s]"
+    problem = switch_problem(direct_feedthrough)
+    return f"direct_feedthrough {problem}" if problem else None
 
 
 class ControlHold(LeafSystem):
@@ -55,9 +71,10 @@ class ControlHold(LeafSystem):
     """
 
     def __init__(self, *, size: int, period: float, delay_periods: int = 0, direct_feedthrough: bool = True):
+        problem = _arguments_problem(size, period, delay_periods, direct_feedthrough)
+        if problem:
+            raise StationError(f"ControlHold: {problem}")
         super().__init__()
-        if delay_periods < 0:
-            raise ValueError("ControlHold needs delay_periods >= 0")
         self._n = size
         self._d = delay_periods
         self._feedthrough = direct_feedthrough

@@ -29,11 +29,14 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JointActuatorIndex, RevoluteSpring
+
+from nsdrake.control.model_files import model_parser
 
 DRAKE_NS = "http://drake.mit.edu"
 ROTOR_MASS = 1e-3  # [kg] the placeholder rotor body (its inertia is the reflected one, on θ_m)
@@ -113,11 +116,11 @@ def add_elastic_arm(plant: MultibodyPlant, parser: Parser, arm_file, belt) -> tu
     return instances
 
 
-def rigid_arm_plant(arm_file, gravity) -> MultibodyPlant:
+def rigid_arm_plant(arm_file, gravity, packages=None) -> MultibodyPlant:
     """The arm of ``arm_file`` alone, rigid, finalized: the kinematics and dynamics of the
-    link coordinates (traces, metrics), never simulated."""
+    link coordinates (traces, metrics), never simulated. ``packages``: as the station's."""
     plant = MultibodyPlant(0.0)
-    Parser(plant).AddModels(str(arm_file))
+    model_parser(plant, Path(arm_file), packages or {}).AddModels(str(arm_file))
     plant.mutable_gravity_field().set_gravity_vector(np.asarray(gravity, dtype=float))
     plant.Finalize()
     return plant

@@ -42,6 +42,15 @@ from pydrake.systems.primitives import MatrixGain
 from nsdrake.control.criteria.obstacle import proximity_geometries
 from nsdrake.control.dynamics import ArmModel
 from nsdrake.control.model import Obstacle
+from nsdrake.control.model_files import (
+    Payload,
+    add_payload,
+    model_file_problem,
+    model_parser,
+    packages_problem,
+    payload_problem,
+    sdf_file_problem,
+)
 from nsdrake.control.validation import arm_problem
 from nsdrake.station.config import ArmConfig, ContactConfig, ObstacleConfig, PlateConfig, StationError
 from nsdrake.station.contact_monitor import ContactMonitor
@@ -80,8 +89,13 @@ class Station:
     tangent: np.ndarray
     q0: np.ndarray  # (n,) initial joint positions [rad]
     v0: np.ndarray  # (n,) initial joint velocities [rad/s]
-    arm_file: Path  # the arm's URDF
+    arm_file: Path  # the arm's model file (URDF, SDF or model directives)
     gravity: np.ndarray  # (3,) world gravity [m/s²]
+    # package:// folders for the arm's model file, {name: folder} (besides its package.xml).
+    packages: dict = field(default_factory=dict)
+    # The payload welded to the tool, and whether the controller is told about it.
+    payload: Payload | None = None
+    payload_declared: bool = True
     # Bodies of the extra obstacles (welded to the world).
     obstacle_bodies: list = field(default_factory=list)
     # Proximity geometries of the arm's links (the tool's excepted) and of the obstacles (plate included).
@@ -126,10 +140,17 @@ def _model_file(src: str, where: str, name: str, base_dir: Path | None) -> Path:
         path = resolve_model(name, base_dir)
     except FileNotFoundError as e:
         raise StationError(f"{src}: {where}: {e}") from None
-    try:
-        check_model_file(path)
-    except StationError as e:
-        raise StationError(f"{src}: {e}") from None
+    problem = model_file_problem(path)
+    if problem:
+        raise StationError(f"{src}: {where}: {problem}")
+    if path.suffix.lower() == ".urdf":
+        try:
+            check_model_file(path)
+        except StationError as e:
+            raise StationError(f"{src}: {e}") from None
+    problem = sdf_file_problem(path)
+    if problem:
+        raise StationError(f"{src}: {path.name}: {problem[0]}: {problem[1]}")
     return path
 
 
@@ -159,7 +180,7 @@ def add_station(
     convert to AutoDiffXd, for geometry queries."""
     world = _add_world(
         builder,
-        arm_urdf=arm.urdf,
+        arm=arm,
         plate=plate,
         contact=contact,
         gravity=gravity,
@@ -189,13 +210,16 @@ class _World(NamedTuple):
     X_WP: RigidTransform
     arm_file: Path
     gravity: np.ndarray
+    packages: dict
+    payload: Payload | None
 
 
 def _add_world(
-    builder, *, arm_urdf, plate, contact, gravity, time_step, obstacles, belt, base_dir, source
+    builder, *, arm, plate, contact, gravity, time_step, obstacles, belt, base_dir, source
 ) -> _World:
-    """The plant and its scene graph with the arm (behind belts, with ``belt``), the plate
-    welded to the world through the sensor joint, the obstacles and gravity; finalized."""
+    """The plant and its scene graph with the arm (behind belts, with ``belt``) and its
+    payload, the plate welded to the world through the sensor joint, the obstacles and
+    gravity; finalized."""
     config = MultibodyPlantConfig(
         time_step=time_step,
         contact_model=contact.model,
@@ -204,9 +228,13 @@ def _add_world(
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
     scene_graph.set_name("scene_graph")
-    arm_file = _model_file(source, "arm.urdf", arm_urdf, base_dir)
+    arm_file = _model_file(source, "arm.urdf", arm.urdf, base_dir)
     plate_file = _model_file(source, "plate.urdf", plate.urdf, base_dir)
-    arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, source)
+    packages = package_folders(arm, base_dir, source)
+    arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, packages, arm.tool_frame, source)
+    payload = station_payload(arm, source)
+    if payload is not None:
+        add_payload(plant, plant.GetFrameByName(arm.tool_frame, arm_instance), payload)
     plate_body = _the_one_body(plant, plate_instance, source)
     X_WP = RigidTransform(RollPitchYaw(plate.roll, plate.pitch, plate.yaw), np.asarray(plate.position))
     sensor_joint = plant.AddJoint(WeldJoint(SENSOR_JOINT, plant.world_frame(), plate_body.body_frame(), X_WP))
@@ -225,14 +253,39 @@ def _add_world(
         X_WP,
         arm_file,
         gravity,
+        packages,
+        payload,
     )
+
+
+def package_folders(arm: ArmConfig, base_dir: Path | None, source: str) -> dict[str, Path]:
+    """``arm.packages`` with each folder resolved against ``base_dir`` (the scenario's folder)."""
+    folders = {
+        name: (base_dir or Path.cwd()) / Path(folder).expanduser() for name, folder in arm.packages.items()
+    }
+    problem = packages_problem(folders)
+    if problem:
+        raise StationError(f"{source}: arm.packages: {problem}")
+    return folders
+
+
+def station_payload(arm: ArmConfig, source: str) -> Payload | None:
+    """``arm.payload`` as a :class:`nsdrake.control.model_files.Payload`, or None (mass 0)."""
+    p = arm.payload
+    if p.mass == 0:
+        return None
+    payload = Payload(mass=p.mass, com=tuple(p.com), inertia=tuple(p.inertia) if p.inertia else None)
+    problem = payload_problem(payload)
+    if problem:
+        raise StationError(f"{source}: arm.payload: {problem}")
+    return payload
 
 
 def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> Station:
     """The arm's model on the task axes, its initial state and the plate's directions on
     the task axes, on the finalized ``world``."""
     plant = world.plant
-    arm_model = _arm_model(plant, world.arm, arm, world.arm_file, task_axes, belt, world.gravity, source)
+    arm_model = _arm_model(plant, world, arm, task_axes, belt, source)
     q0, v0 = _initial_state(arm, arm_model.joint_names, source)
     elastic, plant_q0, plant_v0 = _plant_initial_state(plant, world.arm, arm_model, belt, q0, v0)
     try:
@@ -252,6 +305,9 @@ def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> 
         v0=v0,
         arm_file=world.arm_file,
         gravity=world.gravity,
+        packages=world.packages,
+        payload=world.payload,
+        payload_declared=arm.payload.declared,
         obstacle_bodies=world.obstacle_bodies,
         X_WP=world.X_WP,
         elastic=elastic,
@@ -260,18 +316,28 @@ def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> 
     )
 
 
-def _parse(plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, src: str):
-    parser = Parser(plant)
-    try:
-        (arm,) = (
-            add_elastic_arm(plant, parser, arm_file, belt)
-            if belt is not None
-            else parser.AddModels(str(arm_file))
+def _parse(
+    plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, packages, tool_frame: str, src: str
+):
+    """(the arm's model instance, the plate's): the arm's is the one that holds the tool frame
+    (a model directives file may add several)."""
+    if belt is not None and arm_file.suffix.lower() != ".urdf":
+        raise StationError(
+            f"{src}: realism.belt: belts split the joints of a URDF; {arm_file.name} is not one"
         )
-        (plate,) = parser.AddModels(str(plate_file))
+    try:
+        parser = model_parser(plant, arm_file, packages)
+        if belt is not None:
+            instances = add_elastic_arm(plant, parser, arm_file, belt)
+        else:
+            instances = parser.AddModels(str(arm_file))
+        (plate,) = Parser(plant).AddModels(str(plate_file))
     except Exception as e:
         raise StationError(f"{src}: cannot parse a model: {' '.join(str(e).split())}") from None
-    return arm, plate
+    holding = [i for i in instances if plant.HasFrameNamed(tool_frame, i)]
+    if len(holding) != 1:
+        raise StationError(f"{src}: arm.tool_frame: no frame '{tool_frame}' in {arm_file.name}")
+    return holding[0], plate
 
 
 def _the_one_body(plant: MultibodyPlant, plate: ModelInstanceIndex, src: str):
@@ -281,14 +347,15 @@ def _the_one_body(plant: MultibodyPlant, plate: ModelInstanceIndex, src: str):
     return plant.get_body(plate_bodies[0])
 
 
-def _arm_model(plant, arm_instance, arm: ArmConfig, arm_file, task_axes, belt, gravity, src) -> ArmModel:
+def _arm_model(plant, world: _World, arm: ArmConfig, task_axes, belt, src) -> ArmModel:
     """The arm's kinematics and dynamics on the task axes: on the station's plant, or on a
     rigid arm of its own beside belts (link coordinates)."""
+    arm_instance, arm_file = world.arm, world.arm_file
     if not plant.HasFrameNamed(arm.tool_frame, arm_instance):
         raise StationError(f"{src}: arm.tool_frame: no frame '{arm.tool_frame}' in {arm_file.name}")
     tool = plant.GetFrameByName(arm.tool_frame, arm_instance)
     if belt is not None:
-        tool = rigid_arm_plant(arm_file, gravity).GetFrameByName(arm.tool_frame)
+        tool = rigid_arm_plant(arm_file, world.gravity, world.packages).GetFrameByName(arm.tool_frame)
     try:
         arm_model = ArmModel(tool.GetParentPlant(), tool, tuple(task_axes))
     except ValueError as e:

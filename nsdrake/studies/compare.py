@@ -153,7 +153,11 @@ def variant_scenario(family: Family, index: int, config: Path | None, duration: 
     from nsdrake.experiment.scenario import validate
 
     variant = family.variants[index]
-    base = load_scenario(variant.scenario or family.scenario, config=config, duration=duration)
+    # validated once the variant's overrides are on it: the user's file may set what only
+    # the variant makes valid (a posture gain where the variant's source is the posture)
+    base = load_scenario(
+        variant.scenario or family.scenario, config=config, duration=duration, validated=False
+    )
     try:
         scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(variant.overrides), defaults=base)
     except Exception as e:
@@ -172,7 +176,9 @@ def check_variants(family: Family, config: Path | None, duration: float | None) 
     (:func:`nsdrake.experiment.scenario_station.add_scenario_station`: fields keyed by
     joint name against that variant's arm), before any variant runs. A problem that only
     ``config`` brings (the same variant without it is fine) names the user's file, not the
-    family's: the family's own variants are the shipped ones, tested."""
+    family's (the family's own variants are the shipped ones, tested), and the variant: a
+    setting only some variants accept (keyed by one arm's joints) is refused for the
+    first variant that does not."""
     from pydrake.systems.framework import DiagramBuilder
 
     from nsdrake.experiment.scenario_station import add_scenario_station
@@ -191,12 +197,10 @@ def check_variants(family: Family, config: Path | None, duration: float | None) 
                 check(i, None)
             except ScenarioError:
                 raise e from None
-            where = f"{family.source} [{variant.name}]: "
-            if not str(e).startswith(where):  # it names its file already (the user's)
-                raise e from None
-            raise ScenarioError(
-                f"{config}: {str(e)[len(where) :]} (in the variant '{variant.name}' of {family.name})"
-            ) from None
+            where, text = f"{family.source} [{variant.name}]: ", str(e)
+            if text.startswith(where):  # named after the family's file: the user's file it is
+                text = f"{config}: {text[len(where) :]}"
+            raise ScenarioError(f"{text} (in the variant '{variant.name}' of {family.name})") from None
 
 
 def slug(text: str) -> str:
@@ -335,7 +339,7 @@ def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
 
 
 def measure_realism(traces: Traces, ctx: RunFacts) -> dict:
-    """The realism ladder (nsdrake/realism.py), in the fig3 window (from 0.5 s after first
+    """The realism ladder (nsdrake/realism/), in the fig3 window (from 0.5 s after first
     contact to the end): the measured normal force's error (what the controller and the
     paper's Fig. 3 see), its drift (least-squares slope) and the share of it that the
     impedance law's normal spring adds, K_p,n nᵀ(x_d − x) / K_f (mean; the normal

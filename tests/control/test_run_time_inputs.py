@@ -105,7 +105,7 @@ REFUSED = {
     "f_d a list": (bad(2, f_d=[4.0]), r"f_d must be a number \[N\]"),
     "f_d None with a force axis": (bad(2, f_d=None), r"f_d is None, but the task has a force axis"),
     "t nan": (bad(2, t=np.nan), r"t must be a finite number"),
-    "t inf": (bad(2, t=np.inf), r"t is inf: must be finite"),
+    "t inf": (bad(2, t=np.inf), r"t must be a finite number, got inf"),
     "t before the previous call": (
         bad(2, t=0.0),
         r"t = 0 s is before the previous call's 0\.002 s: reset\(\)",
@@ -401,3 +401,93 @@ def test_the_first_call_refuses_a_time_given_as_text():
         ControllerInputError, match=r"^ControllerStep\.step: t must be a finite number, got '0\.1'"
     ):
         planar().step("0.1", *good_call(0)[1:])
+
+
+# ------------------------------------------------- nothing silently assumed (issue 36, item 3)
+
+
+@pytest.mark.parametrize("missing", ["R_d", "omega_d", "omegadot_d"])
+def test_a_rotation_never_given_is_refused_by_the_step_and_after_a_reset(missing):
+    """A pose task's first call without R_d (or ω_d, ω̇_d) is refused naming it: R_d = None
+    used to command the identity orientation (joints at their effort limits on issue 36's
+    arm). After a good call None holds the last one; after reset() it must be given again.
+    The τ of the call that holds equals the τ of a call that gives the same values again."""
+    step, reference = pose_step(), pose_step()
+    given = {"R_d": UNIT, "omega_d": np.array([0.1, 0.0, 0.0]), "omegadot_d": np.zeros(3)}
+    first = {name: value for name, value in given.items() if name != missing}
+    args, _ = pose_call(0)
+    with pytest.raises(ControllerInputError) as caught:
+        step.step(*args, **first)
+    assert re.fullmatch(
+        rf"ControllerStep\.step: {missing} is None on the first call \(since the step was made or "
+        r"reset\(\)\), but the task has rotational axes \['rx', 'ry', 'rz'\]: give .*; "
+        r"later calls may pass None to hold it",
+        str(caught.value),
+    ), str(caught.value)
+    step.step(*args, **given)
+    reference.step(*args, **given)
+    args, _ = pose_call(1)
+    np.testing.assert_array_equal(step.step(*args, **first).tau, reference.step(*args, **given).tau)
+    step.reset()
+    with pytest.raises(ControllerInputError, match=rf"{missing} is None on the first call"):
+        step.step(*pose_call(0)[0], **first)
+
+
+@pytest.mark.parametrize("fused", [False, True], ids=["named", "fused"])
+@pytest.mark.parametrize(
+    "missing", ["desired_orientation", "desired_angular_velocity", "desired_angular_acceleration"]
+)
+def test_a_rotation_port_never_connected_is_named_by_the_controllers_port(fused, missing):
+    """The Diagram, named or fused, refuses an unconnected rotation input naming the
+    controller's own port in one line (Drake named "InputPort[6] (R_d) of …
+    impedance_controller", or the Multiplexer's u5 in the fused system)."""
+    controller = NullSpaceImpedanceController(
+        controller_model=SPATIAL, config=ControllerConfig(period=T), task_axes=POSE, fused=fused
+    )
+    inputs = {
+        "desired_position": np.array([0.3, 0.1, 0.4]),
+        "desired_velocity": np.zeros(3),
+        "desired_acceleration": np.zeros(3),
+        "desired_orientation": UNIT,
+        "desired_angular_velocity": np.zeros(3),
+        "desired_angular_acceleration": np.zeros(3),
+    }
+    del inputs[missing]
+    context = fixed_context(controller, np.r_[SPATIAL_Q0, np.zeros(7)], **inputs)
+    with pytest.raises(ControllerInputError) as caught:
+        controller.GetOutputPort("generalized_force").Eval(context)
+    assert str(caught.value) == (
+        f"::controller input {missing}: not connected: the controller needs it at every tick "
+        "(connect it, or fix its value)"
+    )
+
+
+def test_time_must_advance_by_whole_periods_and_skipped_periods_are_taken():
+    """t repeated, between periods, or backwards: refused, the step as it was. Skipped
+    periods (t two or more periods on) are taken however many calls in a row: nsdrake's
+    drive on a loaded machine answers late for many statuses in a row, each time the
+    newest (nsdrake/driver/loop.py), and its UDP silence test stopped on the step's refusal
+    when ten skips in a row were refused. Fails if a stuck t is taken (it was: a second
+    tick at the same time), if a skip is refused, or if a refused call changed the step."""
+    step, reference = planar(), planar()
+    args = list(good_call(0))
+    step.step(*args)
+    reference.step(*args)
+    for t, expected in (
+        (0.0, r"t = 0 s is the previous call's time again"),
+        (
+            0.5 * T,
+            r"t = 0\.001 s is 0\.5 periods after the previous call's 0 s: t must advance by whole periods",
+        ),
+        (1.002 * T, r"t = 0\.002004 s is 1\.002 periods after"),
+        (-T, r"t = -0\.002 s is before the previous call's 0 s"),
+    ):
+        with pytest.raises(ControllerInputError, match=expected):
+            step.step(t, *args[1:])
+    t = 0.0
+    for k in range(30):  # thirty calls, each two or three periods on: taken
+        t += (2 + k % 2) * T
+        tau = step.step(t, *args[1:]).tau.copy()
+        np.testing.assert_array_equal(tau, reference.step(t, *args[1:]).tau)  # the refusals changed nothing
+        assert np.all(np.isfinite(tau))
+    step.step(t + T * (1 + 1e-9), *args[1:])  # rounding of t is not a time between periods

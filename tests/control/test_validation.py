@@ -377,7 +377,6 @@ def no_limit_urdf() -> str:
             {"obstacles": [Obstacle("far", Box(0.1, 0.1, 0.1), RigidTransform([1e6, 0.0, 0.0]))]},
             "obstacles[0]: its position 1e+06 m is beyond the 100 m",
         ),
-        (no_limit_urdf(), {"dynamics": "pinocchio"}, "controller_model: Pinocchio cannot read the URDF"),
     ],
     ids=[
         "unclosed XML",
@@ -395,7 +394,6 @@ def no_limit_urdf() -> str:
         "gravity of 10000 g",
         "obstacle of 1e200 m",
         "obstacle 1000 km away",
-        "Pinocchio asked, cannot read",
     ],
 )
 def test_bad_models_are_refused_in_one_line_naming_the_argument(urdf, kwargs, message):
@@ -407,11 +405,12 @@ def test_bad_models_are_refused_in_one_line_naming_the_argument(urdf, kwargs, me
     assert got.startswith(message), got
 
 
-def test_pinocchio_falls_back_to_drake_where_only_drake_reads_the_urdf():
-    """ "auto" dynamics: a URDF Pinocchio cannot read (revolute joints without <limit>,
-    which Drake accepts) gives Drake's terms, not an error."""
+def test_pinocchio_models_what_only_drake_reads():
+    """ "auto" dynamics: a URDF Pinocchio's own parser cannot read (revolute joints without
+    <limit>, which Drake accepts) still gets Pinocchio's terms: its model is built from the
+    plant Drake parsed (nsdrake/control/pinocchio_tree.py), not from the text."""
     model = ControllerModel.from_urdf(no_limit_urdf(), tool_frame="tool", task_axes=("x", "y"))
-    assert model.dynamics == "drake"
+    assert model.dynamics == "pinocchio"
     assert ControllerModel.from_urdf(PLANAR3, tool_frame="tool", task_axes=("x", "y")).dynamics == "pinocchio"
 
 

@@ -103,3 +103,47 @@ def test_the_field_parser_on_a_known_class():
     assert (docs["inner"].meaning, docs["inner"].unit, docs["inner"].default) == ("", "", "[1, 2]")
     assert (docs["plain"].meaning, docs["plain"].unit) == ("no unit here", "")
     assert [f.name for f in dataclasses.fields(Example)] == list(docs)
+
+
+def decision_tree_rows(text: str) -> dict[int, tuple[str, ...]]:
+    """docs/decision_tree.md's mode table: mode → its levels' criteria, level 2 first."""
+    words = {
+        "obstacle avoidance": "obstacle",
+        "joint limits": "joint_limits",
+        "joint-limit avoidance": "joint_limits",
+        "joint torque": "joint_torque",
+        "joint-torque minimisation": "joint_torque",
+        "manipulability": "manipulability",
+        "manipulability maximisation": "manipulability",
+    }
+    rows = {}
+    for line in text.splitlines():
+        match = re.match(r"^\| (\d) \| ([^|]+) \| ([^|]+) \|$", line)
+        if match:
+            names = [match.group(2).strip()] + [w.strip() for w in match.group(3).split(",")]
+            rows[int(match.group(1))] = tuple(words[w] for w in names if w != "nothing")
+    return rows
+
+
+def test_the_decision_tree_page_is_the_selector():
+    """docs/decision_tree.md's table (each mode's level 2 and lower levels) is
+    nsdrake.control.priority's ORDERINGS, every mode listed. Catches a mode or an ordering
+    changed in the code but not on the page the `mode` columns link to."""
+    from nsdrake.control.priority import ORDERINGS, Mode
+
+    rows = decision_tree_rows((ROOT / "docs" / "decision_tree.md").read_text())
+    assert rows == {int(m): tuple(c.value for c in ORDERINGS[m]) for m in Mode}
+    swapped = (
+        (ROOT / "docs" / "decision_tree.md").read_text().replace("| 2 | joint-torque", "| 3 | joint-torque")
+    )
+    assert decision_tree_rows(swapped) != rows
+
+
+def test_a_docstring_role_renders_as_its_target():
+    """A port's or a field's meaning read from a docstring shows ``:mod:`x``` as the literal
+    x, never the raw role (the API page printed ':mod:nsdrake.control.actuator_limits')."""
+    parts = nsdrake_docs.inline("clipped (:mod:`nsdrake.control.actuator_limits`: τ), :func:`~a.b` and `c`")
+    text = "".join(p.astext() for p in parts)
+    assert ":mod:" not in text and ":func:" not in text
+    literals = [p.astext() for p in parts if p.tagname == "literal"]
+    assert literals == ["nsdrake.control.actuator_limits", "a.b", "c"]

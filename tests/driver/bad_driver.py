@@ -23,7 +23,7 @@ WARM = 100  # commands before the fault
 UTIME0 = 1_700_000_000_000_000
 FAULTS = (
     "undecodable", "nan", "position_limit", "velocity_limit", "two_publishers", "silence",
-    "jump", "backward", "2khz", "250hz", "sensor_silence", "no_sensor",
+    "jump", "backward", "2khz", "250hz", "sensor_silence", "no_sensor", "creep",
 )  # fmt: skip
 
 
@@ -80,8 +80,12 @@ def main() -> None:
                 offset = -5 * step
         on = began is not None
         utime, robot_utime = utime + step, robot_utime + step
-        if on and fault == "position_limit":
-            q[5] += 0.009  # joint 6 creeps up, 0.009 rad a period (within the jump check), past its limit
+        if on and fault == "position_limit":  # joint 6 moves up at 2.5 rad/s (within its velocity limit,
+            # its reported velocity agreeing: half a step from rest first) until past its position limit
+            q[5] += 0.0025 if v[5] else 0.00125
+            v[5] = 2.5
+        if on and fault == "creep":  # joint 7 creeps at 5 rad/s while its velocity reads 0 (issue 35)
+            q[6] += 0.005
         data = status(
             q, v if not (on and fault == "velocity_limit") else [3.0] + v[1:], utime, robot_utime + offset
         )

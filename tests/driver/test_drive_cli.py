@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import json
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -113,6 +116,15 @@ def test_simulated_driver_writes_the_run_folder(tmp_path, capsys):
             "another process cannot reach the simulated driver",
         ),
         (["sim-driver", "panda_wipe", "--lcm", "bogus://x", "--expire-sec", "0"], "--expire-sec must be"),
+        (
+            ["drive", "panda_wipe", "--simulated-driver", "--realtime-rate", "1e-9"],
+            "--realtime-rate: 1e-09 would wait 1e+06 s of wall clock for each 1 ms control period; "
+            "give at least 0.001",
+        ),
+        (
+            ["drive", "panda_wipe", "--simulated-driver", "--realtime-rate", "0.00099"],
+            "--realtime-rate: 0.00099 would wait 1.01 s",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
@@ -126,16 +138,52 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, words):
     ("setting", "words"),
     [
         ("first_status_timeout: 1e9", "driver.first_status_timeout: must be at most 600 s"),
-        ("status_timeout_periods: 0.5", "driver.status_timeout_periods: must be >= 1"),
+        ("status_timeout_periods: 1.0e12", "driver.status_timeout_periods: removed: the silence bound is now "
+         "driver.expire_sec"),
+        ("expire_sec: 1.0e12", "driver.expire_sec: must be at most 0.1 s"),
+        ("expire_sec: 0.0015", "driver.expire_sec: must be at least two control periods (0.002 s"),
+        ("expire_sec: 0", "driver.expire_sec: must be a finite number > 0"),
+        ("start_tolerance: 1.0e9", "driver.start_tolerance: must be at most 0.00435 rad"),
+        ("start_tolerance: 0.0044", "driver.start_tolerance: must be at most 0.00435 rad"),
+        ("max_joint_step: 0.01", "driver.max_joint_step: must be at most 0.002484 rad"),
+        ("max_joint_step: -1", "driver.max_joint_step: must be a finite number >= 0"),
+        ("force_torque_channel: PANDA_STATUS", "force_torque_channel: must differ from status_channel"),
+        ("command_channel: PANDA_FORCE_TORQUE", "force_torque_channel: must differ from command_channel"),
+        ("status_channel: PANDA_COMMAND", "driver.command_channel: must differ from status_channel"),
     ],
-)
-def test_driver_timeouts_out_of_range_are_refused(tmp_path, capsys, setting, words):
-    """A first wait of 1e9 s (a drive that hangs for ever) and a silence bound under a period."""
+)  # fmt: skip
+def test_driver_settings_out_of_range_are_refused(tmp_path, capsys, setting, words):
+    """Issue 34, item 2 (its fourth round's cases among them): a first wait of 1e9 s (a
+    drive that hangs for ever), the removed silence setting, an expiry beyond what a held
+    torque allows or under two periods, a start tolerance beyond two periods of the slowest
+    joint (1e9: the full torque at the first command on an arm 1 rad away), a joint step
+    beyond the slowest joint's, and channels shared: one line, exit 2, nothing run (the
+    out folder not made)."""
     config = tmp_path / "c.yaml"
     config.write_text(f"driver: {{{setting}}}\n")
-    assert main(["drive", "panda_wipe", "--simulated-driver", "--config", str(config)]) == 2
+    out = tmp_path / "out"
+    argv = ["drive", "panda_wipe", "--simulated-driver", "--config", str(config), "--out", str(out)]
+    assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and words in err, err
+    assert not out.exists()
+
+
+def test_driver_settings_at_their_bounds_are_taken():
+    """The bounds themselves are taken (catches a refusal one ulp early): the start
+    tolerance of two periods of the slowest joint, the joint step of one, the expiry of
+    two periods and of 0.1 s."""
+    from nsdrake.driver.controller_side import check_drive_scenario
+    from nsdrake.driver.panda import VELOCITY_LIMIT, joint_step_allowance
+
+    for setting in (
+        {"start_tolerance": 2 * float(VELOCITY_LIMIT.min()) * 1e-3},
+        {"max_joint_step": float(joint_step_allowance(1e-3).min())},
+        {"expire_sec": 0.002},
+        {"expire_sec": 0.1},
+    ):
+        s = load_scenario("panda_wipe", duration=0.01)
+        check_drive_scenario(dataclasses.replace(s, driver=dataclasses.replace(s.driver, **setting)))
 
 
 def test_a_bad_driver_setting_is_refused(tmp_path, capsys):
@@ -252,14 +300,57 @@ def test_the_standalone_simulated_driver_applies_each_command_one_period_late():
 
 def test_the_simulated_driver_falls_back_to_damping_when_commands_expire():
     """The controller stops answering after 30 statuses: the driver applies its last
-    command while younger than expire_sec (20 ms of wall clock here), then damping (catches a driver
-    that applies a dead controller's last torque for ever, or drops it at once)."""
+    command while younger than expire_sec (20 ms of wall clock here, the scenario's
+    driver.expire_sec, which the driver reads as the controller does), then damping
+    (catches a driver that applies a dead controller's last torque for ever, drops it at
+    once, or ignores the scenario's expiry: 50 ms leaves fewer than 20 periods damped)."""
     scenario = load_scenario("panda_wipe")
+    scenario = dataclasses.replace(scenario, driver=dataclasses.replace(scenario.driver, expire_sec=0.02))
     lcm = DrakeLcm("memq://")
     AnsweringController(lcm, stop_after=30)
-    served = serve_simulated_driver(scenario, lcm, duration=0.1, expire_sec=0.02, low_pass_freq=1000.0)
+    # the driver's wall clock [µs] advancing 500 µs each time it is read (a stamp and an
+    # expiry check a period: 1 ms a period, whatever the machine's load)
+    wall = itertools.count(0, 500)
+    served = serve_simulated_driver(
+        scenario, lcm, duration=0.1, low_pass_freq=1000.0, wall_utime=lambda: next(wall)
+    )
     assert served.periods == 100 and served.fresh == 31, served  # 30 answers, the last also a period on
     assert served.commanded_periods == 30 and served.fresh_fraction == 1.0  # the controller's part: all fresh
-    # how many periods 20 ms of wall clock spans depends on the machine (a driver behind real
-    # time catches up faster): some, then damping to the end
-    assert served.stale >= 5 and served.expired >= 20 and served.expired == 100 - 31 - served.stale, served
+    # about 20 periods stale (with 50 ms: about 50), then damping to the end
+    assert 5 <= served.stale <= 25 and served.expired == 100 - 31 - served.stale, served
+
+
+def test_the_pacing_answers_ctrl_c_within_its_slice():
+    """The simulated driver's pacing (nsdrake/driver/run.py's Pacer) waits for the wall
+    clock, at least t / rate (0.05 s of robot time at rate 1), and returns once Ctrl-C's
+    flag is set although its target lies 1000 s ahead (catches Drake's Simulator pacing,
+    which sleeps in C++ where Ctrl-C is not read: issue 34's `--realtime-rate 1e-9`
+    answered only SIGKILL)."""
+    from nsdrake.driver.run import Pacer
+    from nsdrake.driver.stop import StopRequest
+
+    stop = StopRequest()
+    pacer = Pacer(1.0, stop)
+    pacer.wait(0.0)
+    start = time.perf_counter()
+    pacer.wait(0.05)
+    assert time.perf_counter() - start >= 0.049
+    waiting = threading.Thread(target=pacer.wait, args=(1000.0,), daemon=True)
+    waiting.start()
+    time.sleep(0.1)
+    assert waiting.is_alive()
+    stop.requested = True
+    waiting.join(timeout=30.0)
+    assert not waiting.is_alive()
+
+
+def test_a_paced_drive_is_paced():
+    """--realtime-rate 0.02: a drive of 0.05 s of robot time (50 ticks) takes at least
+    2.5 s of wall clock (catches the Pacer never called: unpaced, the 50 ticks take a few
+    ms each)."""
+    from nsdrake.driver.run import prepare
+
+    drive = prepare(load_scenario("panda_wipe", duration=0.05), realtime_rate=0.02)
+    start = time.perf_counter()
+    run = drive.run()
+    assert run.failure is None and time.perf_counter() - start >= 2.5

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import sys
 from pathlib import Path
 
@@ -32,6 +33,7 @@ FAULTS = {  # injected by tests/driver/bad_driver.py; the words of the controlle
     "250hz": "the stream's period is not the controller's 1000 µs",
     "sensor_silence": "no lcmt_force_torque on PANDA_FORCE_TORQUE for ",
     "no_sensor": "before the first command: no lcmt_force_torque on PANDA_FORCE_TORQUE within 3 s although",
+    "creep": "status refused: panda_joint7 moved ",
 }
 
 
@@ -93,13 +95,14 @@ def test_every_wire_fault_over_udp_is_one_line_and_nothing_after(tmp_path, fault
 
 def pair_script(duration: float, out: str, config: str | None = None) -> str:
     """nsdrake sim-driver and nsdrake drive, two processes on the namespace's bus, as the
-    README's recipe runs them (the driver's filter off, commands expire after 50 ms). The
-    driver serves 1 s longer than the drive: it counts from the first command it
-    receives, the drive from the first status after it was ready."""
+    README's recipe runs them (the driver's filter off; commands expire after the
+    scenario's driver.expire_sec, which both sides read: 50 ms as shipped). The driver
+    serves 1 s longer than the drive: it counts from the first command it receives, the
+    drive from the first status after it was ready."""
     config = f" --config {config}" if config else ""
     driver = python_in_namespace(
         f"-m nsdrake sim-driver panda_wipe --lcm '{URL}' --duration {duration + 1.0:g}{config} "
-        "--low-pass-freq 1000 --expire-sec 0.05"
+        "--low-pass-freq 1000"
     )
     drive = python_in_namespace(
         f"-m nsdrake drive panda_wipe --lcm '{URL}' --duration {duration:g}{config} --out {out}"
@@ -117,10 +120,11 @@ def test_a_drive_over_udp_between_two_processes(tmp_path):
     UDP between processes at all (a bus that drops statuses, DrakeLcm's one-message queue
     answering stale ones), the clock read from utime. (Which status is answered, and the
     timing rules, are tested at their boundaries in test_wire_faults.py.) The silence bound
-    is 200 periods here: the simulated driver is a Python simulation that a shared machine
-    stalls for ms (README)."""
+    is the most a scenario may set, 100 periods (driver.expire_sec 0.1 s, read by both
+    sides): this test runs in the fast subset beside the suite's workers, where the
+    simulated driver, a Python simulation, stalls for tens of ms."""
     require_namespace()
-    (tmp_path / "c.yaml").write_text("driver: {status_timeout_periods: 200}\n")
+    (tmp_path / "c.yaml").write_text("driver: {expire_sec: 0.1}\n")
     result = run_in_namespace(pair_script(1.5, "out", "c.yaml"), cwd=tmp_path, timeout=600)
     err = without_notices((tmp_path / "drive.err").read_text())
     assert result.returncode == 0, result.stderr
@@ -136,27 +140,34 @@ def test_a_drive_over_udp_between_two_processes(tmp_path):
     assert float(traces["f_n"].max()) > 2.0  # it reached the table: the run is a real one
 
 
+ACCEPTANCE = "NSDRAKE_ACCEPTANCE"  # .ci/run's own step after the suite sets it (=1)
+
+
 @pytest.mark.slow
 def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
-    """Issue 27's acceptance: 20 s of panda_wipe over UDP between the two processes,
-    free-running at 1 kHz real time with the default bounds: the drive ends without a
-    fault, every bound met, the controller's clock on the robot's (20 000 periods), and
-    at least 99% of the simulated driver's periods applied a fresh command. This needs
-    both processes to keep real time: on a machine loaded beyond its cores it is skipped,
-    saying so. On this project's 2-core virtual machine it fails even idle: a C thread at
-    real-time priority is woken more than the 3 ms silence bound late within 20 s
-    (bench/bench_machine_floor.py; docs/real_arm.md, "Measured")."""
+    """Issues 27 and 35's acceptance: 20 s of panda_wipe over UDP between the two
+    processes, free-running at 1 kHz real time at the shipped settings (the silence bound
+    the driver's expiry, 50 ms): the drive exits 0 (no fault, every bound met), the
+    controller's clock on the robot's (20 000 periods), and at least 99% of the simulated
+    driver's periods between the first and the last command applied the answer to the
+    previous status. Both processes must keep real time, so it runs in CI's own step
+    after the suite, when the machine is quiet (.ci/run sets NSDRAKE_ACCEPTANCE=1), not
+    beside the suite's workers: elsewhere it is skipped, saying how to run it."""
+    if os.environ.get(ACCEPTANCE) != "1":
+        pytest.skip(f"the 20 s real-time acceptance runs alone: {ACCEPTANCE}=1 (.ci/run's last step)")
     require_namespace()
-    load, cores = os.getloadavg()[0], os.cpu_count() or 1
-    if load > 0.75 * cores:
-        pytest.skip(f"load average {load:.1f} on {cores} cores: the machine cannot keep two 1 kHz loops")
     result = run_in_namespace(pair_script(20.0, "out"), cwd=tmp_path, timeout=900)
     assert result.returncode == 0, result.stderr
-    assert (tmp_path / "drive.rc").read_text().strip() == "0", (tmp_path / "drive.err").read_text()
+    err = (tmp_path / "drive.err").read_text()
+    assert (tmp_path / "drive.rc").read_text().strip() == "0", err + (tmp_path / "drive.out").read_text()
     timing = json.loads((tmp_path / "out" / "timing.json").read_text())
     assert "failure" not in timing and 20000 <= timing["periods"] <= 20003
+    assert timing["silence_bound_periods"] == 50.0
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert metrics["status"] == "ok" and metrics["all_passed"] and len(metrics["metrics"]) > 5, metrics
     line = (tmp_path / "driver.out").read_text().splitlines()[-1]
     fresh = float(line.split("of them applied a fresh command (")[1].split("%")[0])
+    print(f"acceptance: {line}; drive {json.dumps(timing)}")
     assert fresh >= 99.0, line
 
 
@@ -189,3 +200,87 @@ def test_ctrl_c_stops_the_simulated_driver_with_130(tmp_path):
     assert (tmp_path / "rc").read_text().strip() == "130"
     err = without_notices((tmp_path / "err").read_text())
     assert err == "nsdrake: simulated driver interrupted (Ctrl-C)\n", err
+
+
+def interrupt_script(tries: int, seed: int) -> tuple[str, list[dict]]:
+    """A bash script of ``tries`` drives (panda_wipe for 30 s, each into its own folder)
+    each sent SIGINT at a random moment (seeded): even tries with no driver on the bus
+    (the drive waits for its first status; SIGINT 0-1 s after it says it drives), odd
+    tries beside a fresh nsdrake sim-driver (mid-run: 0.3-3 s after). Returns the script
+    and the tries' plans."""
+    rng = random.Random(seed)
+    lines, plans = [], []
+    wait = "for j in $(seq 1200); do grep -q {word} {file} && break; sleep 0.05; done"
+    for i in range(tries):
+        mid_run = i % 2 == 1
+        delay = rng.uniform(0.3, 3.0) if mid_run else rng.uniform(0.0, 1.0)
+        plans.append({"try": i, "mid_run": mid_run, "delay": round(delay, 3)})
+        config = " --config c.yaml" if mid_run else ""
+        drive = python_in_namespace(
+            f"-m nsdrake drive panda_wipe --lcm '{URL}' --duration 30 --out out{i}{config}"
+        )
+        if mid_run:
+            driver = python_in_namespace(f"-m nsdrake sim-driver panda_wipe --lcm '{URL}'{config}")
+            serving = wait.format(word="serving", file=f"s{i}.out")
+            lines += [f"{driver} > s{i}.out 2> s{i}.err &", "spid=$!", serving]
+        lines += [
+            f"{drive} > d{i}.out 2> d{i}.err &",
+            "pid=$!",
+            wait.format(word="driving", file=f"d{i}.out"),
+            f"sleep {delay:.3f}; kill -INT $pid; wait $pid; echo $? > d{i}.rc",
+        ]
+        if mid_run:
+            lines += ["kill -INT $spid; wait $spid || true"]
+    return "\n".join(lines) + "\n", plans
+
+
+def check_interrupted(folder: Path, plan: dict) -> int | None:
+    """One try of interrupt_script: exit 130, one line on stderr saying Ctrl-C, and the
+    run folder kept, marked interrupted; returns the commands sent. None for a mid-run
+    try whose drive had stopped on a silence of the simulated driver (a Python simulation
+    that a loaded machine stalls past the bound) before the SIGINT came: no test of it."""
+    i = plan["try"]
+    err = without_notices((folder / f"d{i}.err").read_text())
+    timing = json.loads((folder / f"out{i}" / "timing.json").read_text())
+    if plan["mid_run"] and timing.get("status") == "failed" and "no lcmt_panda_status" in timing["failure"]:
+        return None
+    assert (folder / f"d{i}.rc").read_text().strip() == "130", (plan, err)
+    assert err.count("\n") == 1 and "interrupted (Ctrl-C); stopped commanding after" in err, (plan, err)
+    assert "marked interrupted" in err and "bus failed" not in err, (plan, err)
+    assert timing["status"] == "interrupted", (plan, timing)
+    commands = int(err.split("stopped commanding after ")[1].split(" ")[0])
+    assert timing["commands"] == commands
+    if commands:
+        assert len(Traces.read_csv(folder / f"out{i}" / "traces.csv")) == commands
+        assert json.loads((folder / f"out{i}" / "metrics.json").read_text())["status"] == "interrupted"
+    return commands
+
+
+@pytest.mark.parametrize("tries", [2, pytest.param(10, marks=pytest.mark.slow)], ids=["2 tries", "10 tries"])
+def test_ctrl_c_at_random_moments_over_udp_is_an_interrupt(tmp_path, tries):
+    """Issue 34, item 1: `nsdrake drive --lcm udpm://…` sent SIGINT at random moments
+    (interrupt_script: waiting for the first status, and mid-run beside nsdrake
+    sim-driver) ends every time with one line, exit 130, the folder kept and marked
+    interrupted. Catches the interrupted wait for a status (LCM's select() returning
+    EINTR, raised by the lcm package as an OSError) taken for a bus failure ("the LCM bus
+    failed", exit 1: every waiting try and most mid-run ones before the fix), and a
+    SIGINT between the drive's first line and its loop that undoes the folder. The mid-run
+    tries (silence bound 0.1 s on both sides: the most a scenario may set) must have
+    commanded; one whose drive the loaded machine had stopped on a silence first is no
+    test of Ctrl-C and is counted aside, and of five, at least one must be a test. The
+    seed is printed for a failure to be replayed."""
+    require_namespace()
+    seed = random.SystemRandom().randrange(1 << 30)
+    print(f"seed {seed}")
+    (tmp_path / "c.yaml").write_text("driver: {expire_sec: 0.1}\n")
+    script, plans = interrupt_script(tries, seed)
+    result = run_in_namespace(script, cwd=tmp_path, timeout=120 * tries)
+    assert result.returncode == 0, result.stderr
+    tested = 0
+    for plan in plans:
+        commands = check_interrupted(tmp_path, plan)
+        if plan["mid_run"] and commands is not None:
+            assert commands > 0, plan
+            tested += 1
+    print(f"{tested} of {tries // 2} mid-run tries interrupted mid-run (the others: a silence first)")
+    assert tested >= (1 if tries >= 10 else 0)

@@ -18,9 +18,10 @@ from fake_bus import FakeBus, force_torque_bytes, status_bytes
 
 from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.faults import clock_problem, elapsed_periods, jump_problem, start_problem
-from nsdrake.driver.loop import ControllerLoop, DriveFaultError
+from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
 from nsdrake.driver.panda import POSITION_UPPER, VELOCITY_LIMIT, limit_problem
-from nsdrake.driver.run import Drive, write_drive_folder
+from nsdrake.driver.run import Drive, _timing, write_drive_folder
+from nsdrake.driver.timing import GcPauses, timing_line
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.traces import Traces
 
@@ -130,19 +131,19 @@ def test_the_newest_status_is_answered_and_the_others_counted_skipped(sides):
     loop.tick()  # publishes at +2.5 ms: three more statuses arrived meanwhile
     bus.tick_cost = 0.0
     robot.status(after=0.5e-3)
-    robot.status(after=0.5e-3, q=robot.q + 1e-3)
-    newest = robot.status(after=0.5e-3, q=robot.q + 2e-3)
+    robot.status(after=0.5e-3, q=robot.q + 1e-4)
+    newest = robot.status(after=0.5e-3, q=robot.q + 2e-4)
     loop.tick()
     assert bus.sent[-1][1].utime == newest and loop.skipped == 2
-    np.testing.assert_allclose(loop.recorder.rows[loop.recorder.count - 1, 1:8], robot.q + 2e-3)
+    np.testing.assert_allclose(loop.recorder.rows[loop.recorder.count - 1, 1:8], robot.q + 2e-4)
     assert loop.periods == 4  # the robot's clock: four periods since the first status, none replayed
 
 
 @pytest.mark.parametrize(("step_us", "periods"), [(1900, 2), (1400, 1), (2600, 3), (3000, 3)])
 def test_a_gap_is_counted_in_periods_to_the_nearest(sides, step_us, periods):
     """A status 1.9 periods after the previous is two periods on (catches a gap counted as
-    one: the controller's clock falls behind the robot's), 1.4 is one, 2.6 and 3 (the
-    bound, accepted) are three."""
+    one: the controller's clock falls behind the robot's), 1.4 is one, 2.6 and 3 are
+    three."""
     loop, robot, bus = start_loop(sides)
     robot.status()
     loop.start()
@@ -206,10 +207,10 @@ def test_utime_jitter_is_taken_around_the_stream_s_phase(sides):
         (0, "repeats the previous status's (a second publisher on the channel?)"),
         (-1000, "went back 1000 µs"),
         (500, "within the same control period: the stream is faster than the controller's period"),
-        (4000, "jumped 4.000 ms (4.0 periods)"),
+        (51000, "jumped 51.000 ms (51.0 periods) from the previous status's (the silence bound: 50 periods"),
         (3 * 3600 * 10**6, "jumped 10800000.000 ms"),
     ],
-    ids=["repeat", "backward", "2 kHz", "250 Hz", "3 h jump (NTP step)"],
+    ids=["repeat", "backward", "2 kHz", "past the bound", "3 h jump (NTP step)"],
 )
 def test_a_clock_that_is_not_the_robot_s_period_stops_the_controller(sides, clock_step, words):
     loop, robot, bus = start_loop(sides)
@@ -227,13 +228,12 @@ def test_a_clock_that_is_not_the_robot_s_period_stops_the_controller(sides, cloc
 
 
 def test_a_slower_stream_is_told_from_lost_statuses(sides):
-    """driver.status_timeout_periods 5: a status two periods after the previous now and
+    """A silence bound of 5 periods: a status two periods after the previous now and
     then (one lost) is taken, nine in a row too; the tenth in a row at 250 Hz (4 periods
     each, within the bound) stops the controller naming the stream's period (catches a
     250 Hz stream run as a 1 kHz one that loses three statuses in four)."""
     loop, robot, bus = start_loop(sides, **{})
-    loop.bound = 5 * T
-    loop.config = dataclasses.replace(loop.config, status_timeout_periods=5.0)
+    loop.bound, loop.bound_periods = 5 * T, 5.0
     robot.status()
     loop.start()
     for _ in range(5):
@@ -265,13 +265,15 @@ def test_two_publishers_on_the_status_channel_are_named(sides):
 
 
 def test_silence_is_declared_at_the_bound_on_the_wall_clock(sides):
-    """driver.status_timeout_periods 3: a status 3 ms after the last is answered, none for
-    just over 3 ms stops the controller (catches silence declared a period late, or
-    counted from the end of the controller's own tick)."""
+    """The shipped bound, driver.expire_sec 0.05 s (50 periods): a status 50 ms after the
+    last is answered, none for just over 50 ms stops the controller (catches silence
+    declared a period late, counted from the end of the controller's own tick, or the
+    bound not following expire_sec: 3 periods before issue 35)."""
     loop, robot, bus = start_loop(sides)
+    assert loop.bound_periods == 50.0 and loop.bound == pytest.approx(0.05, abs=1e-15)
     robot.status()
     loop.start()
-    robot.status(after=3e-3, clock_step=3000)
+    robot.status(after=50e-3, clock_step=50000)
     loop.tick()
     assert loop.commands == 2
     bus.tick_cost = 2.5e-3  # a long tick: silence still counts from the status's arrival
@@ -280,8 +282,53 @@ def test_silence_is_declared_at_the_bound_on_the_wall_clock(sides):
     with pytest.raises(DriveFaultError) as info:
         loop.tick()
     waited = bus.now - robot.arrival
-    assert 3e-3 < waited <= 3e-3 + 1e-5, waited
-    assert "no lcmt_panda_status on PANDA_STATUS for 3.0 ms" in info.value.problem
+    assert 50e-3 < waited <= 50e-3 + 1e-5, waited
+    assert info.value.problem == (
+        "no lcmt_panda_status on PANDA_STATUS for 50.0 ms "
+        "(the silence bound: driver.expire_sec 0.05 s, 50 periods)"
+    )
+
+
+def test_the_bound_follows_driver_expire_sec(sides):
+    """driver.expire_sec 0.02 s: the silence bound is 20 periods, and a clock 21 periods on
+    is refused (catches a bound that ignores the setting)."""
+    scenario = sides["sensor"].scenario
+    side = dataclasses.replace(
+        sides["sensor"], scenario=dataclasses.replace(
+            scenario, driver=dataclasses.replace(scenario.driver, expire_sec=0.02)
+        )
+    )  # fmt: skip
+    bus = FakeBus()
+    loop = ControllerLoop(side, bus, clock=bus.clock)
+    robot = Robot(bus, side.station.q0)
+    loop.ready()
+    assert loop.bound_periods == pytest.approx(20.0) and loop.bound == pytest.approx(0.02)
+    error = run_until_fault(loop, robot, bus, lambda r: r.status(after=20e-3, clock_step=21000))
+    assert "jumped 21.000 ms (21.0 periods)" in error.problem and "20 periods" in error.problem
+
+
+def test_late_statuses_within_the_bound_are_glitches_counted_by_length(sides):
+    """Statuses 2, 3, 10, 11, 50 and 2 periods after the previous, each a glitch: answered,
+    and counted 2 of 2 periods, 2 of 3-10, 2 of 11-50, the longest 50 (catches an
+    off-by-one at a bin's edge, a gap counted in ms or in statuses, and a glitch taken for
+    a fault); then one status 51 periods on stops the controller."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    for gap in (2, 3, 10, 11, 50, 2):
+        robot.status(after=gap * T, clock_step=gap * 1000)
+        loop.tick()
+        robot.status()
+        loop.tick()
+    assert loop.commands == 13 and loop.gap_counts.tolist() == [2, 2, 2, 0] and loop.longest_gap == 50
+    timing = _timing(loop, GcPauses(), True)
+    assert timing["gaps"] == {"2": 2, "3-10": 2, "11-50": 2, "over 50": 0}
+    assert timing["longest_gap_periods"] == 50
+    line = timing_line(timing)
+    assert "late statuses: 2 of 2, 2 of 3-10, 2 of 11-50 periods, the longest 50 periods" in line
+    robot.status(after=51 * T, clock_step=51000)
+    with pytest.raises(DriveFaultError):
+        loop.tick()
 
 
 def long_tick_then_five_statuses(loop, robot, bus) -> None:
@@ -327,22 +374,22 @@ def test_the_longest_silence_is_the_longest_wait_from_the_last_arrival(sides):
 
 
 def test_the_sensor_s_silence_is_elapsed_time_not_statuses(sides):
-    """Force-torque messages stop at t = 1 ms; statuses go on, the next two 2.5 ms and
-    1 ms later (one period on each, a late status is not a fault): at 3.5 ms the sensor
-    is silent 2.5 ms (< 3, taken), at 4.5 ms 3.5 ms: refused, though only two statuses
-    came (catches silence counted in statuses or periods)."""
+    """Force-torque messages stop at t = 1 ms; statuses go on, the next two 49.5 ms and
+    1 ms later (one period on each, a late status is not a fault): at 50.5 ms the sensor
+    is silent 49.5 ms (< the 50 ms bound, taken), at 51.5 ms 50.5 ms: refused, though only
+    two statuses came (catches silence counted in statuses or periods)."""
     loop, robot, bus = start_loop(sides)
     robot.status()
     loop.start()
     robot.status()
     loop.tick()
     robot.force_torque = False
-    robot.status(after=2.5e-3)
+    robot.status(after=49.5e-3)
     loop.tick()
     robot.status()
     with pytest.raises(DriveFaultError) as info:
         loop.tick()
-    assert "no lcmt_force_torque on PANDA_FORCE_TORQUE for 3.5 ms" in info.value.problem
+    assert "no lcmt_force_torque on PANDA_FORCE_TORQUE for 50.5 ms" in info.value.problem
     assert loop.commands == 3
 
 
@@ -363,17 +410,19 @@ def test_a_refused_status_stops_the_controller(sides, fault, words):
 
 
 def test_a_joint_beyond_the_panda_s_limits_stops_the_controller(sides):
-    """Joint 6 at its published upper limit + 0.02 rad (margin 0.01): refused, reached in
-    steps the jump check allows (catches a position creeping past the limit)."""
+    """Joint 6 at its published upper limit + 0.02 rad (margin 0.01): refused, reached at
+    2.5 rad/s (its velocity reported: steps the motion checks allow; catches a position
+    moving past the limit)."""
     loop, robot, bus = start_loop(sides)
     robot.status()
     loop.start()
-    q = robot.q.copy()
+    q, v = robot.q.copy(), np.zeros(7)
     target = POSITION_UPPER[5] + 0.02
     with pytest.raises(DriveFaultError) as info:
         while True:
-            q[5] = min(q[5] + 0.009, target)
-            robot.status(q=q)
+            q[5] = min(q[5] + (0.0025 if v[5] else 0.00125), target)
+            v[5] = 2.5
+            robot.status(q=q, v=v)
             loop.tick()
     assert (
         "panda_joint6 is at" in info.value.problem
@@ -486,7 +535,7 @@ def test_without_force_torque_messages_the_line_names_the_sensor(sides):
 def test_first_status_outside_the_start_tolerance_is_refused(sides):
     loop, robot, bus = start_loop(sides)
     q = robot.q.copy()
-    q[3] += 0.02  # start_tolerance 0.01 rad
+    q[3] += 0.02  # start_tolerance 0.004 rad
     robot.status(q=q)
     with pytest.raises(DriveFaultError) as info:
         loop.start()
@@ -511,8 +560,11 @@ def test_pure_checks():
     q0 = np.zeros(7)
     assert start_problem(q0 + 0.01, q0, 0.01, NAMES) is None
     assert "panda_joint7" in start_problem(q0 + np.arange(7) * 0.002, q0, 0.01, NAMES)
-    assert jump_problem(q0 + 0.02, q0, 0.01, 2, NAMES) is None
-    assert jump_problem(q0 + 0.021, q0, 0.01, 2, NAMES) is not None
+    allowance = np.full(7, 0.02)
+    assert jump_problem(q0 + 0.02, q0, allowance, 2, NAMES, "of x") is None
+    assert "panda_joint1 moved 0.021 rad in 2 period(s), more than the 0.02 rad of x" in jump_problem(
+        q0 + 0.021, q0, allowance, 2, NAMES, "of x"
+    )
     assert clock_problem(2000, 1000, 0, 1000, 3.0, "utime") is None
     assert clock_problem(1500, 1300, 0, 1000, 3.0, "utime") is None  # 200 µs, but periods 1 → 2: jitter
     assert "same control period" in clock_problem(1499, 1000, 0, 1000, 3.0, "utime")
@@ -566,3 +618,179 @@ def test_the_robot_s_success_rate_is_reported_once_the_drive_has_run_its_window(
     assert loop.success_rate_min == 0.9
     summary = timing_summary(loop.times.seconds, T, control_command_success_rate_min=loop.success_rate_min)
     assert "the robot's control_command_success_rate fell to 0.90" in timing_line(summary)
+
+
+def creeping(joint: int, step: float, v=None):
+    """A fault: every status from now on has ``joint`` ``step`` [rad] further on, its
+    reported velocity ``v`` (default zeros)."""
+
+    def fault(r):
+        r.q = r.q.copy()
+        r.q[joint] += step
+        r.status(v=v)
+
+    return fault
+
+
+def test_a_position_creeping_at_5_rad_s_is_refused_at_the_first_status(sides):
+    """Issue 35's acceptance: joint 7 creeping 0.005 rad per 1 ms status (5 rad/s, beyond
+    its 2.61 rad/s limit) while its velocity reads 0 is refused at the first status that
+    shows it, naming the joint (catches the old 0.01 rad-a-period max_joint_step, which
+    let it through for 90 commands, and a bound per period from the fastest joint only)."""
+    loop, robot, bus = start_loop(sides)
+    error = run_until_fault(loop, robot, bus, creeping(6, 0.005))
+    assert error.problem.startswith(
+        "status refused: panda_joint7 moved 0.005 rad in 1 period(s), more than the 0.00294 rad"
+    ), error.problem
+
+
+@pytest.mark.parametrize(("joint", "speed"), [(0, 2.2), (6, 2.7)])
+def test_a_joint_near_its_velocity_limit_is_no_fault(sides, joint, speed):
+    """A joint moving steadily at its velocity limit (+ the 5% margin's most), its velocity
+    reported: answered (catches bounds tighter than a Panda's own motion)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    v = np.zeros(7)
+    v[joint] = speed
+    robot.q = robot.q.copy()
+    robot.q[joint] += speed * T / 2  # from rest: the trapezoid of 0 and the speed
+    robot.status(v=v)
+    loop.tick()
+    for _ in range(20):
+        robot.q = robot.q.copy()
+        robot.q[joint] += speed * T
+        robot.status(v=v)
+        loop.tick()
+    assert loop.commands == 22
+
+
+@pytest.mark.parametrize(("joint", "speed"), [(0, 2.6), (4, 3.1)])
+def test_a_joint_faster_than_its_limit_is_refused_naming_it(sides, joint, speed):
+    """Joint 1 at 2.6 rad/s (limit 2.175) and joint 5 at 3.1 (limit 2.61), its velocity
+    reading 0: refused at once, by its velocity limit's step, checked first (catches one
+    bound for all joints, the fastest's: joint 1 at 2.6 would pass it)."""
+    loop, robot, bus = start_loop(sides)
+    error = run_until_fault(loop, robot, bus, creeping(joint, speed * T))
+    assert error.problem.startswith(f"status refused: panda_joint{joint + 1} moved ")
+    assert "its velocity limit allows" in error.problem
+
+
+def test_a_position_that_its_velocity_does_not_explain_is_refused(sides):
+    """Joint 3 creeping 0.001 rad a period (1 rad/s, well within its limit) while its
+    velocity reads 0: refused at the first such status by the velocity check (catches the
+    check missing or comparing the wrong status's velocity); the same move with the
+    velocity reported, 1 rad/s, is answered (the test above)."""
+    loop, robot, bus = start_loop(sides)
+    error = run_until_fault(loop, robot, bus, creeping(2, 0.001))
+    assert error.problem.startswith(
+        "status refused: panda_joint3 moved 0.001 rad in 1 ms while its reported velocity (0 then 0 rad/s) "
+        "says 0 rad: they disagree by more than 0.000235 rad"
+    ), error.problem
+
+
+def test_max_joint_step_set_is_one_bound_for_every_joint(sides):
+    """driver.max_joint_step 0.001 rad: joint 2 starting to move at 1.2 rad/s (its velocity
+    reported; within its limit) is answered for its first half step, 0.0006 rad, and
+    refused at its first whole one, 0.0012 rad, naming the setting (catches a set value
+    ignored)."""
+    loop, robot, bus = start_loop(sides)
+    loop.config = dataclasses.replace(loop.config, max_joint_step=0.001)
+    v = np.zeros(7)
+    v[1] = 1.2
+
+    def move(r):
+        creeping(1, 0.0006, v)(r)
+        creeping(1, 0.0012, v)(r)
+
+    error = run_until_fault(loop, robot, bus, move, sent=6)
+    assert error.problem == (
+        "status refused: panda_joint2 moved 0.0012 rad in 1 period(s), more than the 0.001 rad "
+        "of driver.max_joint_step 0.001 rad per period"
+    )
+
+
+class InterruptedBus(FakeBus):
+    """A bus whose wait fails as the ``lcm`` package's does when a signal interrupts
+    select() (OSError "lcm_handle_timeout() returned -1"): at the ``at``-th handle call
+    with a timeout, ``times`` times in a row, after running ``signal()`` (the handler)."""
+
+    def __init__(self, at: int, times: int, signal=lambda: None):
+        super().__init__()
+        self.calls, self.fail_at, self.times, self.signal = 0, at, times, signal
+
+    def handle(self, timeout_ms: int) -> int:
+        if timeout_ms:
+            self.calls += 1
+        if self.calls >= self.fail_at and self.times:
+            self.times -= 1
+            self.signal()
+            raise OSError("lcm_handle_timeout() returned -1")
+        return super().handle(timeout_ms)
+
+
+def test_ctrl_c_during_a_wait_is_an_interrupt_not_a_bus_failure(sides):
+    """SIGINT while the loop waits for a status (the flag set, the wait failing with
+    EINTR's OSError): DriveInterruptedError, at the start and mid-run (catches the OSError
+    reported as "the LCM bus failed", exit 1: issue 34)."""
+    for at in (1, 4):
+        bus = InterruptedBus(at, 1)
+        loop = ControllerLoop(sides["sensor"], bus, clock=bus.clock)
+        loop.side.reset()
+        bus.signal = lambda loop=loop: setattr(loop.stop, "requested", True)
+        robot = Robot(bus, loop.side.station.q0)
+        loop.ready()
+        robot.status()
+        with pytest.raises(DriveInterruptedError):
+            loop.start()
+            for _ in range(10):
+                robot.status(after=3 * T, clock_step=3000)
+                loop.tick()
+        assert (loop.commands == 0) == (at == 1) and len(bus.sent) == loop.commands
+
+
+def test_another_signal_s_eintr_is_no_fault_and_a_broken_bus_stays_one(sides, tmp_path):
+    """The wait failing once without Ctrl-C (another signal's EINTR): retried, no fault; a
+    wait failing every time (a broken socket): "the LCM bus failed", not an interrupt
+    (catches every OSError taken for Ctrl-C, or every one for a failure)."""
+    bus = InterruptedBus(2, 1)
+    loop = ControllerLoop(sides["sensor"], bus, clock=bus.clock)
+    loop.side.reset()
+    robot = Robot(bus, loop.side.station.q0)
+    loop.ready()
+    robot.status()
+    loop.start()
+    for _ in range(5):
+        robot.status(after=3 * T, clock_step=3000)
+        loop.tick()
+    assert loop.commands == 6
+    bus = InterruptedBus(2, 1000)
+    loop = ControllerLoop(sides["sensor"], bus, clock=bus.clock)
+    loop.side.reset()
+    robot = Robot(bus, loop.side.station.q0)
+    for _ in range(10):
+        robot.status(after=3 * T, clock_step=3000)
+    run = Drive(loop, None).run()
+    assert not run.interrupted and "the LCM bus failed: lcm_handle_timeout() returned -1" in run.failure
+
+
+def test_a_controller_later_than_the_bound_stops(sides):
+    """A 52 ms tick while the robot goes on at 1 kHz (each status on time, one period after
+    the last): the next status answered would be 52 periods after the one before, past
+    the 50-period bound, when the driver has dropped the last command and damped: refused
+    (catches only the statuses' own gaps checked: the controller's lateness unbounded)."""
+    loop, robot, bus = start_loop(sides)
+    robot.status()
+    loop.start()
+    robot.status()
+    bus.tick_cost = 52e-3
+    loop.tick()
+    bus.tick_cost = 0.0
+    for _ in range(52):
+        robot.status()
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    assert info.value.problem.startswith(
+        "status refused: 52 periods since the status answered before it, beyond the silence bound"
+    )
+    assert loop.commands == 2

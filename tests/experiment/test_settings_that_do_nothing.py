@@ -282,3 +282,29 @@ def test_a_posture_beyond_a_joints_limits_is_refused(tmp_path, capsys, posture, 
         "--no-replay",
     ]
     assert main(args) in (0, 1)
+
+
+def test_compare_names_the_variant_that_refuses_a_setting_only_some_variants_take(tmp_path):
+    """`--config` with a posture gain: the variants whose source is the posture take it,
+    the others (source criteria: nothing reads it) refuse it. Refused in one line naming
+    the user's file and the first variant that refuses it (it named only the file), and
+    checked on each variant with its overrides on (the family's base scenario was checked
+    with the file before the variant's overrides, so even the variants that take it were
+    refused, with the base's source in the message)."""
+    config = tmp_path / "posture_gain.yaml"
+    config.write_text("desired_null_space:\n  posture:\n    gain: -0.3\n")
+    family = load_family("null_space_laws")
+    paper, kinematic = (
+        next(v for v in family.variants if v.name == name)
+        for name in ("panda_wipe / paper", "panda_wipe / kinematic PD")
+    )
+    check_variants(
+        dataclasses.replace(family, variants=(paper,)), config, None
+    )  # the posture's source: taken
+    with pytest.raises(ScenarioError) as caught:
+        check_variants(dataclasses.replace(family, variants=(paper, kinematic)), config, None)
+    assert str(caught.value) == (
+        f"{config}: desired_null_space.posture.gain: must be 0: nothing uses it "
+        "(desired_null_space.source is criteria and null_space.law is kinematic_posture_pd), got -0.3 "
+        "(in the variant 'panda_wipe / kinematic PD' of null_space_laws)"
+    ), str(caught.value)

@@ -175,6 +175,41 @@ def test_replay_loads_offline_and_shows_the_arm_at_the_plate(browser, short_run)
     assert [u for u in requested_urls(browser) if not u.startswith(ALLOWED_SCHEMES)] == []
 
 
+def test_replay_opens_at_the_start_with_play_in_view(browser, short_run):
+    """replay.html opens paused at t = 0 (the tool where the traces' first row puts it, not
+    at the plate), its play button visible in the window and Meshcat's animation controls
+    open; the button plays the recording. Catches the page opening on the last frame with
+    play folded under Open Controls."""
+    out, _ = short_run
+    open_page(browser, out / "replay.html")
+    WebDriverWait(browser, 60).until(lambda d: d.execute_script("return viewer.animator.duration > 0"))
+    time.sleep(1.0)  # the page's own start-up: the animation loaded, then set to t = 0
+    state = browser.execute_script(
+        "const a = viewer.animator; return {playing: a.playing, gui_closed: viewer.gui.closed,"
+        " time: a.actions.reduce((t, x) => Math.max(t, x.time), 0)};"
+    )
+    assert state == {"playing": False, "gui_closed": False, "time": 0}
+    tool = browser.execute_script(_SCENE, ["/drake/visualizer/arm4/tool"])[0]["position"]
+    traces = Traces.read_csv(out / "traces.csv")
+    assert np.allclose(tool[:2], [traces["x"][0], traces["y"][0]], atol=1e-6)
+    assert traces["f_n"][0] < 1.0  # the start: not yet at the plate
+    button = browser.find_element("id", "nsdrake-play")
+    rect = browser.execute_script("return arguments[0].getBoundingClientRect().toJSON()", button)
+    width, height = browser.execute_script("return [window.innerWidth, window.innerHeight]")
+    assert button.is_displayed() and 0 <= rect["left"] and rect["right"] <= width and rect["bottom"] <= height
+    assert "play" in button.text
+    screenshot(browser, out / "replay_start.png")
+    # The largest time the animation shows once played (a slow software renderer may reach
+    # the end in one frame, where Meshcat rewinds it: so the largest, not the current).
+    browser.execute_script(
+        "const a = viewer.animator; window.shownMax = 0; const show = a.display_progress.bind(a);"
+        "a.display_progress = (t) => { window.shownMax = Math.max(window.shownMax, t); show(t); };"
+    )
+    button.click()
+    WebDriverWait(browser, 30).until(lambda d: d.execute_script("return window.shownMax > 0"))
+    assert severe_messages(browser) == []
+
+
 def test_report_loads_offline_with_its_plots_and_diagram(browser, short_run):
     out, result = short_run
     open_page(browser, out / "report.html")

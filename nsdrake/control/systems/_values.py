@@ -7,6 +7,8 @@ copy is (numbers copied, model scratch made anew, never shared between contexts)
 
 from __future__ import annotations
 
+import re
+
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import ValueProducer
 
@@ -59,8 +61,56 @@ def check_inputs(system, context, values, names, quaternion: int = -1) -> None:
     controller's path in the user's diagram, the time, the input port and its entry."""
     problem = inputs_problem(values, names, quaternion)
     if problem is not None:
-        controller = system.GetSystemPathname().rsplit("::", 1)[0] or "controller"
-        raise ControllerInputError(f"{controller} at t = {context.get_time():g} s", problem)
+        raise ControllerInputError(f"{controller_path(system)} at t = {context.get_time():g} s", problem)
+
+
+# The controller's input ports packed into its commands, in their order (the named
+# ImpedanceController's inputs, the fused system's Multiplexer): the names a user wires.
+COMMAND_PORTS = (
+    "measured_wrench", "desired_position", "desired_velocity", "desired_acceleration", "desired_force",
+    "desired_orientation", "desired_angular_velocity", "desired_angular_acceleration",
+)  # fmt: skip
+
+
+def controller_path(system) -> str:
+    """The controller's path in the user's diagram (``::user::controller``), from one of its
+    systems."""
+    return system.GetSystemPathname().rsplit("::", 1)[0] or "controller"
+
+
+def evaluated(system, context, port, name: str):
+    """``port``'s value; an input the user never connected nor fixed (Drake names the inner
+    system's port: "InputPort[6] (R_d) of … impedance_controller") is refused as
+    :class:`ControllerInputError` naming the controller's own port ``name``. Costs nothing
+    until it fails."""
+    try:
+        return port.Eval(context)
+    except RuntimeError:
+        if port.HasValue(context):
+            raise  # something upstream failed: the user's system, named by Drake
+        raise unconnected(system, name) from None
+
+
+def unconnected(system, name: str) -> ControllerInputError:
+    """The error for the controller's input ``name`` left unconnected."""
+    return ControllerInputError(
+        f"{controller_path(system)} input {name}",
+        "not connected: the controller needs it at every tick (connect it, or fix its value)",
+    )
+
+
+def evaluated_commands(system, context, port):
+    """The fused system's packed commands (the Multiplexer of the controller's inputs in
+    COMMAND_PORTS order); an input of it left unconnected is refused naming the
+    controller's port, read from Drake's message about the Multiplexer's input."""
+    try:
+        return port.Eval(context)
+    except RuntimeError as e:
+        multiplexer = f"of System {controller_path(system)}::commands (Multiplexer"
+        found = re.search(r"InputPort\[(\d+)\] \(u\d+\) " + re.escape(multiplexer), str(e))
+        if found is None or "is not connected" not in str(e):
+            raise
+        raise unconnected(system, COMMAND_PORTS[int(found.group(1))]) from None
 
 
 def scratch(entry, context):

@@ -9,7 +9,7 @@ from nsdrake.control.layout import tick_parts
 from nsdrake.control.leaf_system import LeafSystem
 from nsdrake.control.plan import ControllerPlan, StageBuffers
 from nsdrake.control.stages import COMMIT, DESIRED, SELECTION, STORE, TICK, commands_size, initial_state
-from nsdrake.control.systems._values import check_inputs, declare_value_cache
+from nsdrake.control.systems._values import check_inputs, declare_value_cache, evaluated, evaluated_commands
 
 
 class FrontValue:
@@ -53,7 +53,7 @@ class FusedController(LeafSystem):
     ``limited_null_space_torque`` is s τ₀ (n) [N m], the null-space torque in τ. An input
     that is not finite, or a zero quaternion, raises
     :class:`nsdrake.control.validation.ControllerInputError` naming the controller's input
-    port and entry.
+    port and entry; so does an input of the controller never connected nor fixed.
 
     Events, as the named systems': every period an unrestricted update stores the q̇_dⁿ
     and τ of the output (the previous values of Eq. 21's q̈_dⁿ and of the rate limit),
@@ -91,7 +91,7 @@ class FusedController(LeafSystem):
         self._scratch_tick = plan.allocate_tick()  # COMMIT reads and writes no tick
 
     def _calc_front(self, context, front: FrontValue):
-        state = self._state.Eval(context)
+        state = evaluated(self, context, self._state, "estimated_state")
         check_inputs(self, context, state, self._plan.input_names["estimated_state"])
         n = self._n
         self._plan.front(front.buffers.scratch, state[:n], state[n:], front.terms, front.buffers)
@@ -99,7 +99,7 @@ class FusedController(LeafSystem):
     def _run(self, context, stages, t_previous, state, tick, commands=None) -> None:
         front, n = self._front.Eval(context), self._n
         b = front.buffers
-        commands = self._commands.Eval(context) if commands is None else commands
+        commands = evaluated_commands(self, context, self._commands) if commands is None else commands
         self._plan.run_arrays(
             stages, context.get_time(), t_previous, front.terms, b.criteria, state[:3], state[3 : n + 4],
             state[n + 4 :], commands, tick, b.scratch,
@@ -108,7 +108,7 @@ class FusedController(LeafSystem):
     def _calc(self, context, output):
         state = context.get_discrete_state(self._discrete).CopyToVector()
         tick = output.get_mutable_value()
-        plan, commands = self._plan, self._commands.Eval(context)
+        plan, commands = self._plan, evaluated_commands(self, context, self._commands)
         check_inputs(self, context, commands, plan.input_names["commands"], plan.commands_quaternion)
         if not self._external.HasValue(context):
             self._run(context, TICK, 0.0, state, tick, commands)

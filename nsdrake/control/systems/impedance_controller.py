@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from nsdrake.control.plan import ControllerPlan
 from nsdrake.control.stages import TASK
-from nsdrake.control.systems._values import StageSystem, check_inputs
+from nsdrake.control.systems._values import COMMAND_PORTS, StageSystem, check_inputs, evaluated
 
 
 class ImpedanceController(StageSystem):
@@ -39,7 +39,7 @@ class ImpedanceController(StageSystem):
     the orientation error log(R_d R_WTᵀ) (:mod:`nsdrake.control.orientation`).
     ``generalized_force`` (n) [N m] is in velocity order. An input that is not finite, or
     a zero quaternion, raises :class:`nsdrake.control.validation.ControllerInputError`
-    naming the controller's input port.
+    naming the controller's input port, as does an input never connected nor fixed.
     """
 
     def __init__(self, *, plan: ControllerPlan):
@@ -50,10 +50,11 @@ class ImpedanceController(StageSystem):
         if plan.m_r:
             sizes |= {"R_d": 4, "omega_d": 3, "omegadot_d": 3}
         self._inputs, start = [], 0
-        for name, size in sizes.items():
-            self._inputs.append((self.DeclareVectorInputPort(name, size), slice(start, start + size)))
+        for (name, size), public in zip(sizes.items(), COMMAND_PORTS, strict=False):
+            port = self.DeclareVectorInputPort(name, size)
+            self._inputs.append((port, slice(start, start + size), public))
             start += size
-        ports = [self._terms] + [port for port, _ in self._inputs]
+        ports = [self._terms] + [port for port, _, _ in self._inputs]
         self.DeclareVectorOutputPort(
             "generalized_force",
             plan.n,
@@ -63,8 +64,8 @@ class ImpedanceController(StageSystem):
 
     def _calc(self, context, output):
         b = self.buffers(context)
-        for port, where in self._inputs:
-            b.commands[where] = port.Eval(context)
+        for port, where, public in self._inputs:
+            b.commands[where] = evaluated(self, context, port, public)
         plan = self._plan
         check_inputs(self, context, b.commands, plan.input_names["commands"], plan.commands_quaternion)
         self.run(context, TASK, b)

@@ -11,6 +11,7 @@ from nsdrake.control.systems._values import (
     TermsValue,
     check_inputs,
     declare_value_cache,
+    evaluated,
     scratch,
 )
 
@@ -58,7 +59,7 @@ class RobotTermsSystem(LeafSystem):
         )
 
     def _calc_terms(self, context, output):
-        state = self._state.Eval(context)
+        state = evaluated(self, context, self._state, "estimated_state")
         check_inputs(self, context, state, self._plan.input_names["estimated_state"])
         n = self._n
         self._plan.terms(

@@ -1,0 +1,141 @@
+"""The docs' prose against the files behind it (issue 38), reading files only (no build, no
+simulation):
+
+- a figure written ``{nsdrake-figure}`375 µs <drive | silence bound 200 | CPU p99.9>``` is
+  the cell of docs/results/drive/table.md it names (docs/_ext/nsdrake_docs.py's
+  ``figure_problem``, which the site's build runs too: a figure that differs is an error
+  under ``sphinx-build -W``);
+- every repository path a page names (README.md, docs/**/*.md, the tutorials' markdown
+  cells, and the docstrings of nsdrake/, which the API page renders) exists.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "docs" / "_ext"))
+nsdrake_docs = pytest.importorskip("nsdrake_docs", reason="the docs extra (sphinx) is not installed")
+
+
+def pages() -> dict[str, str]:
+    """Page path → its text: README.md, docs/**/*.md, the notebooks' markdown cells."""
+    out = {"README.md": (ROOT / "README.md").read_text()}
+    for page in sorted((ROOT / "docs").glob("**/*.md")):
+        if "_build" not in page.parts and "results" not in page.parts:
+            out[page.relative_to(ROOT).as_posix()] = page.read_text()
+    for notebook in sorted((ROOT / "docs").glob("**/*.ipynb")):
+        if "_build" in notebook.parts:
+            continue
+        cells = json.loads(notebook.read_text())["cells"]
+        text = "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "markdown")
+        out[notebook.relative_to(ROOT).as_posix()] = text
+    return out
+
+
+def figures(text: str) -> list[tuple[str, str]]:
+    """(written figure, target) of each ``{nsdrake-figure}`` role in a page."""
+    out = []
+    for role in nsdrake_docs.FIGURE_ROLE.findall(text):
+        match = nsdrake_docs.FIGURE.match(" ".join(role.split()))
+        assert match, f"not 'FIGURE <RESULTS | ROW | COLUMN>': {role}"
+        out.append((match.group("written"), match.group("target")))
+    return out
+
+
+def figure_problems(texts: dict[str, str]) -> list[str]:
+    return [
+        f"{page}: {problem}"
+        for page, text in texts.items()
+        for written, target in figures(text)
+        if (problem := nsdrake_docs.figure_problem(ROOT, written, target))
+    ]
+
+
+def test_every_prose_figure_is_its_file():
+    """Each figure the prose marks is the table cell it names, to the digits written.
+    Catches a table regenerated without its prose (docs/real_arm.md said p99.9 0.4–0.5 ms
+    against the table's 375/500 µs)."""
+    texts = pages()
+    assert sum(len(figures(t)) for t in texts.values()) >= 10  # the marked figures are found
+    assert figure_problems(texts) == []
+
+
+def test_a_figure_that_differs_is_caught():
+    """The check fails on a changed digit, a dropped decimal that rounds wrong, a wrong
+    unit prefix (µs for ms), a figure not in a prose cell, a row named twice: not a test
+    that cannot fail."""
+    texts = pages()
+    page, text = next((p, t) for p, t in texts.items() if "{nsdrake-figure}`375 µs" in t)
+    for wrong in ("376 µs", "375 ms", "0.4 ms"):
+        changed = {page: text.replace("{nsdrake-figure}`375 µs", f"{{nsdrake-figure}}`{wrong}", 1)}
+        assert any(f"'{wrong}'" in p for p in figure_problems(changed)), wrong
+    problem = nsdrake_docs.figure_problem
+    assert problem(ROOT, "62.9 µm", "realism | clean | tangential_position_error_rms | m") is None
+    assert "is not" in problem(ROOT, "63.9 µm", "realism | clean | tangential_position_error_rms | m")
+    assert "unit" in problem(ROOT, "62.9 mm", "realism | clean | tangential_position_error_rms | µ")
+    assert "is not in" in problem(ROOT, "3.2 ms", "machine_floor | run 5: | figure")
+    assert "rows contain" in problem(ROOT, "1 ms", "machine_floor | cyclictest | figure")
+    assert "does not exist" in problem(ROOT, "1", "no_such_family | a | b")
+
+
+# A path: a top-level folder of the repository, then path characters. Template paths
+# (FAMILY, NAME), globs and the outputs commands write (runs/, docs/_build) are not named
+# files.
+TOP = r"(?:nsdrake|docs|tests|scripts|bench|urdf|diagrams|\.ci)"
+PATH = re.compile(rf"(?<![\w./-]){TOP}/[\w./-]*")
+NOT_A_FILE = re.compile(r"[A-Z]{3,}|\*|_build|\{|<")
+
+
+def named_paths(text: str) -> set[str]:
+    """The repository paths a text names, trailing punctuation and ``::test``/``:name``
+    suffixes cut."""
+    found = set()
+    for raw in PATH.findall(text):
+        path = raw.rstrip(".,;:)")
+        if path.count("/") and not NOT_A_FILE.search(path):
+            found.add(path)
+    return found
+
+
+def docstrings() -> dict[str, str]:
+    """Module path → its text (the API page renders the docstrings)."""
+    return {p.relative_to(ROOT).as_posix(): p.read_text() for p in sorted((ROOT / "nsdrake").glob("**/*.py"))}
+
+
+def missing_paths(texts: dict[str, str]) -> list[str]:
+    return [
+        f"{page}: names {path}, which does not exist"
+        for page, text in texts.items()
+        for path in sorted(named_paths(text))
+        if not (ROOT / path).exists()
+    ]
+
+
+def test_every_path_a_page_names_exists():
+    """Catches a page (or a docstring the API page shows) naming a file that was moved or
+    never was (the API page named tests/docs/test_docs.py, a docstring nsdrake/priority.py)."""
+    assert missing_paths({**pages(), **docstrings()}) == []
+
+
+def test_a_missing_path_is_caught():
+    """The path check finds a path in backticks, in prose, with a test suffix, and leaves
+    templates and outputs alone."""
+    text = (
+        "see `tests/docs/test_docs.py::test_x`, nsdrake/priority.py. Also "
+        "`docs/results/FAMILY/table.md`, docs/_build/html and `nsdrake/control/priority.py`."
+    )
+    assert named_paths(text) == {
+        "tests/docs/test_docs.py",
+        "nsdrake/priority.py",
+        "nsdrake/control/priority.py",
+    }
+    assert missing_paths({"page": text}) == [
+        "page: names nsdrake/priority.py, which does not exist",
+        "page: names tests/docs/test_docs.py, which does not exist",
+    ]
