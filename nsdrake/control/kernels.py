@@ -4,7 +4,16 @@ The controller's arithmetic runs in numba kernels (``@njit(cache=True)``). numba
 a kernel on its first call and keeps the machine code in ``__pycache__`` beside the
 source, so the first run after an install compiles and later runs load.
 
-Two things numba leaves to its user:
+Three things numba leaves to its user:
+
+- **Once for every configuration.** numba compiles a kernel anew for each new mix of
+  argument types, and a kernel that a run does not call is not compiled: a kernel
+  specialised per configuration, or one that only some scenarios reach, compiles again in
+  a later run. So the controller's stages take the configuration as values, never as
+  types (:func:`nsdrake.control.stages.run_stages`), and :func:`compile_kernels`, called
+  where a controller is built, compiles every kernel nsdrake calls from Python with the
+  types of its call sites, in one go: one compile per install covers a pose or a position
+  task, a sweep, joint limits, obstacles and any joint count (issue 36).
 
 - **A notice.** Compiling takes tens of seconds, during which a run prints nothing.
   :func:`announce_compiling` listens to numba's compile events and prints one line, once
@@ -22,6 +31,7 @@ from __future__ import annotations
 
 import hashlib
 import sys
+import time
 from pathlib import Path
 
 from numba.core import config, event
@@ -80,14 +90,18 @@ def refresh_cache(package: Path = PACKAGE) -> bool:
 
 
 class _CompileNotice(event.Listener):
-    """Prints :data:`NOTICE` on stderr when the first nsdrake kernel starts compiling, and
-    counts the compiles under way (numba nests them: a kernel compiles its callees)."""
+    """Prints :data:`NOTICE` on stderr when the first nsdrake kernel starts compiling,
+    counts the compiles under way (numba nests them: a kernel compiles its callees) and
+    adds up the wall time spent in them (outermost compiles only)."""
 
-    def __init__(self):
+    def __init__(self, clock=time.monotonic):
         self.printed = False
         self.depth = 0
+        self.clock, self.seconds, self.started = clock, 0.0, 0.0
 
     def on_start(self, ev):
+        if self.depth == 0:
+            self.started = self.clock()
         self.depth += 1
         if self.printed:
             return
@@ -99,6 +113,12 @@ class _CompileNotice(event.Listener):
 
     def on_end(self, ev):
         self.depth = max(0, self.depth - 1)
+        if self.depth == 0:
+            self.seconds += self.clock() - self.started
+
+    def compile_seconds(self) -> float:
+        """Wall time spent compiling so far, the compile under way included [s]."""
+        return self.seconds + (self.clock() - self.started if self.depth > 0 else 0.0)
 
 
 _notice = _CompileNotice()
@@ -111,8 +131,71 @@ def compiling() -> bool:
     return _notice.depth > 0
 
 
+def compile_seconds() -> float:
+    """Wall time this process has spent compiling numba kernels so far [s] (after
+    :func:`announce_compiling`): what a progress line leaves out of a simulation's time
+    (:mod:`nsdrake.reporting.progress`)."""
+    return _notice.compile_seconds()
+
+
 def announce_compiling() -> None:
     """Registers the compile notice (once per process)."""
     if not getattr(announce_compiling, "done", False):
         event.register("numba:compile", _notice)
         announce_compiling.done = True
+
+
+def _entry_points() -> list[tuple[str, str, tuple]]:
+    """Every kernel nsdrake calls from Python, with the argument types of each call site:
+    (module, name, argument types). Kernels called only by kernels compile with their
+    callers. The controller's stages take float64 and int64 arrays, C-contiguous, never a
+    configuration-dependent type (:func:`nsdrake.control.stages.run_stages`); the others
+    take the arrays Pinocchio and Drake return (column-major matrices, read-only vectors)."""
+    from numba.core import types
+
+    def A(dtype: str, ndim: int, layout: str = "C", readonly: bool = False):
+        return types.Array(getattr(types, dtype), ndim, layout, readonly=readonly)
+
+    f1, f2, i1, i64, f64 = A("float64", 1), A("float64", 2), A("int64", 1), types.int64, types.float64
+    f2F, b2, f1_read = A("float64", 2, "F"), A("bool_", 2), A("float64", 1, readonly=True)
+    pose = (f2F, f1, f1)  # a rotation matrix, a position, a vector
+    return [
+        # the controller's stages (nsdrake.control.plan): Pinocchio's arrays, then the plan's
+        ("nsdrake.control.stages", "terms_stage",
+         (f2F, f1, f1, f2F, f2F, A("float64", 3, "A", readonly=True), *pose, f1, f1, i1, i1, f1)),
+        ("nsdrake.control.stages", "complete_terms", (f1, f1, i1, i1)),  # the Drake terms' path
+        ("nsdrake.control.stages", "run_stages", (i64, f64, f64, f1, i1, i1, f1, f2, f1, f1, f1, f1, f1)),
+        ("nsdrake.control.layout", "terms_size", (i1,)),
+        ("nsdrake.control.layout", "tick_size", (i1,)),
+        ("nsdrake.control.layout", "_take", (f1, i64, i64)),
+        ("nsdrake.control.layout", "input_fault", (f1, i64)),
+        # the model (nsdrake.control.model, nsdrake.control.dynamics): Drake's and Pinocchio's arrays
+        ("nsdrake.control.model", "symmetric_and_inverse", (f2F,)),
+        ("nsdrake.control.dynamics", "derived_terms", (f2F, f2, A("float64", 3), f1)),
+        ("nsdrake.control.dynamics", "_jacobian_partials", (A("float64", 2, "A"),) * 2 + (b2, b2, i1, i1)),
+        ("nsdrake.control.dynamics", "_jacobian_partials", (f2, f2, b2, b2, i1, i1)),
+        # the obstacle criterion by Drake's queries (nsdrake.control.criteria.obstacle)
+        ("nsdrake.control.criteria.obstacle", "_axis_segments", (A("float64", 3), f2, f2, f1)),
+        ("nsdrake.control.criteria.obstacle", "_in_body_frames", (A("float64", 3), A("float64", 2, "A"))),
+        ("nsdrake.control.criteria.distance", "segments_box", (f2, f2, f2F, f1_read, f1)),
+        ("nsdrake.control.criteria.distance", "segments_sphere", (f2, f2, f1_read, f64)),
+        # the station and the run's metrics
+        ("nsdrake.station.force_sensor", "contact_wrench", pose),
+        ("nsdrake.control.orientation", "orientation_error", (f2F, f2F)),
+    ]  # fmt: skip
+
+
+def compile_kernels() -> None:
+    """Compiles (or loads from numba's cache) every kernel nsdrake calls from Python, with
+    the types of its call sites (:func:`_entry_points`), once per process. A first run
+    after an install thus compiles, in one go, the kernels of every configuration: a
+    pose task or a position task, a sweep, joint limits, obstacles, any joint count; a
+    later run of any scenario finds them all in the cache (issue 36). Called where a
+    controller is built (:class:`nsdrake.control.plan.ControllerPlan`)."""
+    if getattr(compile_kernels, "done", False):
+        return
+    import importlib
+
+    for module, name, arguments in _entry_points():
+        getattr(importlib.import_module(module), name).compile(arguments)
+    compile_kernels.done = True

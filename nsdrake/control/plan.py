@@ -18,6 +18,7 @@ from pydrake.geometry import Box, Capsule, Sphere
 from nsdrake.control.config import ControllerConfig
 from nsdrake.control.criteria.obstacle import ObstacleDistances, obstacle_potential
 from nsdrake.control.impedance import ImpedanceGains
+from nsdrake.control.kernels import compile_kernels
 from nsdrake.control.layout import (
     CRITERIA,
     LINK_WIDTH,
@@ -144,6 +145,7 @@ class ControllerPlan:
         normal: np.ndarray | None,
         wrench_point: Sequence[float] | None,
     ):
+        compile_kernels()  # every configuration's kernels at once, the first time (issue 36)
         self.model, self.config = model, config
         arm = model.arm
         self.n, self.m, self.m_t, self.m_r = arm.n, arm.m, arm.m_t, arm.m_r
@@ -161,18 +163,6 @@ class ControllerPlan:
         )
         self.plan = self._plan_array(wrench_point, links, supports, obstacles)
         self.index = self._index_array(joints)
-        # None where the controller does not use a part of the stages' code (run_stages):
-        # rotational task axes, a prescribed sweep, joint limits, obstacles in closed form.
-        self.variant = tuple(
-            1 if used else None
-            for used in (
-                self.m_r > 0,
-                config.desired_null_space.source == "sweep",
-                bool(np.isfinite(model.plant.GetPositionLowerLimits()).any()
-                     or np.isfinite(model.plant.GetPositionUpperLimits()).any()),
-                self.obstacle_mode == OBSTACLES_CLOSED_FORM,
-            )
-        )  # fmt: skip
         self._terms_fields = field_slices(terms_views, self.terms_length, self.dims)
         self._tick_fields = field_slices(tick_views, self.tick_length, self.dims)
 
@@ -345,10 +335,12 @@ class ControllerPlan:
         tick,
         scratch,
     ) -> None:
-        """:meth:`run` with each array given (views of a system's ports and state)."""
+        """:meth:`run` with each array given (views of a system's ports and state). The times
+        and the stages go as a float and an int whatever the caller's numbers, so that
+        :func:`run_stages` keeps its one compiled signature."""
         if run_stages(
-            stages, t, t_previous, self.plan, self.index, self.dims, terms, criteria, switch, previous_qdot,
-            previous_tau, commands, tick, *self.variant,
+            int(stages), float(t), float(t_previous), self.plan, self.index, self.dims, terms, criteria,
+            switch, previous_qdot, previous_tau, commands, tick,
         ):  # fmt: skip
             self._queried_obstacle_row(scratch, self.terms_field(terms, "q"), criteria[0])
             rest = stages & ~CRITERIA_STAGE

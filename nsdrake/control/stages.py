@@ -185,7 +185,7 @@ def _complete_terms(T, P, ix):
 @njit(cache=True)
 def run_stages(
     stages, t, t_previous, plan, index, dims, terms, criteria, switch, previous_qdot, previous_tau,
-    commands, tick, pose, sweep, limits, obstacles,
+    commands, tick,
 ) -> bool:  # fmt: skip
     """The ``stages`` (a bit set of this module's constants) at time t, in their order:
     CRITERIA, COMMIT (at ``t_previous``), SELECTION, DESIRED or SWEEP, TASK, NULL_SPACE,
@@ -196,10 +196,11 @@ def run_stages(
     obstacle row needs Drake's queries: the caller computes that row, then the remaining
     stages (:meth:`nsdrake.control.plan.ControllerPlan.run`).
 
-    ``pose``, ``sweep``, ``limits``, ``obstacles`` are None where the controller has no
-    rotational task axes, no prescribed sweep, no joint limits, no obstacle in closed form
-    (:attr:`nsdrake.control.plan.ControllerPlan.variant`): compiled code for what a
-    controller does not use is left out (numba specialises on None)."""
+    What a controller uses (rotational task axes, a prescribed sweep, joint limits,
+    obstacles in closed form) is read from the plan and the index at run time, never
+    specialised at compile time: one compiled version serves every controller, and the
+    arguments' types never change (an int, two floats, float64 and int64 arrays,
+    C-contiguous), so that numba compiles it once per install (:mod:`nsdrake.control.kernels`)."""
     T, P, ix, out = (
         terms_views(terms, dims),
         plan_views(plan, dims),
@@ -207,7 +208,7 @@ def run_stages(
         tick_views(tick, dims),
     )
     n = T.q.shape[0]
-    if stages & CRITERIA and _criteria_rows(T, P, ix, criteria, limits, obstacles):
+    if stages & CRITERIA and _criteria_rows(T, P, ix, criteria):
         return True
     if stages & COMMIT:
         _commit_switch(P, criteria, switch, t_previous)
@@ -216,16 +217,16 @@ def run_stages(
     if stages & (SWEEP | DESIRED):
         if P.posture_source:
             out.qdot[:] = _posture_velocity(T, P, t)
-        elif sweep is None:
-            out.qdot[:] = out.selection[:n]
-        else:
+        elif P.sweep:
             w = P.sweep_wave
             out.qdot[:] = sweep_velocity(T.N, P.direction, sweep_amplitude(t, w[0], w[1], w[2], w[3]))
-    if stages & TASK:
-        if pose is None:
-            _position_task(T, P, ix, commands, out.task)
         else:
+            out.qdot[:] = out.selection[:n]
+    if stages & TASK:
+        if ix.rot_rows.shape[0]:
             _pose_task(T, P, ix, commands, out.task)
+        else:
+            _position_task(T, P, ix, commands, out.task)
     if stages & NULL_SPACE:
         if P.law == PAPER:
             _null_space(T, P, out.qdot, previous_qdot, out.null_space)
@@ -245,18 +246,18 @@ def run_stages(
 
 
 @njit(cache=True, inline="always")
-def _criteria_rows(T, P, ix, criteria, limits, obstacles) -> bool:
+def _criteria_rows(T, P, ix, criteria) -> bool:
     """Stage 2: the four rows of ``criteria`` in Criterion's order, the obstacle row last.
     Returns True, with that row packed empty, when it needs Drake's queries (the caller
     fills it; the other rows are complete)."""
     n = T.q.shape[0]
     _torque_and_manipulability_rows(T, P, criteria)
-    if limits is None:
-        pack_criterion(criteria[3], np.zeros(n), 0.0, np.inf, 0.0)
-    else:
+    if P.has_limits:
         _joint_limits_row(T, P, criteria[3])
+    else:
+        pack_criterion(criteria[3], np.zeros(n), 0.0, np.inf, 0.0)
     pack_criterion(criteria[0], np.zeros(n), 0.0, np.inf, 0.0)  # no obstacle geometry: d_min = ∞
-    if obstacles is None:
+    if P.obstacle_mode != OBSTACLES_CLOSED_FORM:
         return P.obstacle_mode == OBSTACLES_QUERIED
     return _obstacle_row(T, P, ix, criteria[0])
 

@@ -41,6 +41,26 @@ def test_a_log_gets_one_line_per_interval_with_simulated_time_and_real_time_fact
     assert all(line.startswith("panda_wipe: ") for line in lines)
 
 
+def test_the_time_spent_compiling_kernels_is_not_simulation_time():
+    """A first run compiles nsdrake's kernels inside its first steps (issue 36: the first line
+    said "0.05 s simulated in 129 s (0.00039x real time)"). Catches the compile counted as
+    simulation time, a compile that happened before the progress started subtracted again,
+    and a line that hides the compile: 30 s compiled before, then 40 s of compile and 10 s
+    of simulation make 20% of 10 s simulated in 10 s."""
+    log, clock, compiled = io.StringIO(), Clock(), [30.0]
+    progress = Progress("fig3", 1.0, simulated=10.0, stream=log, clock=clock, compiling=lambda: compiled[0])
+    clock.now += 20.0
+    compiled[0] += 20.0  # compiling, nothing simulated yet
+    progress(0.0)
+    clock.now += 30.0
+    compiled[0] += 20.0
+    progress(0.2)
+    assert log.getvalue().splitlines() == [
+        "fig3: 0%, compiling nsdrake's kernels (20 s)",
+        "fig3: 20%, 2 s simulated in 10 s (0.2x real time), after 40 s compiling nsdrake's kernels",
+    ]
+
+
 def test_after_a_long_gap_the_next_line_is_one_interval_away():
     """A run that reports nothing for minutes (a slow step, a machine under load): one line
     when it reports again, then the next only one interval later, by the heartbeat as by the
@@ -90,6 +110,7 @@ def test_nsdrake_run_in_a_pipe_prints_no_bar(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert "\r" not in err
     line = r"fig3: +\d+%, [\d.e+-]+ s simulated in \d+ s \([\d.e+-]+x real time\)"
+    line += r"(, after \d+ s compiling nsdrake's kernels)?"
     assert all(re.fullmatch(line, x) for x in err.splitlines() if "simulated in" in x), err
 
 
