@@ -215,3 +215,33 @@ def test_the_push_figures_are_in_the_laws_row(push_scenario, arm):
     assert row["push_position_error_before"] == pytest.approx(0.07, abs=1e-12)
     assert row["push_tau0_limited_time"] == pytest.approx(5 * T, abs=1e-12)
     assert math.isinf(row["push_return_time"])
+
+
+def test_the_realism_ladder_measures_from_settle_time_after_first_contact():
+    """The realism family's clean row (fig3), the same hand-built marker: its force,
+    tangential position, ‖eⁿ‖ and ν figures see the window from the row at first contact
+    + SETTLE_TIME on. Catches the window from first contact, or a row late."""
+    from conftest import paper_arm
+
+    from nsdrake.studies.compare import measure_realism
+
+    family = load_family("realism")
+    scenario = variant_scenario(family, 0, None, None)
+    rows = 2500
+    t = times(rows)
+    m = marker(t)
+    f_d = np.full(rows, 10.0)
+    f_n = np.where(np.arange(rows) >= CONTACT_ROW, f_d + m, 0.0)
+    zeros = np.zeros(rows)
+    traces = Traces(
+        {"t": t, "f_n": f_n, "f_d": f_d, "x": m, "x_d": zeros, "y": zeros, "y_d": zeros}
+        | {"en1": m, "en2": zeros, "nu": m}
+    )
+    ctx = SimpleNamespace(
+        scenario=scenario, arm=paper_arm(), tangent=np.array([1.0, 0.0]), normal=np.array([0.0, 1.0])
+    )
+    row = measure_realism(traces, ctx)
+    assert row["first_contact_time"] == t[CONTACT_ROW] and "note" not in row, row.get("note")
+    assert row["force_error_peak"] == pytest.approx(AT_START, abs=1e-12)
+    for name in ("force_error_rms", "tangential_position_error_rms", "en_rms", "nu_rms"):
+        assert row[name] == pytest.approx(window_rms(m, t), rel=1e-12), name
