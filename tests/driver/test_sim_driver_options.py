@@ -207,15 +207,15 @@ def test_a_command_expires_after_expire_sec_of_the_wall_clock(scenario, expire_s
 
 
 def test_the_success_rate_is_over_the_last_100_periods(scenario):
-    """A hand-built sequence: the controller answers statuses 0-149, then only one in
-    three (150, 153, …). Period k applies the answer to the newest answered status j ≤ k,
+    """A hand-built sequence: the controller answers statuses 0-119, then only one in
+    three (120, 123, …). Period k applies the answer to the newest answered status j ≤ k,
     fresh when k − j ≤ 1 (the answer to status k itself, in one process, or to k − 1): so
-    from 150 on two periods in three are fresh. The rate each status reports is the mean
-    of the flags of the last 100 periods before it (1.0 before any): 1.0 up to 150, then
-    falling to about 2/3 by 250. Checked at every status. Catches the first 100 periods
+    from 120 on two periods in three are fresh. The rate each status reports is the mean
+    of the flags of the last 100 periods before it (1.0 before any): 1.0 up to 120, then
+    falling to about 2/3 by 220. Checked at every status. Catches the first 100 periods
     kept instead of the last 100 (the rate stays 1.0), or a window of another length."""
-    periods = 300
-    answered = lambda k: k < 150 or (k - 150) % 3 == 0  # noqa: E731
+    periods = 220
+    answered = lambda k: k < 120 or (k - 120) % 3 == 0  # noqa: E731
     _, controller = serve(
         scenario, periods, lambda k: np.zeros(7) if answered(k) else None, low_pass_freq=1000.0
     )
