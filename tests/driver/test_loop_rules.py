@@ -21,11 +21,12 @@ import signal
 
 import numpy as np
 import pytest
+from drake import lcmt_panda_status
 from fake_bus import FakeBus, force_torque_bytes, status_bytes
 
 from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.faults import SLOW_STREAM
-from nsdrake.driver.loop import ControllerLoop, DriveFaultError
+from nsdrake.driver.loop import SUCCESS_RATE_WINDOW, ControllerLoop, DriveFaultError
 from nsdrake.driver.run import Drive
 from nsdrake.experiment.scenario import load_scenario
 
@@ -56,18 +57,20 @@ class Robot:
         self.arrival, self.utime, self.robot_utime = 0.0, UTIME0, ROBOT_UTIME0
         self.force_torque = True
 
-    def status(self, after: float, periods: float = 1, *, q=None, clock_us: int | None = None) -> int:
-        """The next status; returns its utime."""
+    def status(
+        self, after: float, periods: float = 1, *, q=None, clock_us: int | None = None, rate=1.0
+    ) -> int:
+        """The next status (``rate``: its control_command_success_rate); returns its utime."""
         step = round(periods * self.period_us) if clock_us is None else clock_us
         self.arrival += after
         self.utime += step
         self.robot_utime += step
         q = self.q if q is None else q
-        self.bus.at(
-            self.arrival,
-            "PANDA_STATUS",
-            status_bytes(q, utime=self.utime, robot_utime=self.robot_utime, v=self.v),
+        message = lcmt_panda_status.decode(
+            status_bytes(q, utime=self.utime, robot_utime=self.robot_utime, v=self.v)
         )
+        message.control_command_success_rate = rate
+        self.bus.at(self.arrival, "PANDA_STATUS", message.encode())
         if self.force_torque:
             self.bus.at(self.arrival, "PANDA_FORCE_TORQUE", force_torque_bytes())
         return self.utime
@@ -223,6 +226,26 @@ def test_start_answers_the_newest_status_queued_while_it_waited(side, how):
     robot.status(T, q=robot.q + np.array([0, 0, 0, 0, 0, 0, 2e-3]))
     loop.tick()
     assert loop.periods == 1 and loop.commands == 2
+
+
+# --- the robot's success rate, counted once the drive has filled its window ------------
+
+
+def test_the_success_rate_counts_from_the_status_after_the_window_s_last_command(side):
+    """libfranka's control_command_success_rate is over its last SUCCESS_RATE_WINDOW
+    cycles: the statuses loaded while the drive had sent fewer commands carry cycles
+    before it (0.0 here, and 0.2 on the last of them: not counted); the one loaded when
+    it has sent exactly that many carries 0.5 and is the minimum; later ones 1.0. Catches
+    the window's boundary moved by one either way (0.2 counted, or 0.5 missed), or the
+    figures of the first commands kept."""
+    loop, robot, bus = make_loop(side, capacity=2 * SUCCESS_RATE_WINDOW)
+    robot.status(loop.period, rate=0.0)
+    loop.start()
+    for sent in range(1, SUCCESS_RATE_WINDOW + 20):  # commands sent before this status is loaded
+        rates = {SUCCESS_RATE_WINDOW - 1: 0.2, SUCCESS_RATE_WINDOW: 0.5}
+        robot.status(loop.period, rate=rates.get(sent, 0.0 if sent < SUCCESS_RATE_WINDOW else 1.0))
+        loop.tick()
+    assert loop.success_rate_min == 0.5
 
 
 # --- the process as the drive found it ---------------------------------------------------
