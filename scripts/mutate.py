@@ -1,17 +1,19 @@
-"""Mutation testing by hand's rules (issue 37, item 4; not run in CI): one-line mistakes of
-the kinds a competent developer makes (a comparison's boundary, which end of a queue, an
-off-by-one, a dropped unit factor, a restored state not restored), applied one at a time
-to a copy of the sources, each followed by the given tests; a mutant the tests let
-through is listed with its line. Prints one line per mutant and the score (killed /
-mutants) at the end, and writes them as JSON with ``--out``.
+"""Mutation testing (issue 37, item 4; not run in CI): one-line mistakes of the kinds a
+competent developer makes (a comparison's boundary, which end of a queue, an off-by-one,
+a dropped unit factor, a state not restored), applied one at a time to the sources, each
+followed by the given tests; a mutant the tests let through is listed with its line.
+Prints one line per mutant and the score (killed / mutants) at the end, and writes them
+as JSON with ``--out``.
 
-    .venv/bin/python scripts/mutate.py nsdrake/driver --tests tests/driver -m "not slow"
+    .venv/bin/python scripts/mutate.py nsdrake/driver --list
     .venv/bin/python scripts/mutate.py nsdrake/driver --sample 30 --seed 1 --tests tests/driver
 
-The sources are mutated in place and restored after each mutant (also on Ctrl-C); run it in
-a worktree of your own with nothing uncommitted under the mutated folder. Each mutant's
-tests run with ``-x -n 0`` (the first failure is enough) and ``--timeout`` seconds at most
-(a mutant that hangs the tests counts as killed, and says so).
+The sources are mutated in place and restored after each mutant (also on Ctrl-C or a
+kill): run it in a worktree of your own with nothing uncommitted under the mutated
+folder, on a quiet machine. Each mutant's tests run with ``-x -n 0`` (the first failure
+is enough) and ``--timeout`` seconds at most: a mutant whose tests time out counts as
+killed and says so (a hang is a failure), so first run the tests once unmutated, warm
+(numba compiles the kernels of a fresh checkout), to know their time.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import ast
 import json
 import random
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -131,7 +134,7 @@ def run_tests(tests: list[str], timeout: float) -> tuple[bool, str]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folders", nargs="+", help="source folders or files to mutate (e.g. nsdrake/driver)")
-    parser.add_argument("--tests", nargs="+", required=True, help="pytest arguments: files, folders")
+    parser.add_argument("--tests", nargs="+", default=[], help="pytest arguments: files, folders")
     parser.add_argument("-m", dest="marker", default="not slow", help='pytest marker expression ("not slow")')
     parser.add_argument(
         "--sample", type=int, default=0, help="run this many mutants, drawn at random (0: all)"
@@ -156,7 +159,10 @@ def main(argv=None) -> int:
             print(f"{m.path}:{m.line} {m.operator}: {m.after}")
         print(f"{len(mutants)} mutants")
         return 0
+    if not args.tests:
+        parser.error("--tests: which tests run on each mutant (e.g. --tests tests/driver)")
     tests = [*args.tests, "-m", args.marker]
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # a kill restores the source too (finally)
     start = time.monotonic()
     for k, mutant in enumerate(mutants, 1):
         original = apply(mutant)
