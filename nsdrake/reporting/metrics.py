@@ -68,6 +68,15 @@ class Metric:
 WINDOW_WORDS = f"from {SETTLE_TIME:g} s after first contact to the end of the run"
 DESCRIPTIONS: tuple[tuple[str, str], ...] = (
     (r"first_contact_time", "when the contact force first reached the contact threshold (the tool touches)"),
+    (
+        r"contact_force_peak",
+        "largest contact force while the first contact settles (from the touch to the "
+        "measuring window): how hard the tool hit the surface",
+    ),
+    (
+        r"time_off_surface",
+        "how long the tool was off the surface after it first touched it (0: it never bounced)",
+    ),
     (r"window_start", f"start of the measuring window ({WINDOW_WORDS})"),
     (r"window_rows", "control periods in the measuring window (how many samples the figures below average)"),
     (r"normal_force_min", "smallest contact force in the window (0: the tool left the surface)"),
