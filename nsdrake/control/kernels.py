@@ -40,7 +40,7 @@ from numba.core.caching import _CacheLocator
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
 # The one line a first run prints; the time is fig3's on 2 cores (docs/architecture.md).
-NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about 40 s)…"
+NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about a minute)…"
 
 
 def kernel_sources(package: Path = PACKAGE) -> list[Path]:
