@@ -768,6 +768,9 @@ class _Pool:
         """Ctrl-C: every running variant is stopped (the terminal may have sent it SIGINT
         already) and has STOP_GRACE to report its traces so far."""
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not lose the table
+        for receive in list(self.running):  # "simulating" sent but not read yet: traces to keep
+            while receive in self.running and receive.poll():
+                self._read(receive)
         for w in self.running.values():
             self.stop(w, "interrupt")
         while self.running:
