@@ -1,7 +1,7 @@
 """The docs' prose against the files behind it (issue 38), reading files only (no build, no
 simulation):
 
-- a figure written ``{nsdrake-figure}`375 µs <drive | silence bound 200 | CPU p99.9>``` is
+- a figure written ``{nsdrake-figure}`162 µs <drive | loop alone | CPU p99.9>``` is
   the cell of docs/results/drive/table.md it names (docs/_ext/nsdrake_docs.py's
   ``figure_problem``, which the site's build runs too: a figure that differs is an error
   under ``sphinx-build -W``);
@@ -71,9 +71,9 @@ def test_a_figure_that_differs_is_caught():
     unit prefix (µs for ms), a figure not in a prose cell, a row named twice: not a test
     that cannot fail."""
     texts = pages()
-    page, text = next((p, t) for p, t in texts.items() if "{nsdrake-figure}`375 µs" in t)
-    for wrong in ("376 µs", "375 ms", "0.4 ms"):
-        changed = {page: text.replace("{nsdrake-figure}`375 µs", f"{{nsdrake-figure}}`{wrong}", 1)}
+    page, text = next((p, t) for p, t in texts.items() if "{nsdrake-figure}`162 µs" in t)
+    for wrong in ("163 µs", "162 ms", "0.1 ms"):
+        changed = {page: text.replace("{nsdrake-figure}`162 µs", f"{{nsdrake-figure}}`{wrong}", 1)}
         assert any(f"'{wrong}'" in p for p in figure_problems(changed)), wrong
     problem = nsdrake_docs.figure_problem
     assert problem(ROOT, "62.9 µm", "realism | clean | tangential_position_error_rms | m") is None
