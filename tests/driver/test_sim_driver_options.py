@@ -23,6 +23,7 @@ from drake import lcmt_panda_command, lcmt_panda_status
 from pydrake.lcm import DrakeLcm
 from scipy.signal import cont2discrete, dlsim
 
+import nsdrake.driver.serve as serve_module
 from nsdrake.driver.panda import TORQUE_RATE_LIMIT
 from nsdrake.driver.serve import serve_simulated_driver
 from nsdrake.experiment.scenario import load_scenario
@@ -37,17 +38,18 @@ def scenario():
 
 
 class FakeClock:
-    """The driver's clock [s]: one control period further at each reading after the first
-    (the driver reads it once at the start and once per period's wait), so that every
-    deadline is met at once; ``utime`` the wall clock's µs on it."""
+    """The driver's clock [s]: half a control period further at each reading after the
+    first (the driver reads it once at the start and twice a period: waiting for the
+    period's middle, where the plant steps, and for its end), so that every deadline is
+    met at once; ``utime`` the wall clock's µs on it."""
 
     def __init__(self, period: float):
-        self.period, self.now, self._read = period, 0.0, False
+        self.period, self.now, self._reads = period, 0.0, 0
 
     def __call__(self) -> float:
-        if self._read:
-            self.now += self.period
-        self._read = True
+        # k half periods as the driver's deadlines are written (start + k periods), to the bit
+        self.now = self._reads * (serve_module.PHYSICS_AT * self.period)
+        self._reads += 1
         return self.now
 
     def utime(self) -> int:
