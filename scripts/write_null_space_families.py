@@ -17,7 +17,15 @@ import numpy as np
 
 from nsdrake.experiment.diagram import build_diagram
 from nsdrake.experiment.scenario import load_scenario
-from nsdrake.studies.null_space_laws import LAW_KEYS, null_space_inertia, self_motion_posture, tuned_gains
+from nsdrake.studies.null_space_laws import (
+    FRANKA_ROS_GAINS,
+    LAW_KEYS,
+    ROBOSUITE_GAINS,
+    null_space_inertia,
+    paper_poles_gains,
+    self_motion_posture,
+    tuned_gains,
+)
 
 FAMILIES = Path(__file__).resolve().parents[1] / "nsdrake" / "studies" / "families"
 NAMES = {
@@ -69,6 +77,29 @@ def law_overrides(law: str, omega: float, h_n: float, posture: dict, criteria_of
         ns["law"] = law.removesuffix("_damped")
         ns |= gains
     dns = {**criteria_off, "source": source, "posture": posture}
+    return {"desired_null_space": dns, "null_space": ns, "report": {"null_space_torque": True}}
+
+
+# Rows beside the rule's, on the tasks named (referee, issue 38): the torque PD at the paper's
+# poles (equal poles, not only an equal slowest pole), and two laws at their library's gains
+EXTRA_TASKS = ("panda_wipe", "panda_self_motion")
+EXTRA_NAMES = {
+    "paper_poles": "dyn. consistent PD (torque), the paper's poles",
+    "franka_ros": "kinematic PD, damped inverse, franka_ros's gains",
+    "robosuite": "dyn. consistent PD (H), robosuite's gains",
+}
+
+
+def extra_overrides(extra: str, omega: float, h_n: float, posture: dict, criteria_off: dict) -> dict:
+    """The overrides of an :data:`EXTRA_NAMES` row."""
+    if extra == "paper_poles":
+        law, gains = "dynamically_consistent_torque_pd", paper_poles_gains(omega, h_n)
+    elif extra == "franka_ros":
+        law, gains = "kinematic_posture_pd", FRANKA_ROS_GAINS
+    else:
+        law, gains = "dynamically_consistent_posture_pd", ROBOSUITE_GAINS
+    ns = {"law": law} | {k: _g(v) for k, v in gains.items()}
+    dns = {**criteria_off, "source": "criteria", "posture": posture}
     return {"desired_null_space": dns, "null_space": ns, "report": {"null_space_torque": True}}
 
 
@@ -124,14 +155,17 @@ def main() -> None:
         "  Which null-space law? Five laws (the paper's through J-bar and through the Moore-Penrose\n"
         "  inverse, the kinematic posture PD with the exact and with franka_ros's damped inverse,\n"
         "  the dynamically consistent posture PD multiplied by H and the same on a torque PD) on the\n"
-        "  same arm, task impedance and posture objective q_d, each tuned by one written rule for the\n"
+        "  same arm, task impedance and posture objective q_d, each tuned by this project's rule (a rule,\n"
+        "  not the libraries' own defaults) for the\n"
         f"  same null-space bandwidth (slowest pole {PANDA_OMEGA:g} rad/s on the Panda,\n"
         f"  {FIG3_OMEGA:g} on fig3),\n"
         "  about critically damped and stable at the control period (damping_ratio and pole_radius_T\n"
         "  per row). Tasks: panda_wipe, q_d moved along the self-motion (panda_self_motion) and off it\n"
         "  (panda_off_path: joint 4 0.3 rad toward straight, the elbow opened), fig3, and a 20 N,\n"
         "  50 ms push on the\n"
-        "  Panda's elbow with and without the 1000 N m/s torque-rate limit.\n"
+        "  Panda's elbow with and without the 1000 N m/s torque-rate limit. On panda_wipe and\n"
+        "  panda_self_motion also the torque PD at the paper's poles (-w and -2w) and two laws at\n"
+        "  their library's gains (franka_ros's kinematic PD, robosuite's H-weighted PD).\n"
         "scenario: panda_wipe\nmeasure: null_space_laws\nvariants:\n"
     ]
     for task, base, extra, posture, off, omega, h_n in tasks:
@@ -139,6 +173,10 @@ def main() -> None:
             text.append(
                 _variant(f"{task} / {NAMES[law]}", base, extra | law_overrides(law, omega, h_n, posture, off))
             )
+        if task in EXTRA_TASKS:
+            for key, name in EXTRA_NAMES.items():
+                over = extra | extra_overrides(key, omega, h_n, posture, off)
+                text.append(_variant(f"{task} / {name}", base, over))
     (FAMILIES / "null_space_laws.yaml").write_text("".join(text))
 
     bandwidth = [

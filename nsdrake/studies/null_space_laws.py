@@ -108,6 +108,30 @@ def tuned_gains(law: str, omega: float, h_n: float) -> dict[str, float]:
     raise ValueError(f"unknown law {law!r}; the laws are {', '.join(LAW_KEYS)}")
 
 
+def paper_poles_gains(omega: float, h_n: float) -> dict[str, float]:
+    """The torque PD (dynamically consistent or kinematic) with the paper's law's poles under
+    the rule, −ω and −2ω where μ = h_n: μ s̈ + D ṡ + K s = μ (s + ω)(s + 2ω), so
+    K_ns = 2 ω² h_n, D_ns = 3 ω h_n (twice the rule's stiffness, 1.5 × its damping)."""
+    return {"posture_stiffness": 2.0 * omega**2 * h_n, "posture_damping": 3.0 * omega * h_n}
+
+
+# Gains as two libraries ship them (not the rule): the variants "… franka_ros's gains" and
+# "… robosuite's gains" of null_space_laws.
+# franka_ros, franka_example_controllers CartesianImpedanceExampleController: the null-space
+# stiffness starts at 20 (nullspace_stiffness_{20.0} in its header), damping 2√K, through
+# the damped (Jᵀ)⁺ with λ = 0.2 (FRANKA_ROS_LAMBDA); its dynamic_reconfigure default
+# (cfg/compliance_param.cfg) is 0, which switches the posture off once the reconfigure
+# server's first call has been filtered in.
+FRANKA_ROS_GAINS = {
+    "posture_stiffness": 20.0,
+    "posture_damping": 2.0 * math.sqrt(20.0),
+    "projector_damping": FRANKA_ROS_LAMBDA,
+}
+# robosuite, utils/control_utils.py nullspace_torques (its OSC controllers): joint_kp = 10,
+# joint_kv = 2√joint_kp, multiplied by H and projected by (I − J̄ J)ᵀ: the H-weighted PD.
+ROBOSUITE_GAINS = {"posture_stiffness": 10.0, "posture_damping": 2.0 * math.sqrt(10.0)}
+
+
 def law_key(null_space, posture) -> str:
     """The :data:`LAW_KEYS` entry of a configuration (``null_space``, ``desired_null_space.posture``)."""
     if null_space.law == "paper":
@@ -117,13 +141,15 @@ def law_key(null_space, posture) -> str:
     return null_space.law
 
 
-def _sampled_loop(law: str, gains: dict, mu: float, T: float) -> np.ndarray:
+def _sampled_loop(law: str, gains: dict, mu: float, T: float, g: float = 1.0) -> np.ndarray:
     """The transition matrix over one period T of the null-space loop along a direction of
     inertia μ (module docstring), the acceleration held over the period: state (s, ṡ) for
     the PD laws, (s, ṡ, ṡ_d of the previous period) for the paper's (its feedforward q̈_dⁿ
-    is the backward difference of q̇_dⁿ)."""
+    is the backward difference of q̇_dⁿ). ``g`` multiplies the acceleration the torque
+    produces (the loop gain: an arm whose null-space inertia is μ/g where the law assumes μ,
+    or whose torque is g times the commanded)."""
     step = np.array([[1.0, T], [0.0, 1.0]])
-    hold = np.array([T * T / 2.0, T])
+    hold = g * np.array([T * T / 2.0, T])
     if law.startswith("paper"):
         a = abs(gains["gain"]) / (mu if law == "paper" else 1.0)
         K_n = gains["K_n"]
@@ -155,17 +181,71 @@ def damping_ratio(poles: np.ndarray) -> float:
     return float((-(p1 + p2) / (2.0 * np.sqrt(p1 * p2))).real)
 
 
+def _pole_radius(law: str, gains: dict, mu: float, period: float, g: float = 1.0) -> float:
+    return float(np.max(np.abs(np.linalg.eigvals(_sampled_loop(law, gains, mu, period, g)))))
+
+
+GAIN_MARGIN_MAX = 1e4  # the search's end: a margin beyond it is reported as this
+
+
+def gain_margin(law: str, gains: dict, mu: float, period: float) -> float:
+    """The loop's gain margin along a direction of inertia μ: the factor g by which the
+    acceleration its torque produces may grow (:func:`_sampled_loop`) before the sampled
+    loop's pole radius reaches 1 (< 1 where the loop is unstable as tuned). Found on a
+    logarithmic grid, then by bisection to 1e-6 relative; :data:`GAIN_MARGIN_MAX` where the
+    loop stays stable up to it. For a PD held over the period the Jury test gives it in
+    closed form, 2μ/(D T) where K T < 2 D (tests/studies/test_null_space_laws_family.py)."""
+    if _pole_radius(law, gains, mu, period) >= 1.0:
+        low, high = 0.0, 1.0
+    else:
+        low, high = 1.0, None
+        for g in np.geomspace(1.0, GAIN_MARGIN_MAX, 161)[1:]:
+            if _pole_radius(law, gains, mu, period, float(g)) >= 1.0:
+                high = float(g)
+                break
+            low = float(g)
+        if high is None:
+            return GAIN_MARGIN_MAX
+    while high - low > 1e-6 * high:
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if _pole_radius(law, gains, mu, period, middle) < 1.0 else (low, middle)
+    return 0.5 * (low + high)
+
+
 def null_space_loop(law: str, gains: dict, masses: np.ndarray, period: float) -> dict:
     """The row's loop figures over the null-space directions of inertias ``masses``: the
-    damping ratios' range, the slowest pole's rate [rad/s] and the largest discrete-time
-    pole radius ρ_T at the control period (< 1: stable; module docstring)."""
-    zetas, slow, rho = [], math.inf, 0.0
+    damping ratios' range, the slowest pole's rate [rad/s], the largest discrete-time pole
+    radius ρ_T at the control period (< 1: stable; module docstring) and the smallest gain
+    margin (:func:`gain_margin`)."""
+    zetas, slow, rho, margin = [], math.inf, 0.0, math.inf
     for mu in masses:
         poles = _continuous_poles(law, gains, float(mu))
         zetas.append(damping_ratio(poles))
         slow = min(slow, float(np.min(-poles.real)))
-        rho = max(rho, float(np.max(np.abs(np.linalg.eigvals(_sampled_loop(law, gains, float(mu), period))))))
-    return {"zeta_min": min(zetas), "zeta_max": max(zetas), "slowest_pole": slow, "pole_radius": rho}
+        rho = max(rho, _pole_radius(law, gains, float(mu), period))
+        margin = min(margin, gain_margin(law, gains, float(mu), period))
+    return {
+        "zeta_min": min(zetas),
+        "zeta_max": max(zetas),
+        "slowest_pole": slow,
+        "pole_radius": rho,
+        "gain_margin": margin,
+    }
+
+
+def loop_along_run(law: str, gains: dict, arm, q: np.ndarray, period: float) -> dict:
+    """:func:`null_space_loop` at each posture of ``q`` (rows of a run's traces): the range
+    over the run of the damping ratio and of the slowest pole, and the smallest gain
+    margin. The null-space inertias change with the posture (the start's figures hold
+    there only)."""
+    loops = [null_space_loop(law, gains, null_space_masses(arm, qk), period) for qk in q]
+    return {
+        "zeta_min": min(lp["zeta_min"] for lp in loops),
+        "zeta_max": max(lp["zeta_max"] for lp in loops),
+        "slowest_pole_min": min(lp["slowest_pole"] for lp in loops),
+        "slowest_pole_max": max(lp["slowest_pole"] for lp in loops),
+        "gain_margin_min": min(lp["gain_margin"] for lp in loops),
+    }
 
 
 def row_gains(scenario) -> dict[str, float]:
@@ -287,19 +367,36 @@ def posture_lag(terms, v: np.ndarray, K: float) -> float:
     return float(np.linalg.norm(Z.T @ terms.H @ np.linalg.pinv(J) @ (J @ v)) / abs(K))
 
 
-def loop_figures(scenario, arm) -> dict:
-    """The row's null-space loop at the start posture, from its own gains and period
-    (:func:`null_space_loop`): what the table reports as its damping ratio and margin."""
+def _span(low: float, high: float) -> str:
+    """A range as the table prints it: one figure where both ends agree to 3 digits."""
+    return f"{low:.3g}" if high - low < 5e-4 * abs(high) else f"{low:.3g}–{high:.3g}"
+
+
+RUN_SAMPLE = 0.01  # [s] the postures of a run at which its loop is evaluated (loop_along_run)
+
+
+def loop_figures(scenario, arm, q_run: np.ndarray | None = None) -> dict:
+    """The row's null-space loop from its own gains and period (:func:`null_space_loop`)
+    at the start posture: damping ratio, slowest pole, pole radius ρ_T, gain margin; and
+    with the run's postures ``q_run``, the same along the run (:func:`loop_along_run`)."""
     key = law_key(scenario.null_space, scenario.desired_null_space.posture)
     q0 = np.array([scenario.arm.initial_positions[j] for j in arm.joint_names])
-    masses = null_space_masses(arm, q0)
-    loop = null_space_loop(key, row_gains(scenario), masses, scenario.control_period)
-    zeta = (
-        f"{loop['zeta_min']:.3g}"
-        if loop["zeta_max"] - loop["zeta_min"] < 5e-4 * loop["zeta_max"]
-        else f"{loop['zeta_min']:.3g}–{loop['zeta_max']:.3g}"
-    )
-    return {"damping_ratio": zeta, "slowest_pole": loop["slowest_pole"], "pole_radius_T": loop["pole_radius"]}
+    gains, T = row_gains(scenario), scenario.control_period
+    loop = null_space_loop(key, gains, null_space_masses(arm, q0), T)
+    row = {
+        "damping_ratio": _span(loop["zeta_min"], loop["zeta_max"]),
+        "slowest_pole": loop["slowest_pole"],
+        "pole_radius_T": loop["pole_radius"],
+        "gain_margin": loop["gain_margin"],
+    }
+    if q_run is not None and len(q_run):
+        run = loop_along_run(key, gains, arm, q_run, T)
+        row |= {
+            "damping_ratio_run": _span(run["zeta_min"], run["zeta_max"]),
+            "slowest_pole_run": _span(run["slowest_pole_min"], run["slowest_pole_max"]),
+            "gain_margin_run_min": run["gain_margin_min"],
+        }
+    return row
 
 
 def _rms(x) -> float:
@@ -311,7 +408,12 @@ def law_figures(traces: Traces, ctx) -> dict:
     """One row of the table (module docstring)."""
     s = ctx.scenario
     t = traces["t"]
-    row: dict = {"law": law_key(s.null_space, s.desired_null_space.posture), **loop_figures(s, ctx.arm)}
+    every = max(1, round(RUN_SAMPLE / s.control_period))
+    q_run = traces.block("q")[::every]
+    row: dict = {
+        "law": law_key(s.null_space, s.desired_null_space.posture),
+        **loop_figures(s, ctx.arm, q_run),
+    }
     k0 = first_contact_index(traces, s.reference.contact_threshold)
     if k0 is None or t[-1] < t[k0] + SETTLE_TIME:
         return {**row, "note": "no contact window (no contact, or the run ends within 0.5 s of it)"}

@@ -25,13 +25,18 @@ from nsdrake.experiment.diagram import build_diagram
 from nsdrake.experiment.scenario import ScenarioError
 from nsdrake.studies.compare import load_family, run_family, variant_scenario
 from nsdrake.studies.null_space_laws import (
+    FRANKA_ROS_GAINS,
     LAW_KEYS,
+    ROBOSUITE_GAINS,
     _continuous_poles,
     damping_ratio,
+    gain_margin,
     law_key,
+    loop_along_run,
     null_space_inertia,
     null_space_loop,
     null_space_masses,
+    paper_poles_gains,
     row_gains,
     tuned_gains,
 )
@@ -45,6 +50,12 @@ LAWS = (
     "dyn. consistent PD (torque)",
 )
 TASKS = ["panda_wipe", "panda_self_motion", "panda_off_path", "fig3", "push", "push, no rate limit"]
+# the rows beside the rule's (referee, issue 38), on panda_wipe and panda_self_motion
+EXTRAS = {
+    "dyn. consistent PD (torque), the paper's poles": "paper_poles",
+    "kinematic PD, damped inverse, franka_ros's gains": "franka_ros",
+    "dyn. consistent PD (H), robosuite's gains": "robosuite",
+}
 
 
 def test_every_task_runs_every_law():
@@ -52,7 +63,38 @@ def test_every_task_runs_every_law():
     names = [v.name.split(" / ") for v in family.variants]
     tasks = list(dict.fromkeys(task for task, _ in names))
     assert tasks == TASKS
-    assert sorted(map(tuple, names)) == sorted((t, law) for t in tasks for law in LAWS)
+    extra = [(t, law) for t in ("panda_wipe", "panda_self_motion") for law in EXTRAS]
+    assert sorted(map(tuple, names)) == sorted([(t, law) for t in tasks for law in LAWS] + extra)
+
+
+def _expected_gains(name: str, variant, h_n: float) -> dict[str, float]:
+    """The gains a variant should have: the rule's, or an extra row's own (EXTRAS)."""
+    law = variant.name.split(" / ")[1]
+    if law in EXTRAS:
+        return {
+            "paper_poles": paper_poles_gains(_bandwidth(name, variant), h_n),
+            "franka_ros": FRANKA_ROS_GAINS,
+            "robosuite": ROBOSUITE_GAINS,
+        }[EXTRAS[law]]
+    return None
+
+
+def test_the_extra_rows_gains_are_their_sources():
+    """The extra rows' gains as the sources write them, checked here from their own words:
+    the torque PD at the paper's poles has μ s² + D s + K = μ (s + ω)(s + 2ω) at μ = h_n;
+    franka_ros's nullspace_stiffness_ 20 with damping 2√K and λ 0.2; robosuite's
+    joint_kp 10, joint_kv 2√kp. Catches a pole pair that is not the paper's (the rule's
+    double pole) or a library's gain misread."""
+    h_n, omega = 0.0263, 20.0
+    g = paper_poles_gains(omega, h_n)
+    poles = np.sort(np.roots([h_n, g["posture_damping"], g["posture_stiffness"]]).real)
+    np.testing.assert_allclose(poles, [-2 * omega, -omega], rtol=1e-12)
+    assert FRANKA_ROS_GAINS == {
+        "posture_stiffness": 20.0,
+        "posture_damping": 2 * 20**0.5,
+        "projector_damping": 0.2,
+    }
+    assert ROBOSUITE_GAINS == {"posture_stiffness": 10.0, "posture_damping": 2 * 10**0.5}
 
 
 def _bandwidth(family_name: str, variant) -> float:
@@ -76,7 +118,9 @@ def test_the_gains_follow_the_tuning_rule(name):
         assert s.desired_null_space.posture.q_d == pytest.approx(dict(s.arm.initial_positions), abs=5e-4)
         key = law_key(s.null_space, s.desired_null_space.posture)
         given = row_gains(s)
-        for field, value in tuned_gains(key, _bandwidth(name, variant), inertia[variant.scenario]).items():
+        h_n = inertia[variant.scenario]
+        expected = _expected_gains(name, variant, h_n) or tuned_gains(key, _bandwidth(name, variant), h_n)
+        for field, value in expected.items():
             assert given[field] == pytest.approx(value, rel=5e-4), (variant.name, field)
 
 
@@ -189,6 +233,90 @@ def test_the_discrete_pole_radius_is_the_sampled_loops(law, omega, mu, T):
     expected = np.max(np.abs(np.linalg.eigvals(A)))
     got = null_space_loop(law, g, np.array([mu]), T)["pole_radius"]
     assert got == pytest.approx(expected, rel=1e-9)
+
+
+@pytest.mark.parametrize("law", ["kinematic_posture_pd", "dynamically_consistent_posture_pd"])
+@pytest.mark.parametrize("omega, mu, T", [(20.0, 0.026, 0.001), (50.0, 0.0018, 0.002), (5.0, 0.05, 0.001)])
+def test_a_pds_gain_margin_is_the_jury_bound(law, omega, mu, T):
+    """A PD held over the period, acceleration g (−k s − d ṡ): its characteristic
+    polynomial z² − (2 − g k T²/2 − g d T) z + (1 − g d T + g k T²/2) is stable (Jury) iff
+    k T < 2 d and g d T < 2, so the margin is 2/(d T), d = D/μ (D for the H-weighted PD),
+    where k T < 2 d holds (it does for every row here): 1/(ωT) = 50 for the Panda's rule
+    (d = 2ω = 40 rad/s, T = 1 ms). Catches a margin read off the wrong crossing, a
+    scale on K only, or a bisection that stops early (to 1e-5)."""
+    g = tuned_gains(law, omega, 0.026)
+    d = g["posture_damping"] / (1.0 if law == "dynamically_consistent_posture_pd" else mu)
+    k = g["posture_stiffness"] / (1.0 if law == "dynamically_consistent_posture_pd" else mu)
+    assert k * T < 2 * d
+    assert gain_margin(law, g, mu, T) == pytest.approx(2.0 / (d * T), rel=1e-5)
+
+
+@pytest.mark.parametrize("law", ["paper", "paper_moore_penrose"])
+def test_the_papers_gain_margin_is_where_scipys_sampled_loop_turns_unstable(law):
+    """The paper's loop (3 states, its backward-difference feedforward), rebuilt with SciPy's
+    zero-order hold as the pole-radius test does, with the plant's input scaled by g: stable
+    just below the margin :func:`gain_margin` reports (g × 0.999) and unstable just above it
+    (× 1.001), on the Panda's rule (ω = 20 rad/s, μ = h_n) and on a light direction at a 4 ms
+    period (unstable as tuned: a margin below 1). Catches a margin of another loop, or one
+    that is not the first crossing."""
+    h_n = 0.026
+    for omega, mu, T in ((20.0, h_n, 0.001), (50.0, 0.0018, 0.004)):
+        g = tuned_gains(law, omega, h_n)
+        margin = gain_margin(law, g, mu, T)
+        Ad, Bd, *_ = cont2discrete(
+            (np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), np.zeros((2, 1))),
+            T,
+            method="zoh",
+        )
+        a = abs(g["gain"]) / (mu if law == "paper" else 1.0)
+        F = np.array([[-a / T - g["K_n"] * a, -g["K_n"], -1.0 / T]])
+
+        def radius(gain, Ad=Ad, Bd=Bd, F=F, a=a):
+            A = np.zeros((3, 3))
+            A[:2, :] = np.hstack([Ad, np.zeros((2, 1))]) + gain * (Bd @ F)
+            A[2, 0] = -a
+            return np.max(np.abs(np.linalg.eigvals(A)))
+
+        assert 0.0 < margin < 1e4 and (margin > 1.0) == (radius(1.0) < 1.0)
+        assert radius(0.999 * margin) < 1.0 < radius(1.001 * margin), (omega, margin)
+
+
+def test_the_loop_along_a_run_spans_its_postures():
+    """loop_along_run over a few postures of fig3's arm: the range of ζ is the range of the
+    per-posture damping ratios computed here from Drake's own mass matrix and Jacobian
+    (H from CalcMassMatrix, J the tool's translational Jacobian, Z from SciPy's null_space),
+    ζ = D/(2√(K μ)) for the torque PD; the smallest margin the smallest of 2μ/(D T).
+    Catches figures taken at the start posture only, or from the wrong inertia."""
+    from pydrake.multibody.tree import JacobianWrtVariable
+    from scipy.linalg import null_space
+
+    arm = paper_arm()
+    plant, context = arm.plant, arm.plant.CreateDefaultContext()
+    q0 = np.array([0.401, 0.972, 1.012, 0.614])
+    qs = np.array([q0 + d for d in (0.0, 0.15, -0.2, 0.3)])
+    g = tuned_gains("dynamically_consistent_torque_pd", 50.0, 0.0049)
+    T = 0.001
+    zetas, margins = [], []
+    for q in qs:
+        plant.SetPositions(context, q)
+        H = plant.CalcMassMatrix(context)
+        J = plant.CalcJacobianTranslationalVelocity(
+            context,
+            JacobianWrtVariable.kV,
+            arm.tool_frame,
+            np.zeros(3),
+            plant.world_frame(),
+            plant.world_frame(),
+        )[arm.rows]
+        Z = null_space(J)
+        for mu in np.linalg.eigvalsh(Z.T @ H @ Z):
+            zetas.append(g["posture_damping"] / (2 * np.sqrt(g["posture_stiffness"] * mu)))
+            margins.append(2 * mu / (g["posture_damping"] * T))
+    run = loop_along_run("dynamically_consistent_torque_pd", g, arm, qs, T)
+    assert run["zeta_min"] == pytest.approx(min(zetas), rel=1e-6)
+    assert run["zeta_max"] == pytest.approx(max(zetas), rel=1e-6)
+    assert run["gain_margin_min"] == pytest.approx(min(margins), rel=1e-5)
+    assert max(zetas) / min(zetas) > 1.05  # the postures differ enough to tell
 
 
 def test_the_moved_posture_keeps_the_tool_where_it_was():
