@@ -3,9 +3,10 @@ and ``nsdrake compare null_space_bandwidth``.
 
 The families run each law of :mod:`nsdrake.control.null_space_laws` on each task with the
 same task impedance and the same secondary objective, a posture q_d. Each law is tuned by
-one written rule (:func:`tuned_gains`), as its users tune it: stable at the control period
-and about critically damped, for a null-space bandwidth ω [rad/s], the rate of the slowest
-pole of the posture's return, equal for every law.
+one written rule of this project's (:func:`tuned_gains`; a rule, not the libraries' own
+gains, which are rows of their own: :data:`FRANKA_ROS_GAINS`, :data:`ROBOSUITE_GAINS`):
+stable at the control period and about critically damped, for a null-space bandwidth
+ω [rad/s], the rate of the slowest pole of the posture's return, equal for every law.
 
 The rule comes from the null-space loop with the task held: in coordinates s of J's null
 space (q − q* = Z s, Z an orthonormal basis), Zᵀ H Z s̈ = Zᵀ τ₀, since Zᵀ Jᵀ = 0; with
