@@ -410,7 +410,7 @@ def law_figures(traces: Traces, ctx) -> dict:
     s = ctx.scenario
     t = traces["t"]
     every = max(1, round(RUN_SAMPLE / s.control_period))
-    q_run = traces.block("q")[::every]
+    q_run = traces.block("q")[::every] if "q1" in traces else None  # a run's postures, where logged
     row: dict = {
         "law": law_key(s.null_space, s.desired_null_space.posture),
         **loop_figures(s, ctx.arm, q_run),
