@@ -98,7 +98,8 @@ def extra_overrides(extra: str, omega: float, h_n: float, posture: dict, criteri
         law, gains = "kinematic_posture_pd", FRANKA_ROS_GAINS
     else:
         law, gains = "dynamically_consistent_posture_pd", ROBOSUITE_GAINS
-    ns = {"law": law} | {k: _g(v) for k, v in gains.items()}
+    # to 10 digits, not the rule rows' 4: 2√10 rounded to 6.325 split robosuite's double pole
+    ns = {"law": law} | {k: float(f"{v:.10g}") for k, v in gains.items()}
     dns = {**criteria_off, "source": "criteria", "posture": posture}
     return {"desired_null_space": dns, "null_space": ns, "report": {"null_space_torque": True}}
 

@@ -195,7 +195,8 @@ def gain_margin(law: str, gains: dict, mu: float, period: float) -> float:
     loop's pole radius reaches 1 (< 1 where the loop is unstable as tuned). Found on a
     logarithmic grid, then by bisection to 1e-6 relative; :data:`GAIN_MARGIN_MAX` where the
     loop stays stable up to it. For a PD held over the period the Jury test gives it in
-    closed form, 2μ/(D T) where K T < 2 D (tests/studies/test_null_space_laws_family.py)."""
+    closed form, 2μ/(D T) where K T < 2 D (2/(D T) for the H-weighted PD;
+    tests/studies/test_null_space_laws_family.py)."""
     if _pole_radius(law, gains, mu, period) >= 1.0:
         low, high = 0.0, 1.0
     else:
@@ -369,8 +370,9 @@ def posture_lag(terms, v: np.ndarray, K: float) -> float:
 
 
 def _span(low: float, high: float) -> str:
-    """A range as the table prints it: one figure where both ends agree to 3 digits."""
-    return f"{low:.3g}" if high - low < 5e-4 * abs(high) else f"{low:.3g}–{high:.3g}"
+    """A range as the table prints it (3 digits): one figure where both ends print alike."""
+    low_text, high_text = f"{low:.3g}", f"{high:.3g}"
+    return low_text if low_text == high_text else f"{low_text}–{high_text}"
 
 
 RUN_SAMPLE = 0.01  # [s] the postures of a run at which its loop is evaluated (loop_along_run)

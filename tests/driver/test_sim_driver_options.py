@@ -38,17 +38,19 @@ def scenario():
 
 
 class FakeClock:
-    """The driver's clock [s]: half a control period further at each reading after the
-    first (the driver reads it once at the start and twice a period: waiting for the
-    period's middle, where the plant steps, and for its end), so that every deadline is
-    met at once; ``utime`` the wall clock's µs on it."""
+    """The driver's clock [s]: at each reading the next deadline the driver waits for (it
+    reads the clock once at the start and twice a period: waiting for the period's middle,
+    where the plant steps, and for its end), so that every deadline is met at once;
+    ``utime`` the wall clock's µs on it."""
 
     def __init__(self, period: float):
         self.period, self.now, self._reads = period, 0.0, 0
 
     def __call__(self) -> float:
-        # k half periods as the driver's deadlines are written (start + k periods), to the bit
-        self.now = self._reads * (serve_module.PHYSICS_AT * self.period)
+        # the driver's deadlines as it writes them (start + (k + PHYSICS_AT) periods, then
+        # start + (k + 1) periods), to the bit, whatever PHYSICS_AT is
+        k, middle = divmod(self._reads, 2)
+        self.now = (k + serve_module.PHYSICS_AT) * self.period if middle else k * self.period
         self._reads += 1
         return self.now
 

@@ -80,11 +80,15 @@ def _expected_gains(name: str, variant, h_n: float) -> dict[str, float]:
 
 
 def test_the_extra_rows_gains_are_their_sources():
-    """The extra rows' gains as the sources write them, checked here from their own words:
-    the torque PD at the paper's poles has μ s² + D s + K = μ (s + ω)(s + 2ω) at μ = h_n;
-    franka_ros's nullspace_stiffness_ 20 with damping 2√K and λ 0.2; robosuite's
-    joint_kp 10, joint_kv 2√kp. Catches a pole pair that is not the paper's (the rule's
-    double pole) or a library's gain misread."""
+    """The torque PD at the paper's poles has μ s² + D s + K = μ (s + ω)(s + 2ω) at μ = h_n
+    (catches a pole pair that is not the paper's, e.g. the rule's double pole). The two
+    libraries' gains are transcribed, not derived, and this test only pins them to the
+    sources' words so that an edit is seen: frankaemika/franka_ros,
+    franka_example_controllers/include/.../cartesian_impedance_example_controller.h
+    (nullspace_stiffness_{20.0}), its .cpp (damping (2.0 * sqrt(nullspace_stiffness_))) and
+    franka_example_controllers/include/.../pseudo_inversion.h (λ 0.2); ARISE-Initiative/
+    robosuite, robosuite/utils/control_utils.py nullspace_torques (joint_kp=10, joint_kv =
+    np.sqrt(joint_kp) * 2, multiplied by the mass matrix)."""
     h_n, omega = 0.0263, 20.0
     g = paper_poles_gains(omega, h_n)
     poles = np.sort(np.roots([h_n, g["posture_damping"], g["posture_stiffness"]]).real)
@@ -257,8 +261,11 @@ def test_the_papers_gain_margin_is_where_scipys_sampled_loop_turns_unstable(law)
     zero-order hold as the pole-radius test does, with the plant's input scaled by g: stable
     just below the margin :func:`gain_margin` reports (g × 0.999) and unstable just above it
     (× 1.001), on the Panda's rule (ω = 20 rad/s, μ = h_n) and on a light direction at a 4 ms
-    period (unstable as tuned: a margin below 1). Catches a margin of another loop, or one
-    that is not the first crossing."""
+    period (the J̄ law unstable there as tuned: a margin below 1); stable on a grid of every
+    gain below it; and the law's difference equations (ṡ_d = −a s, the backward-difference
+    feed-forward, the torque held over the period), stepped 20 000 periods, decay at
+    0.98 × the margin and grow at 1.02 ×. Catches a margin of another loop, or one that is
+    not the first crossing."""
     h_n = 0.026
     for omega, mu, T in ((20.0, h_n, 0.001), (50.0, 0.0018, 0.004)):
         g = tuned_gains(law, omega, h_n)
@@ -279,6 +286,18 @@ def test_the_papers_gain_margin_is_where_scipys_sampled_loop_turns_unstable(law)
 
         assert 0.0 < margin < 1e4 and (margin > 1.0) == (radius(1.0) < 1.0)
         assert radius(0.999 * margin) < 1.0 < radius(1.001 * margin), (omega, margin)
+        # the first crossing: stable everywhere below it
+        assert all(radius(x) < 1.0 for x in np.linspace(0.001, 0.999, 400) * margin)
+        # and the law's own difference equations, stepped, decay below it and grow above
+        for factor, grows in ((0.98, False), (1.02, True)):
+            s, v, sd_prev = 1e-3, 0.0, -a * 1e-3  # at rest before the first period
+            for _ in range(20000):
+                sd = -a * s  # ṡ_d = −a s
+                acc = factor * margin * ((sd - sd_prev) / T + g["K_n"] * (sd - v))
+                s, v, sd_prev = s + T * v + 0.5 * T * T * acc, v + T * acc, sd
+                if abs(s) > 1.0:  # grown a thousandfold
+                    break
+            assert (abs(s) > 1.0 if grows else abs(s) < 1e-6), (omega, factor, s)
 
 
 def test_the_loop_along_a_run_spans_its_postures():
