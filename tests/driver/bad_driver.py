@@ -20,6 +20,7 @@ import lcm
 from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
 
 WARM = 100  # commands before the fault
+ACCELERATION = 2.7  # [rad/s²] position_limit's joint 6 from rest to past its limit
 UTIME0 = 1_700_000_000_000_000
 FAULTS = (
     "undecodable", "nan", "position_limit", "velocity_limit", "two_publishers", "silence",
@@ -63,7 +64,7 @@ def main() -> None:
     fault = args.fault
     k, utime, robot_utime, offset = 0, UTIME0, 5_000_000, 0
     period, step = 1e-3, 1000
-    began = faulty_utime = faulty_at = None
+    began = faulty_utime = faulty_at = q_on = None
     now = time.monotonic()
     deadline, next_time = now + args.seconds, now
     while time.monotonic() < deadline:
@@ -80,10 +81,16 @@ def main() -> None:
                 offset = -5 * step
         on = began is not None
         utime, robot_utime = utime + step, robot_utime + step
-        if on and fault == "position_limit":  # joint 6 moves up at 2.5 rad/s (within its velocity limit,
-            # its reported velocity agreeing: half a step from rest first) until past its position limit
-            q[5] += 0.0025 if v[5] else 0.00125
-            v[5] = 2.5
+        if on and fault == "position_limit":  # joint 6 accelerates from rest at 2.7 rad/s² until past
+            # its position limit (about 0.93 s, 2.5 rad/s then: within its velocity limit): the
+            # position is the integral of the reported velocity exactly, over any gap between
+            # two statuses the controller answers (a velocity step, as it was, disagreed with
+            # the position when the controller skipped a status: a consistency refusal instead)
+            if q_on is None:
+                q_on, n_on = q[5], 0
+            n_on += 1
+            t_on = n_on * 1e-3
+            q[5], v[5] = q_on + 0.5 * ACCELERATION * t_on**2, ACCELERATION * t_on
         if on and fault == "creep":  # joint 7 creeps at 5 rad/s while its velocity reads 0 (issue 35)
             q[6] += 0.005
         data = status(
