@@ -63,9 +63,10 @@ def _flow(value) -> str:
     return str(value)
 
 
-def law_overrides(law: str, omega: float, h_n: float, posture: dict, criteria_off: dict) -> dict:
-    """The overrides that make ``law`` at bandwidth ω the variant's null-space law."""
-    gains = {k: _g(v) for k, v in tuned_gains(law, omega, h_n).items()}
+def law_overrides(law: str, gains: dict, posture: dict, criteria_off: dict) -> dict:
+    """The overrides that make ``law`` (a :data:`LAW_KEYS` entry) with ``gains`` (as the
+    file writes them, by configuration field) the variant's null-space law."""
+    gains = dict(gains)
     ns: dict = {"K_n": gains.pop("K_n")} if "K_n" in gains else {}
     if law.startswith("paper"):
         posture = {**posture, "gain": gains.pop("gain")}
@@ -80,28 +81,36 @@ def law_overrides(law: str, omega: float, h_n: float, posture: dict, criteria_of
     return {"desired_null_space": dns, "null_space": ns, "report": {"null_space_torque": True}}
 
 
+def rule_gains(law: str, omega: float, h_n: float) -> dict:
+    """The rule's gains for ``law`` at bandwidth ω, to the 4 digits the file writes."""
+    return {k: _g(v) for k, v in tuned_gains(law, omega, h_n).items()}
+
+
 # Rows beside the rule's, on the tasks named (referee, issue 38): the torque PD at the paper's
-# poles (equal poles, not only an equal slowest pole), and two laws at their library's gains
+# poles (equal poles, not only an equal slowest pole), and two laws at their library's gains;
+# by name: (law, gains at bandwidth ω and null-space inertia h_n)
 EXTRA_TASKS = ("panda_wipe", "panda_self_motion")
-EXTRA_NAMES = {
-    "paper_poles": "dyn. consistent PD (torque), the paper's poles",
-    "franka_ros": "kinematic PD, damped inverse, franka_ros's gains",
-    "robosuite": "dyn. consistent PD (H), robosuite's gains",
+EXTRAS = {
+    "dyn. consistent PD (torque), the paper's poles": (
+        "dynamically_consistent_torque_pd",
+        paper_poles_gains,
+    ),
+    "kinematic PD, damped inverse, franka_ros's gains": (
+        "kinematic_posture_pd_damped",
+        lambda omega, h_n: FRANKA_ROS_GAINS,
+    ),
+    "dyn. consistent PD (H), robosuite's gains": (
+        "dynamically_consistent_posture_pd",
+        lambda omega, h_n: ROBOSUITE_GAINS,
+    ),
 }
 
 
-def extra_overrides(extra: str, omega: float, h_n: float, posture: dict, criteria_off: dict) -> dict:
-    """The overrides of an :data:`EXTRA_NAMES` row."""
-    if extra == "paper_poles":
-        law, gains = "dynamically_consistent_torque_pd", paper_poles_gains(omega, h_n)
-    elif extra == "franka_ros":
-        law, gains = "kinematic_posture_pd", FRANKA_ROS_GAINS
-    else:
-        law, gains = "dynamically_consistent_posture_pd", ROBOSUITE_GAINS
-    # to 10 digits, not the rule rows' 4: 2√10 rounded to 6.325 split robosuite's double pole
-    ns = {"law": law} | {k: float(f"{v:.10g}") for k, v in gains.items()}
-    dns = {**criteria_off, "source": "criteria", "posture": posture}
-    return {"desired_null_space": dns, "null_space": ns, "report": {"null_space_torque": True}}
+def extra_gains(name: str, omega: float, h_n: float) -> tuple[str, dict]:
+    """An :data:`EXTRAS` row's law and gains, to 10 digits, not the rule rows' 4 (2√10
+    rounded to 6.325 split robosuite's double pole)."""
+    law, gains = EXTRAS[name]
+    return law, {k: float(f"{v:.10g}") for k, v in gains(omega, h_n).items()}
 
 
 def _variant(name: str, scenario: str, overrides: dict) -> str:
@@ -172,11 +181,15 @@ def main() -> None:
     for task, base, extra, posture, off, omega, h_n in tasks:
         for law in LAW_KEYS:
             text.append(
-                _variant(f"{task} / {NAMES[law]}", base, extra | law_overrides(law, omega, h_n, posture, off))
+                _variant(
+                    f"{task} / {NAMES[law]}",
+                    base,
+                    extra | law_overrides(law, rule_gains(law, omega, h_n), posture, off),
+                )
             )
         if task in EXTRA_TASKS:
-            for key, name in EXTRA_NAMES.items():
-                over = extra | extra_overrides(key, omega, h_n, posture, off)
+            for name in EXTRAS:
+                over = extra | law_overrides(*extra_gains(name, omega, h_n), posture, off)
                 text.append(_variant(f"{task} / {name}", base, over))
     (FAMILIES / "null_space_laws.yaml").write_text("".join(text))
 
@@ -196,7 +209,7 @@ def main() -> None:
             if law == "kinematic_posture_pd_damped":
                 continue  # its null-space loop is the exact-inverse one's (module docstring)
             posture = {"q_d": q_d, "offset": on_path, **moved}
-            over = law_overrides(law, omega, h_panda, posture, {})
+            over = law_overrides(law, rule_gains(law, omega, h_panda), posture, {})
             bandwidth.append(_variant(f"{omega:g} rad/s / {NAMES[law]}", "panda_self_motion", over))
     (FAMILIES / "null_space_bandwidth.yaml").write_text("".join(bandwidth))
     print(
