@@ -204,22 +204,11 @@ def test_the_rules_poles_are_the_closed_loop_poles(arm_name, law):
         assert float(np.min(-predicted.real)) == pytest.approx(omega, rel=1e-6)
 
 
-@pytest.mark.parametrize(
-    "law", ["paper", "paper_moore_penrose", "kinematic_posture_pd", "dynamically_consistent_posture_pd"]
-)
-@pytest.mark.parametrize(
-    "omega, mu, T", [(20.0, 0.026, 0.001), (50.0, 0.0018, 0.002), (400.0, 0.0018, 0.004)]
-)
-def test_the_discrete_pole_radius_is_the_sampled_loops(law, omega, mu, T):
-    """ρ_T of :func:`null_space_loop` against the sampled loop built with SciPy: the plant
-    s̈ = u/μ discretised with a zero-order hold (cont2discrete), the law's torque computed
-    from the samples (the paper's with its backward-difference feedforward, one more
-    state), to 1e-9. The last case is unstable for some laws (ρ > 1), so the test also
-    sees the radius cross 1. Catches a hold formula off by the T²/2 term or a feedforward
-    that uses the current instead of the previous sample."""
-    h_n = 0.026
-    g = tuned_gains(law, omega, h_n)
-    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu  # what τ₀ does per unit
+def _scipy_sampled_loop(law: str, g: dict, mu: float, T: float, gain: float = 1.0) -> np.ndarray:
+    """The law's null-space loop sampled at T, built with SciPy: the plant s̈ = u/μ
+    discretised with a zero-order hold (cont2discrete), the law's torque computed from the
+    samples (the paper's with its backward-difference feedforward, one more state), the
+    plant's input scaled by ``gain``."""
     Ad, Bd, *_ = cont2discrete(
         (np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), np.zeros((2, 1))),
         T,
@@ -230,11 +219,26 @@ def test_the_discrete_pole_radius_is_the_sampled_loops(law, omega, mu, T):
         # state (s, ṡ, ṡ_d previous); u = (ṡ_d − ṡ_d,prev)/T + K_n (ṡ_d − ṡ), ṡ_d = −a s
         F = np.array([[-a / T - g["K_n"] * a, -g["K_n"], -1.0 / T]])
         A = np.zeros((3, 3))
-        A[:2, :] = np.hstack([Ad, np.zeros((2, 1))]) + Bd @ F
+        A[:2, :] = np.hstack([Ad, np.zeros((2, 1))]) + gain * (Bd @ F)
         A[2, 0] = -a
-    else:
-        A = Ad + Bd @ (scale * np.array([[-g["posture_stiffness"], -g["posture_damping"]]]))
-    expected = np.max(np.abs(np.linalg.eigvals(A)))
+        return A
+    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu  # what τ₀ does per unit
+    return Ad + gain * (Bd @ (scale * np.array([[-g["posture_stiffness"], -g["posture_damping"]]])))
+
+
+@pytest.mark.parametrize(
+    "law", ["paper", "paper_moore_penrose", "kinematic_posture_pd", "dynamically_consistent_posture_pd"]
+)
+@pytest.mark.parametrize(
+    "omega, mu, T", [(20.0, 0.026, 0.001), (50.0, 0.0018, 0.002), (400.0, 0.0018, 0.004)]
+)
+def test_the_discrete_pole_radius_is_the_sampled_loops(law, omega, mu, T):
+    """ρ_T of :func:`null_space_loop` against the sampled loop built with SciPy
+    (:func:`_scipy_sampled_loop`), to 1e-9. The last case is unstable for some laws (ρ > 1),
+    so the test also sees the radius cross 1. Catches a hold formula off by the T²/2 term or
+    a feedforward that uses the current instead of the previous sample."""
+    g = tuned_gains(law, omega, 0.026)
+    expected = np.max(np.abs(np.linalg.eigvals(_scipy_sampled_loop(law, g, mu, T))))
     got = null_space_loop(law, g, np.array([mu]), T)["pole_radius"]
     assert got == pytest.approx(expected, rel=1e-9)
 
@@ -270,19 +274,10 @@ def test_the_papers_gain_margin_is_where_scipys_sampled_loop_turns_unstable(law)
     for omega, mu, T in ((20.0, h_n, 0.001), (50.0, 0.0018, 0.004)):
         g = tuned_gains(law, omega, h_n)
         margin = gain_margin(law, g, mu, T)
-        Ad, Bd, *_ = cont2discrete(
-            (np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), np.zeros((2, 1))),
-            T,
-            method="zoh",
-        )
         a = abs(g["gain"]) / (mu if law == "paper" else 1.0)
-        F = np.array([[-a / T - g["K_n"] * a, -g["K_n"], -1.0 / T]])
 
-        def radius(gain, Ad=Ad, Bd=Bd, F=F, a=a):
-            A = np.zeros((3, 3))
-            A[:2, :] = np.hstack([Ad, np.zeros((2, 1))]) + gain * (Bd @ F)
-            A[2, 0] = -a
-            return np.max(np.abs(np.linalg.eigvals(A)))
+        def radius(gain, g=g, mu=mu, T=T):
+            return np.max(np.abs(np.linalg.eigvals(_scipy_sampled_loop(law, g, mu, T, gain))))
 
         assert 0.0 < margin < 1e4 and (margin > 1.0) == (radius(1.0) < 1.0)
         assert radius(0.999 * margin) < 1.0 < radius(1.001 * margin), (omega, margin)
@@ -297,7 +292,7 @@ def test_the_papers_gain_margin_is_where_scipys_sampled_loop_turns_unstable(law)
                 s, v, sd_prev = s + T * v + 0.5 * T * T * acc, v + T * acc, sd
                 if abs(s) > 1.0:  # grown a thousandfold
                     break
-            assert (abs(s) > 1.0 if grows else abs(s) < 1e-6), (omega, factor, s)
+            assert abs(s) > 1.0 if grows else abs(s) < 1e-6, (omega, factor, s)
 
 
 def test_the_loop_along_a_run_spans_its_postures():
