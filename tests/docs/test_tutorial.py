@@ -131,20 +131,7 @@ def test_the_tutorial_runs_and_shows_what_it_says(tmp_path):
     0.5%; measured 4.990 N) with a standard deviation under 0.01 N, and the joint-torque
     criterion ‖Jᵀ F_d‖² ends at least 5% lower than it started (measured 20.1 → 17.2 N² m²),
     the null space doing what the tutorial says it does."""
-    notebook = nbformat.read(NOTEBOOK, as_version=4)
-    notebook.cells.append(nbformat.v4.new_code_cell(EXPORT))
-    client = nbclient.NotebookClient(
-        notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}
-    )
-    client.execute()
-    (line,) = [
-        text
-        for output in notebook.cells[-1].outputs
-        if output.get("name") == "stdout"
-        for text in output["text"].splitlines()
-        if text.startswith("RESULTS ")
-    ]
-    r = json.loads(line.removeprefix("RESULTS "))
+    r = run_notebook(NOTEBOOK, EXPORT, tmp_path)
     t, q = np.array(r["t"]), np.array(r["q"])
     x = tool_positions(r["urdf"], q)
     error = np.linalg.norm(x - np.array(r["x_step"]), axis=1)
