@@ -89,7 +89,7 @@ def main() -> None:
             if q_on is None:
                 q_on, n_on = q[5], 0
             n_on += 1
-            t_on = n_on * 1e-3
+            t_on = n_on * period
             q[5], v[5] = q_on + 0.5 * ACCELERATION * t_on**2, ACCELERATION * t_on
         if on and fault == "creep":  # joint 7 creeps at 5 rad/s while its velocity reads 0 (issue 35)
             q[6] += 0.005

@@ -23,9 +23,8 @@ from drake import lcmt_panda_command, lcmt_panda_status
 from pydrake.lcm import DrakeLcm
 from scipy.signal import cont2discrete, dlsim
 
-import nsdrake.driver.serve as serve_module
 from nsdrake.driver.panda import TORQUE_RATE_LIMIT
-from nsdrake.driver.serve import serve_simulated_driver
+from nsdrake.driver.serve import PHYSICS_AT, serve_simulated_driver
 from nsdrake.experiment.scenario import load_scenario
 
 UTIME0 = 1_700_000_000_000_000  # [µs] the fake wall clock's start
@@ -50,7 +49,7 @@ class FakeClock:
         # the driver's deadlines as it writes them (start + (k + PHYSICS_AT) periods, then
         # start + (k + 1) periods), to the bit, whatever PHYSICS_AT is
         k, middle = divmod(self._reads, 2)
-        self.now = (k + serve_module.PHYSICS_AT) * self.period if middle else k * self.period
+        self.now = (k + PHYSICS_AT) * self.period if middle else k * self.period
         self._reads += 1
         return self.now
 
