@@ -415,7 +415,11 @@ def _sim_driver(args) -> int:
     from nsdrake.driver.controller_side import check_drive_scenario
     from nsdrake.driver.realtime import realtime_process
 
+    from nsdrake.driver.serve import option_problems
+
     scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
+    for option, problem in option_problems(scenario, args.expire_sec, args.low_pass_freq):
+        raise ScenarioError(f"{option}: {problem}")
     realtime = _realtime(args, None)  # the flags only: the scenario's driver.realtime is the controller's
     if args.lcm.startswith("memq://"):
         raise ScenarioError(

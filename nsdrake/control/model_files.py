@@ -21,7 +21,6 @@ in a simulated station (the arm carries it).
 
 from __future__ import annotations
 
-import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
@@ -35,7 +34,15 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 
 from nsdrake.control.urdf_checks import sdf_problems
-from nsdrake.control.validation import ControllerConfigError, one_line, show
+from nsdrake.control.validation import (
+    ControllerConfigError,
+    is_number,
+    one_line,
+    positive_problem,
+    real_problem,
+    show,
+    vector_problem,
+)
 
 MODEL_SUFFIXES = (".urdf", ".sdf", ".dmd.yaml")
 
@@ -69,22 +76,30 @@ def inertia_matrix(inertia) -> np.ndarray:
 
 
 def payload_problem(payload) -> str | None:
-    """Why ``payload`` is no physical payload, or None."""
+    """Why ``payload`` is no physical payload, or None. Its numbers follow the package's one
+    number rule (:func:`nsdrake.control.validation.real_problem`): booleans (True is not
+    1 kg), text and complex values are refused, naming the field."""
     if not isinstance(payload, Payload):
         return f"must be a Payload(mass, com, inertia), got {show(payload)}"
-    if not isinstance(payload.mass, int | float) or not (math.isfinite(payload.mass) and payload.mass > 0):
-        return f"mass must be a finite number > 0 [kg], got {show(payload.mass)}"
-    com = np.asarray(payload.com, dtype=float) if _numeric(payload.com) else None
-    if com is None or com.shape != (3,) or not np.all(np.isfinite(com)) or np.max(np.abs(com)) > 10.0:
-        return f"com must be three finite numbers within 10 m of the tool frame [m], got {show(payload.com)}"
+    mass = payload.mass
+    problem = positive_problem(mass) if is_number(mass) else real_problem(mass, "a finite number > 0 [kg]")
+    if problem:
+        return f"mass {problem}"
+    what = "three finite numbers within 10 m of the tool frame [m]"
+    problem = vector_problem(payload.com, 3, what)
+    if problem is None and np.max(np.abs(np.asarray(payload.com, dtype=float))) > 10.0:
+        problem = f"must be {what}, got {show(payload.com)}"
+    if problem:
+        return f"com {problem}"
     if payload.inertia is None:
         return None
+    what = "a symmetric (3, 3) matrix or (ixx, iyy, izz, ixy, ixz, iyz) [kg m²]"
+    problem = real_problem(payload.inertia, what)
+    if problem:
+        return f"inertia {problem}"
     I = inertia_matrix(payload.inertia) if _numeric(payload.inertia) else None
     if I is None or I.shape != (3, 3) or not np.all(np.isfinite(I)) or not np.allclose(I, I.T):
-        return (
-            "inertia must be a symmetric (3, 3) matrix or (ixx, iyy, izz, ixy, ixz, iyz) [kg m²], "
-            f"got {show(payload.inertia)}"
-        )
+        return f"inertia must be {what}, got {show(payload.inertia)}"
     moments = np.linalg.eigvalsh(I)
     if moments[0] < 0 or moments[0] + moments[1] < moments[2] * (1 - 1e-9):
         return f"inertia is not physical: principal moments {np.round(moments, 9).tolist()}"

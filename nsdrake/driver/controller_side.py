@@ -29,7 +29,13 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from nsdrake.control.controller import NullSpaceImpedanceController
 from nsdrake.control.orientation import rotation_to_quaternion
 from nsdrake.control.step import ControllerStep
-from nsdrake.driver.panda import NUM_JOINTS, PandaLimitError, panda_actuator_limits, panda_driver_problems
+from nsdrake.driver.panda import (
+    NUM_JOINTS,
+    PandaLimitError,
+    panda_actuator_limits,
+    panda_driver_problems,
+    payload_rating_problem,
+)
 from nsdrake.driver.wrench import wrench_from_external_torques
 from nsdrake.experiment.checks import check_with_model
 from nsdrake.experiment.diagram import build_controller, surface_path
@@ -103,10 +109,14 @@ class ControllerSide:
 def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
     """``scenario`` with the Panda's published torque and torque-rate limits wherever it
     gives none (:func:`nsdrake.driver.panda.panda_actuator_limits`); one-line ScenarioError
-    for limits above them, an arm that is not a 7-joint one, or ``driver`` settings beyond
-    what the Panda allows (:func:`nsdrake.driver.panda.panda_driver_problems`)."""
+    for limits above them, an arm that is not a 7-joint one, a payload heavier than the
+    Panda is rated for (declared or not: the arm carries it either way), or ``driver``
+    settings beyond what the Panda allows (:func:`nsdrake.driver.panda.panda_driver_problems`)."""
     for where, problem in panda_driver_problems(scenario.driver, scenario.control_period):
         raise ScenarioError(f"{scenario.source or 'scenario'}: driver.{where}: {problem}")
+    problem = payload_rating_problem(scenario.arm.payload.mass)
+    if problem:
+        raise ScenarioError(f"{scenario.source or 'scenario'}: arm.payload.mass: {problem}")
     try:
         limits = panda_actuator_limits(scenario.actuator_limits, station.arm_model.joint_names)
     except PandaLimitError as e:

@@ -38,21 +38,24 @@ def jump_problem(
 
 def velocity_mismatch_problem(
     q: np.ndarray, q_previous: np.ndarray, v: np.ndarray, v_previous: np.ndarray, elapsed: float,
-    allowance: float, joint_names,
+    allowance: np.ndarray, joint_names,
 ) -> str | None:  # fmt: skip
     """A joint whose position change over ``elapsed`` [s] differs from the trapezoid of its
-    two reported velocities, (q̇_prev + q̇) Δt / 2, by more than ``allowance`` [rad]: a
-    position and a velocity that cannot both be the robot's (the worst joint named)."""
+    two reported velocities, (q̇_prev + q̇) Δt / 2, by more than its ``allowance`` [rad] (one
+    per joint, or one for all): a position and a velocity that cannot both be the robot's
+    (the worst joint, by its excess, named)."""
     moved = np.subtract(q, q_previous)
     expected = 0.5 * elapsed * np.add(v, v_previous)
     mismatch = np.abs(moved - expected)
-    worst = int(np.argmax(mismatch))
-    if mismatch[worst] <= allowance:
+    excess = mismatch - allowance
+    worst = int(np.argmax(excess))
+    if excess[worst] <= 0.0:
         return None
+    allowed = float(np.broadcast_to(allowance, mismatch.shape)[worst])
     return (
         f"{joint_names[worst]} moved {moved[worst]:.4g} rad in {elapsed * 1e3:g} ms while its reported "
         f"velocity ({v_previous[worst]:.4g} then {v[worst]:.4g} rad/s) says {expected[worst]:.4g} rad: "
-        f"they disagree by more than {allowance:.3g} rad (nsdrake/driver/panda.py)"
+        f"they disagree by more than {allowed:.3g} rad (nsdrake/driver/panda.py)"
     )
 
 

@@ -20,7 +20,11 @@ status k:
    re-anchored every tick), the wrench taken (the newest force-torque message, which
    must have arrived within the silence bound) and the controller side ticks once
    (:class:`nsdrake.driver.controller_side.ControllerSide`);
-4. one command is sent, stamped with the status's ``utime``, and the tick recorded.
+4. the command passes the last gate before the wire (:func:`nsdrake.driver.panda.command_problem`:
+   the Panda's published torque and torque-rate limits on what is sent, τ − g(q) when the
+   robot adds g, after everything that shaped it; a command beyond them stops the drive
+   and is not sent), then it is sent, stamped with the status's ``utime``, and the tick
+   recorded.
 
 Silence is the wall-clock time since the last status arrived (not counting the
 controller's own compute: a status that arrived during a long tick is not silence).
@@ -51,6 +55,7 @@ from nsdrake.driver.panda import (
     ENVELOPE_CENTRE,
     ENVELOPE_HALF_WIDTH,
     NUM_JOINTS,
+    command_problem,
     joint_step_allowance,
     limit_problem,
     velocity_mismatch_allowance,
@@ -151,6 +156,7 @@ class ControllerLoop:
         self.gap_counts = np.zeros(len(GAP_BINS), dtype=np.int64)
         self.longest_gap = 0  # [periods] the longest of them (0: none)
         self._deviation = np.zeros((2, NUM_JOINTS))
+        self._sent = np.zeros(NUM_JOINTS)  # the last command sent (the gate's rate check)
 
         self._wrench = np.zeros(6)
         self._anchor = self._last_clock = 0
@@ -421,9 +427,13 @@ class ControllerLoop:
         np.copyto(self._wrench, wrench)
         side = self.side
         desired, result = side.tick(self.time, self._q, self._v, self._wrench)
+        problem = command_problem(side.command, self._sent if self.commands else None, self._names)
+        if problem:  # the last gate: nothing beyond the robot's published limits leaves
+            raise self._fault(f"command refused, not sent: {problem}")
         self.bus.publish(
             self.config.command_channel, self._command.set(self._status.utime(data), side.command)
         )
+        self._sent[:] = side.command
         self.commands += 1
         self._last_arrival = arrival
         self.times.record(time.perf_counter() - wall, time.thread_time() - cpu)

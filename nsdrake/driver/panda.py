@@ -2,10 +2,20 @@
 
 The published limits (Franka Emika's FCI documentation, "Robot and interface
 specifications": joint torque limits 87 N m for joints 1–4 and 12 N m for joints
-5–7, torque-rate limit 1000 N m/s for every joint) are applied by the controller's
-own actuator limits (:mod:`nsdrake.control.actuator_limits`) before anything is sent:
-the robot stops with a reflex when a command breaks them. They bound the torque the
-joint produces, τ of the law with g included (the robot adds g to the command).
+5–7, torque-rate limit 1000 N m/s for every joint) are applied twice:
+
+- by the controller's own actuator limits (:mod:`nsdrake.control.actuator_limits`) to
+  τ of the law, g included: the torque the joint produces;
+- by the last gate before the wire (:func:`command_problem`) to what is sent: the
+  command τ − g(q) when the robot adds g (Franka's torque interface checks its limits
+  on that command, the torque it is asked for on top of its own gravity compensation),
+  after everything that shapes it. The limiter does not see g, so a command can break
+  the limits that τ keeps (a payload's gravity beyond what the joint can hold: 431 N m
+  on joint 2 with 100 kg, issue 43); the gate stops the drive before such a command
+  leaves.
+
+A payload heavier than the Panda's published rating (:data:`RATED_PAYLOAD`) is refused
+before anything is built (:func:`payload_rating_problem`).
 """
 
 from __future__ import annotations
@@ -19,6 +29,13 @@ from nsdrake.control.config import ActuatorLimitsConfig
 NUM_JOINTS = 7  # pydrake.manipulation.kPandaArmNumJoints
 TORQUE_LIMITS = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])  # [N m], joints 1–7
 TORQUE_RATE_LIMIT = 1000.0  # [N m/s], every joint
+ROBOT_CYCLE = 1e-3  # [s] the Panda's control cycle (1 kHz): a new command acts within one
+# Franka's published payload (datasheet, "Payload 3 kg"): everything the flange carries, a
+# Franka Hand (about 0.7 kg) included, so a payload beside a hand may weigh that much less.
+RATED_PAYLOAD = 3.0  # [kg]
+# What the gate forgives beyond a limit: the rounding of τ − g and of the limiter's clip
+# (a few units of the last place of 100 N m), far below any torque the robot resolves.
+COMMAND_ROUNDING = 1e-9  # [N m]
 
 
 class PandaLimitError(ValueError):
@@ -95,15 +112,30 @@ def limit_problem(q: np.ndarray, v: np.ndarray, joint_names) -> str | None:
 
 # A status's position against Franka's velocity limits and against its own reported velocity
 # (nsdrake.driver.faults.jump_problem, velocity_mismatch_problem). Both allow the sensing noise
-# of the two readings compared (POSITION_NOISE each); the second also the velocity's noise and
-# what a joint accelerating at ACCELERATION_BOUND moves apart from the trapezoid of the two
-# reported velocities (at most a Δt²/4). ACCELERATION_BOUND is five times Franka's largest
-# published joint acceleration (20 rad/s², joints 6–7): a contact's impact accelerates joints
-# faster than a planned motion may. At 1 kHz and one period the second rule allows 2.4e-4 rad:
-# a position that creeps at 0.3 rad/s while its velocity reads zero is refused.
+# of the two readings compared (POSITION_NOISE each). The second compares the position change
+# Δq over Δt with the trapezoid of the two reported velocities, (q̇₀ + q̇₁) Δt / 2. For any
+# motion, Δq − (q̇₀ + q̇₁) Δt / 2 = ∫₀^Δt (Δt/2 − s) q̈(s) ds: the acceleration weighted by at
+# most Δt/2. So with |q̈| ≤ A (Franka's published acceleration limit of the joint) and an
+# impact that changes the joint's velocity by at most ΔV at any instant, the gap is at most
+# A Δt²/4 + ΔV Δt/2, and exactly that for the motion that accelerates at +A for half the
+# interval and −A for the other (the impact at one end): the bound is tight at every Δt,
+# and nothing else is allowed but the noise of the two velocity readings (VELOCITY_NOISE
+# each, 2 × VELOCITY_NOISE × Δt/2). The velocity limit never binds first within the
+# silence bound: A Δt / 2 ≤ 20 rad/s² × 0.05 s = 1 rad/s, below every joint's limit.
+# (Before issue 43 one acceleration of 100 rad/s², five times the largest published, held
+# over the whole interval: 0.063 rad over 50 ms, so a joint could creep at 1.2 rad/s across
+# a gap of the silence bound while its velocity read zero; now 7.9e-3 rad on joint 2.)
+# IMPACT_VELOCITY_CHANGE is the velocity change that rule allowed within one period
+# (100 rad/s² × 1 ms), kept so that a contact's impact passes as before: one period's
+# allowance is 2.6e-4 rad (2.35e-4 rad before), and a position that creeps at 0.3 rad/s
+# while its velocity reads zero is still refused at one period; over 50 periods the
+# allowance is 7.9e-3 rad on joint 2, 1.6e-2 on joints 6-7 (joint 2 creeping at
+# 0.16 rad/s, joint 7 at 0.32 rad/s across the longest gap is refused).
 POSITION_NOISE = 1e-4  # [rad] per reading
 VELOCITY_NOISE = 1e-2  # [rad/s] per reading
-ACCELERATION_BOUND = 100.0  # [rad/s²]
+# Franka's published joint acceleration limits (FCI documentation, "Limits for Panda"), joints 1–7
+ACCELERATION_LIMIT = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])  # [rad/s²]
+IMPACT_VELOCITY_CHANGE = 0.1  # [rad/s] the most one impact changes a joint's velocity by
 
 
 def joint_step_allowance(elapsed: float) -> np.ndarray:
@@ -117,10 +149,16 @@ def slowest_joint_speed() -> float:
     return float(VELOCITY_LIMIT.min())
 
 
-def velocity_mismatch_allowance(elapsed: float) -> float:
-    """The most a joint's position change over ``elapsed`` [s] may differ from the
-    trapezoid of its two reported velocities [rad] (the constants above)."""
-    return 2.0 * POSITION_NOISE + VELOCITY_NOISE * elapsed + ACCELERATION_BOUND * elapsed**2 / 4.0
+def velocity_mismatch_allowance(elapsed: float) -> np.ndarray:
+    """The most each joint's position change over ``elapsed`` [s] may differ from the
+    trapezoid of its two reported velocities [rad]: A Δt²/4 + ΔV Δt/2 with the noise of the
+    readings (the comment above argues each term)."""
+    return (
+        2.0 * POSITION_NOISE
+        + VELOCITY_NOISE * elapsed
+        + ACCELERATION_LIMIT * elapsed**2 / 4.0
+        + IMPACT_VELOCITY_CHANGE * elapsed / 2.0
+    )
 
 
 START_TOLERANCE_PERIODS = 2  # driver.start_tolerance's bound, in periods at the slowest joint's limit
@@ -147,3 +185,52 @@ def panda_driver_problems(driver, period: float):
             f"must be at most {step:.4g} rad (a period at the slowest joint's velocity limit, with the "
             f"margins of nsdrake/driver/panda.py), got {driver.max_joint_step!r}",
         )
+
+
+def payload_rating_problem(mass) -> str | None:
+    """A payload heavier than the Panda's published rating, :data:`RATED_PAYLOAD` (None: within it)."""
+    if mass > RATED_PAYLOAD:
+        return (
+            f"{mass:g} kg is above the Panda's published payload of {RATED_PAYLOAD:g} kg (a Franka Hand's "
+            "mass counts too): the arm is not rated to carry it"
+        )
+    return None
+
+
+_COMMAND_BOUND = TORQUE_LIMITS + COMMAND_ROUNDING
+_RATE_BOUND = TORQUE_RATE_LIMIT * ROBOT_CYCLE + COMMAND_ROUNDING  # [N m] per robot cycle
+
+
+def command_problem(command: np.ndarray, previous: np.ndarray | None, joint_names) -> str | None:
+    """The last gate before the wire: why the torque ``command`` about to be sent breaks the
+    Panda's published limits (the worst joint named), else None. Its magnitude against
+    :data:`TORQUE_LIMITS`; with ``previous`` (the command sent before it; None for a drive's
+    first), its change against :data:`TORQUE_RATE_LIMIT` over one :data:`ROBOT_CYCLE`:
+    the robot applies each new command at its next 1 kHz cycle, so a status the controller
+    skipped does not spread a step over the periods missed. Both with
+    :data:`COMMAND_ROUNDING`. A command that is not finite is refused too."""
+    size = np.abs(command)
+    if previous is None:
+        if (size <= _COMMAND_BOUND).all():  # the usual case, two array operations (every tick)
+            return None
+    else:
+        change = np.abs(np.subtract(command, previous))
+        if (size <= _COMMAND_BOUND).all() and (change <= _RATE_BOUND).all():
+            return None
+    bad = np.flatnonzero(~np.isfinite(command))
+    if bad.size:
+        return f"{joint_names[bad[0]]}'s command is {float(command[bad[0]])!r}"
+    excess = size - TORQUE_LIMITS
+    k = int(np.argmax(excess))
+    if excess[k] > COMMAND_ROUNDING:
+        return (
+            f"{joint_names[k]} would be sent {command[k]:.4g} N m, beyond the Panda's published "
+            f"{TORQUE_LIMITS[k]:g} N m for joint {k + 1}"
+        )
+    rate = change / ROBOT_CYCLE
+    k = int(np.argmax(rate))
+    return (
+        f"{joint_names[k]}'s command would change by {command[k] - previous[k]:.4g} N m in one "
+        f"{ROBOT_CYCLE * 1e3:g} ms cycle ({rate[k]:.4g} N m/s), beyond the Panda's published "
+        f"{TORQUE_RATE_LIMIT:g} N m/s"
+    )

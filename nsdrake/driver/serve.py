@@ -40,6 +40,7 @@ to the real bus, and feeds it the torque it chose.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 import math
 import struct
@@ -53,6 +54,7 @@ from pydrake.lcm import DrakeLcm, DrakeLcmInterface
 from nsdrake.driver.panda import NUM_JOINTS, TORQUE_RATE_LIMIT
 from nsdrake.driver.realtime import RealtimeSettings, realtime_mode
 from nsdrake.driver.simulated_driver import SimulatedDriver
+from nsdrake.experiment.driver_config import driver_problems
 from nsdrake.experiment.scenario import Scenario
 
 DAMPING = np.array([37.5, 50.0, 37.5, 25.0, 5.0, 3.75, 2.5])  # [N m s/rad] drake-franka-driver's k_d
@@ -154,6 +156,30 @@ def lowpass(previous: np.ndarray, value: np.ndarray, period: float, cutoff: floa
     return gain * value + (1.0 - gain) * previous
 
 
+def option_problems(scenario: Scenario, expire_sec: float | None, low_pass_freq: float):
+    """Yields (option, problem) for ``nsdrake sim-driver``'s options beyond what they may be,
+    bounded as the scenario's fields are: ``--expire-sec`` by ``driver.expire_sec``'s own
+    rules (:func:`nsdrake.experiment.driver_config.driver_problems`: two periods to 0.1 s:
+    the same number on both sides), ``--low-pass-freq`` a cutoff in (0, NO_FILTER] Hz
+    (NO_FILTER, libfranka's kMaxCutoffFrequency, turns the filter off; a larger number
+    means nothing more, and is most likely a typo for a filter that is on)."""
+    if expire_sec is not None:
+        driver = dataclasses.replace(scenario.driver, expire_sec=expire_sec)
+        for where, problem in driver_problems(driver, scenario.control_period):
+            if where == "expire_sec":
+                yield "--expire-sec", f"{problem} (as the scenario's driver.expire_sec)"
+    if not (isinstance(low_pass_freq, int | float) and 0.0 < low_pass_freq <= NO_FILTER):
+        yield (
+            "--low-pass-freq",
+            f"must be a cutoff in (0, {NO_FILTER:g}] Hz ({NO_FILTER:g}, libfranka's kMaxCutoffFrequency, "
+            f"turns the filter off), got {low_pass_freq!r}",
+        )
+
+
+class SimulatedDriverOptionError(ValueError):
+    """An option of :func:`serve_simulated_driver` beyond its bounds; one line naming it."""
+
+
 def serve_simulated_driver(
     scenario: Scenario,
     lcm: DrakeLcmInterface,
@@ -174,6 +200,8 @@ def serve_simulated_driver(
     ``stop``: a :class:`nsdrake.driver.stop.StopRequest` that ends it at the next period;
     ``realtime``: the serving thread in real time (:mod:`nsdrake.driver.realtime`:
     SCHED_FIFO, a core, memory locked, the collector off)."""
+    for option, problem in option_problems(scenario, expire_sec, low_pass_freq):
+        raise SimulatedDriverOptionError(f"{option}: {problem}")
     expire_sec = scenario.driver.expire_sec if expire_sec is None else expire_sec
     server = _Server(scenario, lcm, expire_sec, low_pass_freq, rate_limit, wall_utime)
     duration = scenario.duration if duration is None else duration

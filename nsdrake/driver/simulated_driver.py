@@ -3,12 +3,22 @@
 ::
 
     command_subscriber ─► command_receiver (PandaCommandReceiver, torque) ─► τ_cmd ─┐
-    gravity (g(q) of the station's plant, when the robot adds it) ───────────────────┤
+    gravity (g(q) of the robot's own model, when the robot adds it) ─────────────────┤
                                                       applied_torque = τ_cmd + g ─► station.actuation
     station: plant, table on its sensor, post
       state ─► q, q̇ ─► status_sender (PandaStatusSender) ─► status_publisher (every period)
       generalized contact forces on the arm ─► τ_ext = −(them) ─┘
       sensor wrench ─► force_torque_sender ─► force_torque_publisher (every period)
+
+**The robot's gravity** is g(q) of the robot's own model, not of the physics: the arm and
+the payload its load settings declare (Franka's end-effector and load settings in Desk or
+libfranka's ``setLoad``, which its gravity compensation adds). The scenario's
+``arm.payload`` with ``declared: true`` stands for a payload set there as well as told to
+the controller; with ``declared: false`` neither knows it, and only the physics carries
+it. So the model is the controller's own (:func:`nsdrake.experiment.diagram.controller_model`:
+the arm's model file, the scenario's gravity, the payload when declared), and the
+controller, which subtracts g(q) of that same model, subtracts exactly what the robot
+adds (docs/real_arm.md, "Gravity"; ``tests/driver/test_payload_gravity.py``).
 
 The status carries q, q̇, the last command (``joint_torque_desired``), the torque applied
 (``joint_torque``) and τ_ext = Jᵀ W_T, the torque with which the arm holds the contact
@@ -38,7 +48,7 @@ from pydrake.systems.primitives import Adder, Demultiplexer, Gain, MatrixGain, V
 
 from nsdrake.driver.panda import NUM_JOINTS
 from nsdrake.driver.wrench import ForceTorqueSender
-from nsdrake.experiment.diagram import log_signals
+from nsdrake.experiment.diagram import controller_model, log_signals
 from nsdrake.experiment.scenario import Scenario
 from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.station.plant import Station
@@ -52,15 +62,18 @@ class SimulatedDriverDiagram:
     # "wrench" (the sensor's), "forbidden_contacts", "state" (the links'), "applied" (the joint
     # torque the plant applied over the period that ends at the sample; zero at t = 0)
     loggers: dict[str, VectorLogSink]
+    # the model whose g(q) the robot adds (a ControllerModel: held, its plant is the gravity's)
+    robot_model: object | None = None
 
 
-def _robot_torque(builder, station, receiver, adds_gravity: bool):
-    """The torque the simulated robot applies: the command, plus g(q) when it adds gravity."""
+def _robot_torque(builder, station, receiver, robot_model):
+    """The torque the simulated robot applies: the command, plus g(q) of ``robot_model`` (a
+    plant of the arm alone, the robot's own model; None: the robot adds no gravity)."""
     applied = receiver.get_commanded_torque_output_port()
-    if not adds_gravity:
+    if robot_model is None:
         return applied
     gravity = builder.AddNamedSystem(
-        "gravity", InverseDynamics(station.plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation)
+        "gravity", InverseDynamics(robot_model, InverseDynamics.InverseDynamicsMode.kGravityCompensation)
     )
     builder.Connect(station.ports.state, gravity.get_input_port_estimated_state())
     adder = builder.AddNamedSystem("applied_torque", Adder(2, NUM_JOINTS))
@@ -74,7 +87,8 @@ def build_simulated_driver(
 ) -> SimulatedDriverDiagram:
     """The simulated driver's diagram (module docstring) on ``lcm``, with the channels of
     ``scenario.driver``. ``adds_gravity``: the robot adds g(q) to every command (Franka's
-    torque interface does); False applies the command alone."""
+    torque interface does, of its own model: the module docstring); False applies the
+    command alone."""
     d, period = scenario.driver, scenario.control_period
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario)
@@ -90,7 +104,8 @@ def build_simulated_driver(
     )
     builder.Connect(subscriber.get_output_port(), receiver.get_message_input_port())
     builder.Connect(state.get_output_port(0), receiver.get_position_measured_input_port())
-    applied = _robot_torque(builder, station, receiver, adds_gravity)
+    robot_model = controller_model(scenario, station) if adds_gravity else None
+    applied = _robot_torque(builder, station, receiver, robot_model and robot_model.plant)
     builder.Connect(applied, station.ports.actuation)
     external = builder.AddNamedSystem("torque_external", Gain(-1.0, NUM_JOINTS))
     builder.Connect(plant.get_generalized_contact_forces_output_port(station.arm), external.get_input_port())
@@ -119,7 +134,11 @@ def build_simulated_driver(
     diagram = builder.Build()
     diagram.set_name("simulated_driver")
     return SimulatedDriverDiagram(
-        diagram=diagram, station=station, command_subscriber=subscriber, loggers=loggers
+        diagram=diagram,
+        station=station,
+        command_subscriber=subscriber,
+        loggers=loggers,
+        robot_model=robot_model,
     )
 
 

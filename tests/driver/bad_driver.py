@@ -1,10 +1,10 @@
 """A Panda driver that misbehaves on purpose, for the wire-fault tests over UDP
 (tests/driver/test_udp.py): it publishes lcmt_panda_status (and lcmt_force_torque) at
 1 kHz with robot_utime, a Panda at rest at --q, and once the controller has answered
-``WARM`` statuses it injects ``--fault``, keeps talking for 0.4 s and prints one JSON
-line: the commands received in all, and those that answer the faulty status or a later
-one (which must be none). Light on purpose (the lcm package and Drake's message types
-only): it starts in a fraction of a second.
+``WARM`` statuses it injects ``--fault`` (``none``: never; SIGTERM ends it), keeps talking
+for 0.4 s and prints one JSON line: the commands received in all, and those that answer
+the faulty status or a later one (which must be none). Light on purpose (the lcm package
+and Drake's message types only): it starts in a fraction of a second.
 
     python bad_driver.py --url URL --fault NAME --q q1,…,q7
 """
@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import time
 
 import lcm
@@ -24,7 +25,7 @@ ACCELERATION = 2.7  # [rad/s²] position_limit's joint 6 from rest to past its l
 UTIME0 = 1_700_000_000_000_000
 FAULTS = (
     "undecodable", "nan", "position_limit", "velocity_limit", "two_publishers", "silence",
-    "jump", "backward", "2khz", "250hz", "sensor_silence", "no_sensor", "creep",
+    "jump", "backward", "2khz", "250hz", "sensor_silence", "no_sensor", "creep", "none",
 )  # fmt: skip
 
 
@@ -52,6 +53,8 @@ def main() -> None:
         "--after", type=float, default=0.4, help="[s] of talking after the fault (past any silence bound)"
     )
     args = parser.parse_args()
+    stopped: list[int] = []  # SIGTERM ends the loop and the report is printed (fault "none": a
+    signal.signal(signal.SIGTERM, lambda *_: stopped.append(1))  # robot at rest, told when to stop)
     bus = lcm.LCM(args.url)
     commands: list[int] = []
 
@@ -67,7 +70,7 @@ def main() -> None:
     began = faulty_utime = faulty_at = q_on = None
     now = time.monotonic()
     deadline, next_time = now + args.seconds, now
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline and not stopped:
         k += 1
         if began is None and len(commands) >= WARM:
             began = time.monotonic()
