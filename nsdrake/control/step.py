@@ -174,6 +174,16 @@ class ControllerStep:
         b = self._buffers
         return np.concatenate([b.switch, b.previous_qdot, b.previous_tau])
 
+    def shift_rate_reference(self, delta: np.ndarray) -> None:
+        """Moves the torque-rate limit's reference, the previous call's τ, by ``delta`` (n)
+        [N m] before the next call (nothing before a first call). For a loop whose actuators
+        see τ − o, o changing between calls (a robot that adds its own g(q) to the command
+        it is sent: nsdrake/driver/controller_side.py): shifted by o_k − o_{k−1}, the limit
+        bounds the change of what they see, (τ_k − o_k) − (τ_{k−1} − o_{k−1}), by ρ_max T."""
+        previous = self._buffers.previous_tau
+        if previous[self._n] != 0.0:
+            previous[: self._n] += delta
+
     def reset(self) -> None:
         """Forget the discrete state: the next call is the first tick (no previous q̇_dⁿ or τ,
         the selector in mode 0, blending in from rest)."""

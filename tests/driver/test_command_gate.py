@@ -105,6 +105,9 @@ class InjectedStep:
     def reset(self):
         self.real.reset()
 
+    def shift_rate_reference(self, delta):
+        self.real.shift_rate_reference(delta)
+
     def step(self, *args):
         result = self.real.step(*args)
         if self.plan:
@@ -222,6 +225,36 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
 
     drive()
     assert seen["sent"] > 0 and seen["refused"] > 0, seen
+
+
+def test_the_command_keeps_the_rate_limit_while_gravity_moves(side):
+    """Joint 2 steps to 1.2 rad/s (its position the trapezoid of its reported velocities:
+    every status consistent) for 20 periods: the damping's torque jumps, the limiter holds
+    the rate at 1000 N m/s, and g(q) moves under the arm. Every command is answered (no
+    stop) and changes by at most 1 N m a cycle, the limit reached. Catches a rate limit on
+    τ alone: the command τ − g then changes by 1 N m plus g's change, and the gate stops
+    the drive (1.001 N m, before this was fixed)."""
+    bus = FakeBus()
+    side.reset()
+    loop = ControllerLoop(side, bus, clock=bus.clock, capacity=32)
+    loop.ready()
+    q, v = np.array(side.station.q0, dtype=float), np.zeros(7)
+    utime = UTIME0
+    for k in range(21):
+        if k:
+            q[1] += 0.5 * 1e-3 * (v[1] + 1.2)
+            v[1] = 1.2
+        utime += 1000
+        bus.at((k + 1) * 1e-3, "PANDA_STATUS", status_bytes(q, v=v, utime=utime, robot_utime=utime))
+        bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
+    loop.start()
+    for _ in range(20):
+        loop.tick()
+    sent = np.array([message.joint_torque for _, message in bus.sent])
+    assert len(sent) == 21
+    change = np.abs(np.diff(sent, axis=0))
+    assert change.max() <= PUBLISHED_RATE * CYCLE + ROUNDING
+    assert change.max() > 0.999 * PUBLISHED_RATE * CYCLE  # the limiter was at its rate limit
 
 
 # --- a payload beyond the rating, a model beyond the limits -----------------------------------
