@@ -16,6 +16,7 @@ from netns import URL, require_namespace, run_in_namespace
 from udp_fault_runner import BOUND
 
 from nsdrake.driver.faults import SLOW_STREAM
+from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.traces import Traces
 
 HERE = Path(__file__).resolve().parent
@@ -174,6 +175,35 @@ def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
     fresh = float(line.split("of them applied a fresh command (")[1].split("%")[0])
     print(f"acceptance: {line}; drive {json.dumps(timing)}")
     assert fresh >= 99.0, line
+
+
+def test_a_command_beyond_the_limits_never_reaches_the_robot_over_udp(tmp_path):
+    """Issue 43, item 1 over a real socket: `nsdrake drive` with a rated 3 kg payload whose
+    centre of mass lies 6 m off the tool (its gravity beyond what joint 6 may be sent),
+    against a driver process that publishes a Panda at rest at the start pose and counts
+    every command it receives: the drive stops at its first status with one line naming
+    the joint, exit 1, and the robot received no command at all. Catches a gate that only
+    a fake bus meets, and the command sent before it is checked."""
+    require_namespace()
+    (tmp_path / "hostile.yaml").write_text("arm: {payload: {mass: 3.0, com: [6.0, 0.0, 0.0]}}\n")
+    q0 = load_scenario("panda_wipe").arm.initial_positions
+    q = ",".join(repr(float(q0[f"panda_joint{k}"])) for k in range(1, 8))
+    robot = python_in_namespace(f"{HERE / 'bad_driver.py'} --url '{URL}' --fault none --q {q} --seconds 300")
+    drive = python_in_namespace(f"-m nsdrake drive panda_wipe --lcm '{URL}' --config hostile.yaml --out out")
+    script = (
+        f"{robot} > driver.out 2> driver.err &\npid=$!\n"
+        f"{drive} > drive.out 2> drive.err\necho $? > drive.rc\nkill -TERM $pid; wait $pid\n"
+    )
+    result = run_in_namespace(script, cwd=tmp_path, timeout=600)
+    err = without_notices((tmp_path / "drive.err").read_text())
+    assert (tmp_path / "drive.rc").read_text().strip() == "1", (err, result.stderr)
+    assert err.count("\n") == 1 and err.startswith(
+        "nsdrake: error: panda_wipe: drive: before the first command: command refused, not sent: panda_joint"
+    ), err
+    assert err.endswith("stopped commanding after 0 command(s)\n"), err
+    report = json.loads((tmp_path / "driver.out").read_text().splitlines()[-1])
+    assert report["commands"] == 0, report
+    assert json.loads((tmp_path / "out" / "timing.json").read_text())["commands"] == 0
 
 
 def test_a_unicast_udpm_address_is_refused_in_one_line(tmp_path):
