@@ -116,6 +116,19 @@ def test_simulated_driver_writes_the_run_folder(tmp_path, capsys):
             "another process cannot reach the simulated driver",
         ),
         (["sim-driver", "panda_wipe", "--lcm", "bogus://x", "--expire-sec", "0"], "--expire-sec must be"),
+        # issue 43: bounded as the scenario's driver.expire_sec is (the same number on both sides)
+        (
+            ["sim-driver", "panda_wipe", "--lcm", "bogus://x", "--expire-sec", "1e9"],
+            "--expire-sec: must be at most 0.1 s (a stale torque held longer",
+        ),
+        (
+            ["sim-driver", "panda_wipe", "--lcm", "bogus://x", "--expire-sec", "0.0015"],
+            "--expire-sec: must be at least two control periods (0.002 s",
+        ),
+        (
+            ["sim-driver", "panda_wipe", "--lcm", "bogus://x", "--low-pass-freq", "1e9"],
+            "--low-pass-freq: must be a cutoff in (0, 1000] Hz",
+        ),
         (
             ["drive", "panda_wipe", "--simulated-driver", "--realtime-rate", "1e-9"],
             "--realtime-rate: 1e-09 would wait 1e+06 s of wall clock for each 1 ms control period; "
@@ -354,3 +367,27 @@ def test_a_paced_drive_is_paced():
     start = time.perf_counter()
     run = drive.run()
     assert run.failure is None and time.perf_counter() - start >= 2.5
+
+
+@pytest.mark.parametrize(
+    ("option", "words"),
+    [
+        ({"expire_sec": 1e9}, "--expire-sec: must be at most 0.1 s"),
+        ({"expire_sec": True}, "--expire-sec: must be a finite number > 0, got True"),
+        ({"low_pass_freq": 0.0}, "--low-pass-freq: must be a cutoff in (0, 1000] Hz"),
+    ],
+)
+def test_the_simulated_driver_s_own_call_bounds_its_options(option, words):
+    """serve_simulated_driver, called from Python, refuses what the command line refuses
+    (one line naming the option), before it builds or publishes anything (catches a bound
+    kept in the CLI's parser alone)."""
+    from nsdrake.driver.serve import SimulatedDriverOptionError
+
+    lcm = DrakeLcm("memq://")
+    heard = []
+    lcm.Subscribe("PANDA_STATUS", heard.append)
+    with pytest.raises(SimulatedDriverOptionError) as info:
+        serve_simulated_driver(load_scenario("panda_wipe", duration=0.01), lcm, **option)
+    assert str(info.value).startswith(words) and "\n" not in str(info.value)
+    lcm.HandleSubscriptions(0)
+    assert heard == []
