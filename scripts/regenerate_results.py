@@ -19,12 +19,24 @@ A family run is CPU-heavy (minutes per family): prefix ``nice`` on a shared mach
 nothing is written outside RUNS and docs/results. The last line says how many families
 were regenerated and the exit status, which agree: 0 if every command succeeded (changed
 or not), 1 if one failed (its line says why), 2 for a family without a results folder.
+
+Ctrl-C (SIGINT, to the script or to its process group from a terminal) stops it as
+``nsdrake compare`` stops itself: the command under way gets one SIGINT (it runs in a
+process group of its own, so a terminal's Ctrl-C reaches it only through this script,
+once) and the time it takes to mark its folder interrupted and keep each finished
+variant; the committed table of that family is left as it was (a family whose copy had
+begun finishes it first), the families done before keep theirs, and the last line says
+so and ``exit 130``; no traceback. The command is started with SIGINT ignored and the
+signal is passed on once it has installed its own handler (read from
+``/proc/PID/status``): a SIGINT while Python imports it would otherwise end it with a
+KeyboardInterrupt traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import shlex
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -61,16 +73,65 @@ def table_rows(text: str) -> dict[str, str]:
     return {line.split("|")[1].strip(): line for line in lines[2:]}
 
 
-def regenerate(family: str, runs: Path) -> tuple[str, bool]:
+INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT), as nsdrake's commands exit
+POLL = 0.02  # [s] how often the wait for a command looks whether a Ctrl-C is to be passed on
+
+
+class CtrlC:
+    """Ctrl-C for the script (module docstring): the handler only notes it; :meth:`run`
+    passes it on to the command under way, once, when that command can take it."""
+
+    def __init__(self):
+        self.requested = False
+
+    def handler(self, signum, frame) -> None:
+        self.requested = True
+
+    def run(self, argv: list[str]) -> int:
+        """``argv`` run from the checkout, in a process group of its own with SIGINT ignored
+        until it sets its own handler; its exit status."""
+        child = subprocess.Popen(
+            argv, cwd=ROOT, process_group=0, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)
+        )
+        passed_on = False
+        while True:
+            try:
+                return child.wait(timeout=POLL)
+            except subprocess.TimeoutExpired:
+                pass
+            if self.requested and not passed_on and takes_sigint(child.pid):
+                child.send_signal(signal.SIGINT)
+                passed_on = True
+
+
+def takes_sigint(pid: int) -> bool:
+    """Whether process ``pid`` no longer ignores SIGINT (its ``SigIgn`` mask in
+    /proc/PID/status; where that cannot be read, True)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    for line in status.splitlines():
+        if line.startswith("SigIgn:"):
+            return not int(line.split()[1], 16) & (1 << (signal.SIGINT - 1))
+    return True
+
+
+def regenerate(family: str, runs: Path, ctrl_c: CtrlC) -> tuple[str, bool]:
     """Runs the family's command into runs/FAMILY and copies its table; (its line, ok)."""
     args = read_command(family)
     out = runs / family
-    done = subprocess.run(
-        [sys.executable, *args, "--out", str(out), *(["--overwrite"] if args[0] == "-m" else [])], cwd=ROOT
+    code = ctrl_c.run(
+        [sys.executable, *args, "--out", str(out), *(["--overwrite"] if args[0] == "-m" else [])]
     )
     new = out / "table.md"
-    if done.returncode != 0:
-        return f"{family}: FAILED (exit {done.returncode}); the committed table is left as it was", False
+    if ctrl_c.requested and code != 0:
+        return (
+            f"{family}: interrupted (Ctrl-C; the command exited {code}); its run so far is in {out}/ "
+            "(unfinished variants marked interrupted); the committed table is left as it was"
+        ), False
+    if code != 0:
+        return f"{family}: FAILED (exit {code}); the committed table is left as it was", False
     if not new.exists():
         why = f"the command exited 0 but wrote no {new}"
         return f"{family}: FAILED ({why}); the committed table is left as it was", False
@@ -105,6 +166,8 @@ def _copy_nested_tables(family: str, out: Path) -> list[str]:
 
 
 def main() -> int:
+    ctrl_c = CtrlC()
+    signal.signal(signal.SIGINT, ctrl_c.handler)  # first: a Ctrl-C from here on is noted, never raised
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--family", required=True, help="a family with a docs/results folder, or all")
     parser.add_argument(
@@ -122,11 +185,27 @@ def main() -> int:
             f"{', '.join(known)}; exit 2"
         )
         return 2
+    if ctrl_c.requested:  # before any command ran
+        print(f"interrupted (Ctrl-C): 0 regenerated; exit {INTERRUPTED}")
+        return INTERRUPTED
     lines, ok = [], True
-    for family in known if args.family == "all" else [args.family]:
-        line, good = regenerate(family, runs)
+    families = known if args.family == "all" else [args.family]
+    for family in families:
+        line, good = regenerate(family, runs, ctrl_c)
         lines.append(line)
         ok &= good
+        if ctrl_c.requested:
+            break
+    if ctrl_c.requested:
+        done = sum(1 for line in lines if ": unchanged" in line or ": changed" in line)
+        left = len(families) - len(lines)
+        lines.append(
+            f"interrupted (Ctrl-C): {done} of {len(families)} regenerated"
+            + (f", {left} not started" if left else "")
+            + f"; exit {INTERRUPTED}"
+        )
+        print("\n".join(lines), flush=True)
+        return INTERRUPTED
     failed = sum(1 for line in lines if ": FAILED" in line)
     lines.append(
         f"{len(lines) - failed} of {len(lines)} regenerated; exit 0"
@@ -138,4 +217,8 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:  # a Ctrl-C while Python started the script, before main's handler
+        print(f"interrupted (Ctrl-C) before anything ran; exit {INTERRUPTED}")
+        sys.exit(INTERRUPTED)
