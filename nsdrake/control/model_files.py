@@ -36,7 +36,6 @@ from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 from nsdrake.control.urdf_checks import sdf_problems
 from nsdrake.control.validation import (
     ControllerConfigError,
-    is_number,
     one_line,
     positive_problem,
     real_problem,
@@ -82,7 +81,9 @@ def payload_problem(payload) -> str | None:
     if not isinstance(payload, Payload):
         return f"must be a Payload(mass, com, inertia), got {show(payload)}"
     mass = payload.mass
-    problem = positive_problem(mass) if is_number(mass) else real_problem(mass, "a finite number > 0 [kg]")
+    problem = real_problem(mass, "a finite number > 0 [kg]")
+    if problem is None and positive_problem(mass):
+        problem = f"must be a finite number > 0 [kg], got {show(mass)}"
     if problem:
         return f"mass {problem}"
     what = "three finite numbers within 10 m of the tool frame [m]"

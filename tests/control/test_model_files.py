@@ -125,10 +125,23 @@ def test_packages_resolve_from_package_xml_ros_package_path_and_the_argument(arm
         ({"path": "missing.urdf"}, "model_file: 'missing.urdf' is not a file"),
         ({"packages": {"myarm": "/no/such/folder"}}, "packages: myarm: '/no/such/folder' is not a folder"),
         ({"payload": Payload(mass=-0.6)}, "payload: mass must be a finite number > 0 [kg], got -0.6"),
+        # issue 43, item 3: the one number rule (True was a 1 kg payload)
+        ({"payload": Payload(mass=True)}, "payload: mass must be a finite number > 0 [kg] as real numbers "
+         "(booleans refused), got True"),
+        ({"payload": Payload(mass="0.6")}, "payload: mass must be a finite number > 0 [kg] as real numbers "
+         "(text refused), got '0.6'"),
+        ({"payload": Payload(mass=0.6 + 0j)}, "payload: mass must be a finite number > 0 [kg] as real "
+         "numbers (complex values refused)"),
+        ({"payload": Payload(mass=0.6, com=(0, 0, True))}, "payload: com must be three finite numbers within "
+         "10 m of the tool frame [m] as real numbers (booleans refused)"),
+        ({"payload": Payload(mass=0.6, com=("0", 0, 0))}, "payload: com must be three finite numbers"),
+        ({"payload": Payload(0.6, inertia=(1e-3, 1e-3, 1e-3, False, 0, 0))}, "payload: inertia must be a "
+         "symmetric (3, 3) matrix or (ixx, iyy, izz, ixy, ixz, iyz) [kg m²] as real numbers (booleans "
+         "refused)"),
         ({"payload": Payload(mass=0.6, com=(0, 0))}, "payload: com must be three finite numbers"),
         ({"payload": Payload(0.6, inertia=(1.0, 0.1, 0.1, 0, 0, 0))}, "payload: inertia is not physical"),
     ],
-)
+)  # fmt: skip
 def test_bad_model_file_arguments_are_refused_in_one_line(arm, arguments, where):
     path = arguments.pop("path", arm.urdf)
     with pytest.raises(ControllerConfigError) as e:
