@@ -414,7 +414,6 @@ def _drive_locked(args, scenario, realtime) -> int:
 def _sim_driver(args) -> int:
     from nsdrake.driver.controller_side import check_drive_scenario
     from nsdrake.driver.realtime import realtime_process
-
     from nsdrake.driver.serve import option_problems
 
     scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
