@@ -532,10 +532,14 @@ def _live_meshcat():
 def main(argv: list[str] | None = None) -> int:
     _never_fail_to_print()
     args = build_parser().parse_args(argv)
-    with ctrl_c.answering() as answer:
-        # sweep and sim-driver compute from their start on (a Ctrl-C is a KeyboardInterrupt)
-        answer.computed = args.command in ("sweep", "sim-driver")
-        return _command(args)
+    try:
+        with ctrl_c.answering() as answer:
+            # sweep and sim-driver compute from their start on (a Ctrl-C is a KeyboardInterrupt)
+            answer.computed = args.command in ("sweep", "sim-driver")
+            return _command(args)
+    except KeyboardInterrupt:  # a Ctrl-C the moment the handling was set, before the command began
+        print("nsdrake: interrupted", file=sys.stderr)
+        return INTERRUPTED
 
 
 def _command(args) -> int:

@@ -100,11 +100,14 @@ def answering():
     read, write = os.pipe()
     os.set_blocking(write, False)
     watcher = threading.Thread(target=_watch, args=(read, state), name="nsdrake-ctrl-c", daemon=True)
-    previous_handler = signal.signal(signal.SIGINT, state.handler)
+    previous_handler = signal.getsignal(signal.SIGINT)
     previous_fd = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
     _current = state
     watcher.start()
     try:
+        # the handler last, inside the try: a SIGINT the moment it is set raises here, and
+        # everything above is undone (the caller sees a KeyboardInterrupt, as from its block)
+        signal.signal(signal.SIGINT, state.handler)
         yield state
     finally:
         _current = None

@@ -167,7 +167,14 @@ def _copy_nested_tables(family: str, out: Path) -> list[str]:
 
 def main() -> int:
     ctrl_c = CtrlC()
-    signal.signal(signal.SIGINT, ctrl_c.handler)  # first: a Ctrl-C from here on is noted, never raised
+    previous = signal.signal(signal.SIGINT, ctrl_c.handler)  # first: from here on noted, never raised
+    try:
+        return _main(ctrl_c)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _main(ctrl_c: CtrlC) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--family", required=True, help="a family with a docs/results folder, or all")
     parser.add_argument(

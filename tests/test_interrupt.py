@@ -451,3 +451,28 @@ def test_ctrl_c_answers_while_the_main_thread_is_in_c_code():
         process.kill()
     assert process.returncode == 130 and took < STOP_WITHIN, (process.returncode, took, err)
     assert err.decode() == ctrl_c.LINE
+
+
+def test_a_ctrl_c_the_moment_its_handler_is_set_is_one_line_and_130():
+    """SIGINT delivered right after nsdrake installs its handler, before the command's own
+    code runs (scripts/regenerate_results.py passes a Ctrl-C on to `nsdrake compare` the
+    moment that handler appears, issue 43): one line, exit 130, no traceback, the handler
+    restored. Catches the KeyboardInterrupt raised inside ctrl_c.answering's setup, outside
+    any try, which printed a traceback and killed the process by SIGINT."""
+    code = (
+        "import os, signal, sys\n"
+        "from nsdrake import cli, ctrl_c\n"
+        "real = signal.signal\n"
+        "def signal_then_ctrl_c(number, handler):\n"
+        "    previous = real(number, handler)\n"
+        "    if number == signal.SIGINT and getattr(handler, '__self__', None).__class__ is ctrl_c.CtrlC:\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "    return previous\n"
+        "signal.signal = signal_then_ctrl_c\n"
+        "code = cli.main(['list'])\n"
+        "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
+        "sys.exit(code)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 130, result.stderr
+    assert without_notices(result.stderr) == "nsdrake: interrupted\n" and result.stdout == "", result
