@@ -150,7 +150,7 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
     q_hi = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
     unit = st.floats(0.0, 1.0)
 
-    @settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
+    @settings(max_examples=100, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
     @given(
         mass=st.one_of(st.just(0.0), st.floats(0.0, 100.0)),
         com=st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3),
