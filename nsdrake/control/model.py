@@ -172,7 +172,7 @@ class ControllerModel:
 
         def add(plant):
             parsed = parse_model_file(plant, path, packages, "model_file", base_pose=base_pose)
-            choose_joints(plant, joints, locked, parsed.sources.mimics)
+            parsed.locked = choose_joints(plant, joints, locked, parsed.sources.mimics)
             return parsed
 
         return cls._parsed(

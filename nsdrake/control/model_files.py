@@ -26,7 +26,7 @@ import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -187,6 +187,7 @@ class ParsedModel:
     sources: ModelSources  # every file of the model and what they declare
     welded: list[str]  # root bodies that floated, welded to the world here
     warnings: dict[str, list[str]]  # Drake's parser warnings, by file name (full text)
+    locked: dict[str, float] = field(default_factory=dict)  # joints locked (choose_joints) -> position
 
 
 class _DrakeWarnings(logging.Handler):
@@ -237,7 +238,10 @@ def parse_model_file(
     sources = read_sources(path, parser.package_map(), where)
     add = add or (lambda parser, file: parser.AddModels(str(file)))
     hulled = plant.geometry_source_is_registered() and sources.meshes_to_hull
-    with _DrakeWarnings() as drake, HulledModel(sources, parser.package_map(), where) if hulled else _Same(path) as copy:
+    with (
+        _DrakeWarnings() as drake,
+        HulledModel(sources, parser.package_map(), where) if hulled else _Same(path) as copy,
+    ):
         try:
             instances = add(parser, copy.top)
         except (RuntimeError, ValueError) as e:
@@ -249,13 +253,19 @@ def parse_model_file(
                 else ""
             )
             text = text if len(text) <= 240 else text[:239] + "…"
-            raise ControllerConfigError(f"{where}: {path.name}", f"Drake cannot parse it: {text}{hint}") from None
+            raise ControllerConfigError(
+                f"{where}: {path.name}", f"Drake cannot parse it: {text}{hint}"
+            ) from None
         warnings = _by_file([copy.original_text(r) for r in drake.records], sources)
     for name, texts in warnings.items():
         first = texts[0].split("warning: ", 1)[-1]
         first = first if len(first) <= 160 else first[:159] + "…"
         LOG.warning(
-            "%s: %s: Drake's parser warned %d time(s) (first: %s)", where, name, len(texts), " ".join(first.split())
+            "%s: %s: Drake's parser warned %d time(s) (first: %s)",
+            where,
+            name,
+            len(texts),
+            " ".join(first.split()),
         )
     welded = weld_floating_roots(plant, instances, base_pose or RigidTransform())
     if welded:
@@ -346,15 +356,21 @@ def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where:
     for name in chosen:
         if name not in names or chosen.count(name) > 1:
             why = "named twice" if name in names else "unknown joint"
-            raise ControllerConfigError(f"{where}: {show(name)}", f"{why}; the file's joints are {', '.join(names)}")
+            raise ControllerConfigError(
+                f"{where}: {show(name)}", f"{why}; the file's joints are {', '.join(names)}"
+            )
     if not isinstance(locked, Mapping):
         raise ControllerConfigError("locked", f"must be a {{joint: position}} mapping, got {show(locked)}")
     for name, value in locked.items():
         if name not in names or name in chosen:
             why = "is one of the arm's joints" if name in chosen else "unknown joint"
-            raise ControllerConfigError(f"locked: {show(name)}", f"{why}; locked joints are those not in joints")
+            raise ControllerConfigError(
+                f"locked: {show(name)}", f"{why}; locked joints are those not in joints"
+            )
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise ControllerConfigError(f"locked: {name}", f"must be a finite number [rad or m], got {show(value)}")
+            raise ControllerConfigError(
+                f"locked: {name}", f"must be a finite number [rad or m], got {show(value)}"
+            )
     for mimic in mimics.values():
         if mimic.joint in names and (mimic.joint in chosen or mimic.leader in chosen):
             raise ControllerConfigError(
@@ -380,7 +396,8 @@ def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where:
         lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
         if not lower - 1e-12 <= q <= upper + 1e-12:
             raise ControllerConfigError(
-                f"locked: {joint.name()}", f"{q:g} is outside the joint's limits [{lower:g}, {upper:g}]; state it"
+                f"locked: {joint.name()}",
+                f"{q:g} is outside the joint's limits [{lower:g}, {upper:g}]; state it",
             )
         positions[joint.name()] = q
         _weld(plant, joint, q, where)  # the joint object is gone after this

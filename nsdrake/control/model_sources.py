@@ -114,7 +114,9 @@ def _visit(path: Path, chain: list[Path], package_map, where, sources: ModelSour
     sources.files.append(source)
     here = f"{where}: {path.name}"
     if not path.is_file():
-        raise ControllerConfigError(f"{where}: {chain[-1].name if chain else path.name}", f"includes {path}, not a file")
+        raise ControllerConfigError(
+            f"{where}: {chain[-1].name if chain else path.name}", f"includes {path}, not a file"
+        )
     if kind == "directives":
         source.includes = _directive_includes(path, package_map, here)
     else:
@@ -236,7 +238,9 @@ def convex_hull_obj(mesh: Path, where: str) -> Path:
         loaded = trimesh.load(str(mesh), force="mesh", process=False)
         hull = trimesh.convex.convex_hull(loaded.vertices)
     except Exception as e:  # trimesh raises many kinds for a file that is not a mesh
-        raise ControllerConfigError(where, f"cannot read the collision mesh {mesh.name}: {one_line(e)}") from None
+        raise ControllerConfigError(
+            where, f"cannot read the collision mesh {mesh.name}: {one_line(e)}"
+        ) from None
     out.parent.mkdir(parents=True, exist_ok=True)
     temporary = out.with_suffix(f".{os.getpid()}.tmp")
     temporary.write_text(trimesh.exchange.obj.export_obj(hull, include_normals=False, include_texture=False))

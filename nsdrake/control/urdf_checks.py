@@ -6,8 +6,9 @@ Physically valid links: a mass > 0, an inertia that is positive definite and mee
 triangle inequality, geometry sizes > 0. A link that cannot move on its own -- the root
 (welded to the world, by the file or by nsdrake), or a frame link on a fixed joint (ROS's
 ``tool0``, ``panda_link8``) -- merges into its parent or the world, so it may have no mass
-and a degenerate inertia (mass ≥ 0, an inertia positive semi-definite); a negative mass or
-moment is refused wherever it is (Drake would simulate a negative mass, warn and
+and a degenerate inertia (mass ≥ 0, principal moments ≥ −MERGED_INERTIA_ROUNDING, no
+triangle inequality); a negative mass, or a clearly negative moment, is refused wherever
+it is. (Drake would simulate a negative mass, warn and
 "repair" an impossible inertia, fail on a bad size with a raw parser line; Pinocchio and
 Drake disagree on a massless link, which a model check would then blame on the
 libraries). A tree of joints: every joint names a parent and a child link, no link is
@@ -57,7 +58,9 @@ def parse_urdf(text: str) -> ET.Element:
 def urdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
     """(where, problem) for every link that is physically invalid and every joint that
     breaks the tree (module docstring); ``where`` names the link or joint."""
-    fixed = _links_that_cannot_move(root.findall("joint"), [link.get("name") for link in root.iter("link")], "urdf")
+    fixed = _links_that_cannot_move(
+        root.findall("joint"), [link.get("name") for link in root.iter("link")], "urdf"
+    )
     for link in root.iter("link"):
         where = f"link '{link.get('name')}'"
         try:
@@ -107,6 +110,11 @@ def _inertial_problem(inertial, cannot_move: bool = False) -> str | None:
     return _mass_and_inertia_problem(None if mass is None else mass.get("value", "0"), get, cannot_move)
 
 
+# A link that cannot move adds its inertia into its parent's (or the world's): a principal
+# moment down to −1e-6 kg m² (a 10 g body a centimetre across) is a vendor's rounding
+# (TIAGo's antennas: −3.5e-8), not a body; a triangle inequality broken there breaks nothing.
+MERGED_INERTIA_ROUNDING = 1e-6  # [kg m²]
+
 INERTIA_ENTRIES = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
 
 
@@ -127,7 +135,9 @@ def sdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
         try:
             if inertia is not None:
                 get = {k: _numbers(_text(inertia.find(k)) or _SDF_DEFAULTS[k])[0] for k in INERTIA_ENTRIES}
-            problem = _mass_and_inertia_problem(None if mass is None else _text(mass), get, link.get("name") in fixed)
+            problem = _mass_and_inertia_problem(
+                None if mass is None else _text(mass), get, link.get("name") in fixed
+            )
         except _NotANumberError as e:
             problem = str(e)
         if problem:
@@ -138,7 +148,9 @@ def _text(element) -> str:
     return "" if element is None or element.text is None else element.text.strip()
 
 
-def _mass_and_inertia_problem(mass_text: str | None, get: dict | None, cannot_move: bool = False) -> str | None:
+def _mass_and_inertia_problem(
+    mass_text: str | None, get: dict | None, cannot_move: bool = False
+) -> str | None:
     """A mass (its text; None: not given) that is not one number > 0, or an inertia
     ({ixx: …}; None: not given) that is not positive definite or breaks the triangle
     inequality; for a link that ``cannot_move`` (module docstring), mass 0 and a positive
@@ -161,9 +173,11 @@ def _mass_and_inertia_problem(mass_text: str | None, get: dict | None, cannot_mo
     if not np.all(np.isfinite(I)):
         return f"inertia must be finite, got {I[np.triu_indices(3)].tolist()}"
     moments = np.linalg.eigvalsh(I)
-    if cannot_move and moments[0] >= -1e-12 * max(1.0, moments[2]):
-        moments = np.maximum(moments, 0.0)  # degenerate allowed; the triangle inequality still holds
-    elif moments[0] <= 0:
+    if cannot_move:  # it merges into its parent: only a clearly negative moment is impossible
+        if moments[0] < -MERGED_INERTIA_ROUNDING:
+            return f"inertia has a negative principal moment: {np.round(moments, 9).tolist()}"
+        return None
+    if moments[0] <= 0:
         return f"inertia must be positive definite, its principal moments are {np.round(moments, 9).tolist()}"
     if moments[0] + moments[1] < moments[2] * (1 - 1e-9):
         return f"inertia breaks the triangle inequality: principal moments {np.round(moments, 9).tolist()}"
