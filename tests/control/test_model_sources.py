@@ -212,23 +212,27 @@ def test_a_mimic_joint_is_refused_in_one_line_unless_locked_with_its_leader(tmp_
 
 
 def test_locked_joints_are_welded_at_their_stated_position(tmp_path):
-    """joints=[j1..j6], j7 locked at 0.7 rad: H (the six joints' block) and g equal Drake's
-    own plant of the whole file with j7 at 0.7; a weld at 0, about another axis or without
-    the outboard mass changes them."""
+    """j6 locked at 0.7 rad, the other six the arm's: H (their block) and g equal Drake's own
+    plant of the whole file with j6 at 0.7; a weld at 0, about another axis or without the
+    outboard mass changes them."""
     arm = write_vendor_arm(tmp_path)
+    chosen = [j for j in ARM if j != "j6"]
     model = ControllerModel.from_file(
-        arm.urdf, tool_frame="tool", task_axes=("x", "y", "z"), joints=ARM[:6], locked={"j7": 0.7}
+        arm.urdf, tool_frame="tool", task_axes=("x", "y", "z"), joints=chosen, locked={"j6": 0.7}
     )
-    assert model.n == 6
+    assert model.joint_names == tuple(chosen)
     plant = drake_plant(arm.urdf, arm.package)
     context = plant.CreateDefaultContext()
-    plant.SetPositions(context, np.concatenate([Q0[:6], [0.7]]))
-    terms = model.terms(model.create_scratch(), Q0[:6], np.zeros(6), False)
-    np.testing.assert_allclose(terms.H, plant.CalcMassMatrix(context)[:6, :6], rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(
-        terms.g, -plant.CalcGravityGeneralizedForces(context)[:6], rtol=1e-12, atol=1e-12
-    )
-    assert "outside the joint's limits" in refused(arm.urdf, joints=ARM[:6], locked={"j7": 3.5})
+    q = Q0.copy()
+    q[5] = 0.7
+    plant.SetPositions(context, q)
+    keep = [0, 1, 2, 3, 4, 6]
+    terms = model.terms(model.create_scratch(), q[keep], np.zeros(6), False)
+    H = plant.CalcMassMatrix(context)[np.ix_(keep, keep)]
+    np.testing.assert_allclose(terms.H, H, rtol=1e-12, atol=1e-12)
+    g = -plant.CalcGravityGeneralizedForces(context)[keep]
+    np.testing.assert_allclose(terms.g, g, rtol=1e-12, atol=1e-12)
+    assert "outside the joint's limits" in refused(arm.urdf, joints=chosen, locked={"j6": 3.5})
     assert "unknown joint" in refused(arm.urdf, joints=["j1", "nope"])
 
 
