@@ -172,7 +172,7 @@ class ControllerModel:
         where = f"model_file: {Path(path).name}"
 
         def add(plant):
-            parsed = parse_model_file(plant, path, packages, "model_file", base_pose=base_pose)
+            parsed = parse_model_file(plant, path, packages, "model_file", base_pose=base_pose, visuals=False)
             parsed.locked = choose_joints(plant, joints, locked, parsed.sources.mimics)
             return parsed
 

@@ -214,7 +214,14 @@ class _DrakeWarnings(logging.Handler):
 
 
 def parse_model_file(
-    plant: MultibodyPlant, path, packages=None, where: str = "model_file", *, base_pose=None, add=None
+    plant: MultibodyPlant,
+    path,
+    packages=None,
+    where: str = "model_file",
+    *,
+    base_pose=None,
+    add=None,
+    visuals: bool = True,
 ) -> ParsedModel:
     """Drake parses the model file ``path`` into ``plant`` (module docstring), after every file
     it includes passed the checks of :mod:`nsdrake.control.model_sources`. With a SceneGraph,
@@ -223,7 +230,8 @@ def parse_model_file(
     ``base_pose`` (a RigidTransform; the world's origin if None), said in one line; a joint
     with a ``<limit effort>`` but no actuator (no ``<transmission>``) gets an actuator of that
     effort limit. Drake's parser warnings are said in one line per file. ``add(parser, path)``
-    replaces ``parser.AddModels(path)`` (the station's belts). Every problem is a one-line
+    replaces ``parser.AddModels(path)`` (the station's belts); without ``visuals``, a copy
+    made for hulls leaves the visual elements out. Every problem is a one-line
     ControllerConfigError naming ``where``."""
     _check_arguments(path, packages, base_pose, where)
     path = Path(path)
@@ -233,7 +241,7 @@ def parse_model_file(
     hulled = plant.geometry_source_is_registered() and sources.meshes_to_hull
     with (
         _DrakeWarnings() as drake,
-        HulledModel(sources, parser.package_map(), where) if hulled else _Same(path) as copy,
+        HulledModel(sources, parser.package_map(), where, visuals) if hulled else _Same(path) as copy,
     ):
         try:
             instances = add(parser, copy.top)
