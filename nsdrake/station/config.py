@@ -43,6 +43,11 @@ class ArmConfig:
     payload: PayloadConfig = field(default_factory=PayloadConfig)
     # Frame of the arm whose origin is the task point (the tool tip) [-].
     tool_frame: str = "tool"
+    # The arm's joints, by name; empty: every joint of the model file. The others (gripper
+    # fingers, a mobile base) are locked at their position in ``locked`` [-].
+    joints: list[str] = field(default_factory=list)
+    # Positions of the joints not in ``joints``, keyed by joint name; 0 where not given [rad or m].
+    locked: dict[str, float] = field(default_factory=dict)
     # Joint positions at t = 0, keyed by joint name; every joint must be given [rad].
     initial_positions: dict[str, float] = field(default_factory=dict)
     # Joint velocities at t = 0, keyed by joint name; missing joints start at rest [rad/s].
