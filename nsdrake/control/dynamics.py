@@ -102,7 +102,8 @@ class RobotTerms:
     H_inv_Jt: np.ndarray = field(init=False, repr=False, compare=False)  # (n, m) H⁻¹ Jᵀ
 
     def __post_init__(self):
-        derived = derived_terms(self.H_inv, self.J, self.dJ_dq, self.v)
+        # H⁻¹ C-contiguous, as the stages pass it: one compiled version (nsdrake.control.kernels)
+        derived = derived_terms(np.ascontiguousarray(self.H_inv), self.J, self.dJ_dq, self.v)
         for name, value in zip(("Jdot", "Jdot_v", "xdot", "H_inv_Jt"), derived, strict=True):
             object.__setattr__(self, name, value)
 
