@@ -20,8 +20,11 @@ Three things numba leaves to its user:
   time. :func:`compile_kernels` therefore has a second process (:func:`_helper`) compile
   the largest kernel, :func:`nsdrake.control.stages.run_stages`, into numba's on-disk
   cache while this one compiles the others, then loads it. numba writes each cache file
-  whole (by rename), and the two processes compile different kernels or the same kernel
-  for the same types, so their files never disagree.
+  whole (by rename), but it saves a kernel by reading that kernel's index, adding the new
+  entry and writing the index back: two processes saving two versions of one kernel (a
+  callee both compile, e.g. for two literal arguments) could lose one, or file one's
+  machine code under the other's types. So while :func:`compile_kernels` runs, every save
+  holds a lock shared by the processes (:func:`_saves_locked`).
 
 - **A notice.** Compiling takes tens of seconds, during which a run prints nothing.
   :func:`announce_compiling` listens to numba's compile events and prints one line, once
@@ -246,6 +249,37 @@ def _cached(dispatcher, arguments: tuple) -> bool:
         return False
 
 
+@contextlib.contextmanager
+def _saves_locked():
+    """A block in which numba saves each cached kernel holding an exclusive lock on one
+    file beside the stamp (:func:`refresh_cache`), so that processes compiling at once
+    never interleave a kernel index's read and write (module docstring)."""
+    try:
+        import fcntl
+
+        from numba.core.caching import IndexDataCacheFile
+    except ImportError:  # no POSIX locks, or numba's internals moved: saves as numba does
+        yield
+        return
+    lock_path = cache_folder(PACKAGE / "__init__.py") / "nsdrake-kernels.lock"
+    original = IndexDataCacheFile.save
+
+    def save(self, key, data):
+        try:
+            lock = open(lock_path, "ab")  # noqa: SIM115 (held across the save below)
+        except OSError:
+            return original(self, key, data)
+        with lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            return original(self, key, data)
+
+    IndexDataCacheFile.save = save
+    try:
+        yield
+    finally:
+        IndexDataCacheFile.save = original
+
+
 def compile_kernels(helper: bool = True) -> None:
     """Compiles (or loads from numba's cache) every kernel nsdrake calls from Python, with
     the types of its call sites (:func:`_entry_points`), once per process. A first run
@@ -259,7 +293,12 @@ def compile_kernels(helper: bool = True) -> None:
     them, or compiles them itself if the helper could not."""
     if getattr(compile_kernels, "done", False):
         return
-    kernels = _dispatchers()
+    with _saves_locked():
+        _compile(_dispatchers(), helper)
+    compile_kernels.done = True
+
+
+def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
     started = None
     if helper and (os.cpu_count() or 1) > 1:
         missing = [(d, a) for d, a in kernels if not _cached(d, a)]
@@ -275,7 +314,6 @@ def compile_kernels(helper: bool = True) -> None:
             _wait(started)
     for dispatcher, arguments in kernels:  # loads what the helper compiled, compiles what it did not
         dispatcher.compile(arguments)
-    compile_kernels.done = True
 
 
 def _start_helper(indices: list[int]) -> subprocess.Popen | None:
@@ -320,6 +358,7 @@ def _helper() -> None:
     threading.Thread(target=orphaned, daemon=True).start()
     _notice.printed = True  # the parent printed the notice
     kernels = _dispatchers()
-    for k in sys.argv[1:]:
-        dispatcher, arguments = kernels[int(k)]
-        dispatcher.compile(arguments)
+    with _saves_locked():
+        for k in sys.argv[1:]:
+            dispatcher, arguments = kernels[int(k)]
+            dispatcher.compile(arguments)

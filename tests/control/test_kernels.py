@@ -157,7 +157,10 @@ for dynamics in ("pinocchio", "drake"):
     config = ControllerConfig(period=0.001)
     config.desired_null_space.criteria.obstacle.gain = 1.0
     step = ControllerStep(controller_model=model, config=config)
-    steps(step, Q0, 0.001, 3, True)
+    zero = np.zeros(3)
+    for k in range(3):  # no force axis: no wrench, no f_d
+        R_d = np.array([1.0, 0, 0, 0])
+        step.step(0.001 * k, Q0, np.zeros(7), None, zero, zero, zero, None, R_d, zero, zero)
     model.terms(model.create_scratch(), Q0, np.ones(7), True)  # the model's own RobotTerms
 # the selector and the orientation error from Python, as the API calls them (ints where a
 # user may write them)
