@@ -299,19 +299,23 @@ def compile_kernels(helper: bool = True) -> None:
 
 
 def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
-    started = None
     if helper and (os.cpu_count() or 1) > 1:
-        missing = [(d, a) for d, a in kernels if not _cached(d, a)]
-        shared = [k for k, (d, _) in enumerate(kernels) if d.py_func.__name__ in HELPER_SHARE]
-        if any(d.py_func.__name__ in HELPER_SHARE for d, _ in missing) and len(missing) > len(shared):
-            _notice.announce()
-            started = _start_helper(shared)
-    if started is not None:
-        mine = [k for k in range(len(kernels)) if kernels[k][0].py_func.__name__ not in HELPER_SHARE]
-        for k in mine:
-            kernels[k][0].compile(kernels[k][1])
-        with _notice.waiting():
-            _wait(started)
+        missing = [d.py_func.__name__ for d, a in kernels if not _cached(d, a)]
+        theirs = [k for k, (d, _) in enumerate(kernels) if d.py_func.__name__ in HELPER_SHARE]
+        if set(missing) & set(HELPER_SHARE) and len(missing) > len(theirs):
+            # A compile from the notice on (compiling(): a Ctrl-C then ends the run at once),
+            # waiting for the helper included.
+            with _notice.waiting():
+                _notice.announce()
+                started, compiled = _start_helper(theirs), False
+                try:
+                    for k, (dispatcher, arguments) in enumerate(kernels):
+                        if started is None or k not in theirs:
+                            dispatcher.compile(arguments)
+                    compiled = True
+                finally:
+                    if started is not None:
+                        _wait(started, compiled)
     for dispatcher, arguments in kernels:  # loads what the helper compiled, compiles what it did not
         dispatcher.compile(arguments)
 
@@ -333,9 +337,12 @@ def _start_helper(indices: list[int]) -> subprocess.Popen | None:
         return None
 
 
-def _wait(process: subprocess.Popen) -> None:
+def _wait(process: subprocess.Popen, wait: bool) -> None:
+    """Waits for the helper to end (``wait``; else ends it at once: this process failed),
+    and ends it if this process is interrupted meanwhile."""
     try:
-        process.wait()
+        if wait:
+            process.wait()
     finally:
         if process.poll() is None:
             process.kill()
