@@ -189,11 +189,17 @@ def test_every_shipped_scenario_and_way_to_run_it_needs_no_further_compile():
     (compiled once per install, or loaded from the cache), every shipped scenario (pose and
     position tasks, sweep, posture, joint limits or none, obstacles in closed form, by
     Drake's queries or none; 4 and 7 joints) run through the named systems, the fused
-    system and a plain ControllerStep (its first t an int), and the Panda with Drake's
-    terms, compile nothing. Catches a configuration that specialises the compiled code
-    (run_stages compiled per pose task, sweep, limits and obstacles: up to 16 versions), a
-    time passed on as an int, and a kernel called from Python with types the list of
-    entry points lacks (a second compile notice in a later run)."""
+    system and a plain ControllerStep (its first t an int), the Panda with Drake's
+    terms, a vendor's arm with OBJ meshes on its links near a ball (the obstacle row from
+    Drake's queries; Pinocchio's and Drake's terms), the model's own terms and the
+    selector's and orientation error's API with ints, compile nothing; and the process
+    then holds each nsdrake kernel for one list of argument types only. Catches a
+    configuration that specialises the compiled code (run_stages compiled per pose task,
+    sweep, limits and obstacles: up to 16 versions), a time passed on as an int, a kernel
+    called from Python with types the list of entry points lacks (a second compile notice
+    in a later run: before issue 42's fix, activation and pack_criterion on mesh links),
+    and a Python caller passing another layout than the stages (_jacobian_partials called
+    with Drake's non-contiguous Jacobian rows: compiled twice)."""
     done = subprocess.run(
         [sys.executable, "-c", _EVERY_CONFIGURATION], capture_output=True, text=True, timeout=1800
     )
@@ -225,16 +231,17 @@ for k in range(3):
 
 # Prints, per nsdrake kernel in numba's cache, the argument types it is cached for.
 _CACHED_SIGNATURES = """
-import importlib, pkgutil
+import importlib
 import numba
-import nsdrake
-for info in pkgutil.walk_packages(nsdrake.__path__, "nsdrake."):
-    module = importlib.import_module(info.name)
-    for name, d in vars(module).items():
-        if isinstance(d, numba.core.registry.CPUDispatcher) and d.py_func.__module__ == info.name:
+from nsdrake.control.kernels import PACKAGE, kernel_sources
+for source in kernel_sources():
+    name = ".".join(("nsdrake",) + source.relative_to(PACKAGE).with_suffix("").parts)
+    module = importlib.import_module(name)
+    for kernel, d in vars(module).items():
+        if isinstance(d, numba.core.registry.CPUDispatcher) and d.py_func.__module__ == name:
             keys = d._cache._cache_file._load_index()
             if keys:
-                print(f"{info.name}.{name}", len(keys), [str(k[0]) for k in keys])
+                print(f"{name}.{kernel}", len(keys), [str(k[0]) for k in keys])
 """
 
 
