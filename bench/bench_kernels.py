@@ -143,7 +143,7 @@ class Compiles(event.Listener):
 
 class Passes(event.Listener):
     def on_start(self, ev):
-        name = ev.data["name"]
+        name = ev.data["name"].split(" [")[0]  # "native_lowering [run_stages]"
         stage = {"nopython_type_inference": "typing", "native_lowering": "lowering"}.get(name, "numba passes")
         push("pass", stage)
     def on_end(self, ev):
