@@ -55,9 +55,11 @@ from numba.core.caching import _CacheLocator
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
 # The one line a first run prints; the time is compile_kernels' wall time on 2 idle cores of
-# the project's machine kind (bench/bench_kernels.py --compile; docs/architecture.md).
-NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about 45 s on 2 cores)…"
-# The kernels the helper process compiles (module docstring): about half of the CPU time.
+# the project's machine kind: about the helper's CPU time (bench/bench_kernels.py --compile:
+# 74 CPU-s under load 11-16, the same chain 50 CPU-s at load 5-7; docs/architecture.md).
+NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about a minute on 2 cores)…"
+# The kernels the helper process compiles (module docstring): the longest chain, run_stages
+# and its callees, about two thirds of the CPU time (the run's process compiles the rest).
 HELPER_SHARE = ("run_stages", "segments_box", "segments_sphere")
 
 
