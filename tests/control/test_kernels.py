@@ -285,3 +285,58 @@ def test_on_a_fresh_cache_a_user_s_commands_print_the_compile_notice_once(tmp_pa
     cached = done.stdout.splitlines()
     assert any(line.startswith("nsdrake.control.stages.run_stages 1 ") for line in cached), cached
     assert [line for line in cached if line.split()[1] != "1"] == []
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux's /proc")
+def test_the_helper_compiling_for_a_killed_run_ends_with_it(tmp_path):
+    """compile_kernels on an empty cache has a helper process compile run_stages on the
+    second core. A run killed meanwhile (SIGKILL: no handler, no cleanup) must not leave
+    the helper compiling for a minute on a core of its own. Catches a helper that does not
+    watch its parent (its stdin closing)."""
+    import signal
+    import time
+
+    env = os.environ | {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    run = subprocess.Popen(
+        [sys.executable, "-c", "from nsdrake.control.kernels import compile_kernels; compile_kernels()"],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert run.stderr.readline().strip() == NOTICE  # the helper starts right after it
+        deadline = time.monotonic() + 60.0
+        while not (helpers := _children(run.pid)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert helpers, "no helper process started"
+    finally:
+        run.send_signal(signal.SIGKILL)
+        run.wait()
+    deadline = time.monotonic() + 10.0
+    alive = helpers
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [p for p in helpers if Path(f"/proc/{p}").exists() and "Z" not in _state(p)]
+    for p in alive:  # the test's own cleanup, whatever the verdict
+        os.kill(p, signal.SIGKILL)
+    assert alive == [], "the helper went on compiling after its run was killed"
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "Z"
