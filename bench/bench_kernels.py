@@ -2,6 +2,17 @@
 against another (issue 36: "compiled once per install, whatever the configuration").
 
     python bench/bench_kernels.py --old /tmp/kernels-old [--duration S] [--rounds N] [--calls N]
+    python bench/bench_kernels.py --compile [--old /tmp/kernels-old]
+
+``--compile`` (issue 44, item 4) profiles ``compile_kernels()`` alone on an empty cache, each
+tree in a child process of its own: the CPU time of each kernel's compile, exclusive of the
+kernels it compiles on the way (numba compiles a kernel's callees inside its compile), split
+by stage (numba's passes: typing, lowering, ...; LLVM: function passes, module passes,
+machine code), from numba's compile and pass events and timers around LLVM's calls; the
+kernels sorted by CPU time, each with the CPU time of the other tree's same kernel and
+their ratio; then the compile as a run does it (with this tree's helper process on the
+second core): its wall time and the CPU time of both processes. On a loaded machine, read
+the CPU times and the ratios; the wall time counts only on an idle one (the load is printed).
 
 ``--old`` is a checkout of the code to compare with (``git worktree add --detach
 /tmp/kernels-old main``); both trees run with this interpreter, each from its own folder
@@ -10,9 +21,11 @@ machine load.
 
 - **first runs**: each tree gets an empty numba cache (``NUMBA_CACHE_DIR``), then runs
   ``nsdrake run`` of every shipped scenario in turn, fig3 first, each in a process of its
-  own (as a user's commands): per run the wall time, the process's CPU time, the CPU time
-  inside numba's compiles (outermost compiles; a listener of numba's compile events), the
-  compiles and the compile notices printed. fig3's row is the first run after an install
+  own (as a user's commands): per run the wall time, the process's CPU time (its helper
+  processes included), the CPU time inside numba's compiles in the process (outermost
+  compiles; a listener of numba's compile events), the compiles and the compile notices
+  printed; and whether the two trees' traces.csv are the same bytes (kernels changed for
+  their compile time must compute the same numbers). fig3's row is the first run after an install
   (``--duration`` shortens every run; the compile does not depend on it).
 - **per tick** (``--rounds`` rounds, warm caches): the mean CPU time of
   ``ControllerStep.step`` over ``--calls`` calls at fresh states, fig3's controller (4 joints,
@@ -96,6 +109,88 @@ print(json.dumps({
 }))
 """
 
+# compile_kernels() under listeners of numba's compile and pass events, with timers around
+# LLVM's stages; writes {"kernels": {kernel: {stage: exclusive CPU s}}, ...} to argv[1].
+PROFILE = """
+import inspect, json, sys, time
+from collections import defaultdict
+from numba.core import codegen, event
+
+clock, stack, order = time.process_time, [], []
+kernels = defaultdict(lambda: defaultdict(float))
+
+def push(kind, key):
+    stack.append([kind, key, clock(), 0.0])
+
+def pop():
+    kind, key, start, children = stack.pop()
+    total = clock() - start
+    if stack:
+        stack[-1][3] += total
+    owner = next((f[1] for f in reversed(stack + [[kind, key]]) if f[0] == "compile"), "(none)")
+    kernels[owner]["other" if kind == "compile" else key] += total - children
+    if kind == "compile":
+        kernels[key]["inclusive"] += total
+
+class Compiles(event.Listener):
+    def on_start(self, ev):
+        f = ev.data["dispatcher"].py_func
+        key = f"{f.__module__}.{f.__qualname__}({', '.join(str(a) for a in ev.data['args'])})"
+        order.append(key)
+        push("compile", key)
+    def on_end(self, ev):
+        pop()
+
+class Passes(event.Listener):
+    def on_start(self, ev):
+        name = ev.data["name"].split(" [")[0]  # "native_lowering [run_stages]"
+        stage = {"nopython_type_inference": "typing", "native_lowering": "lowering"}.get(name, "numba passes")
+        push("pass", stage)
+    def on_end(self, ev):
+        pop()
+
+def timed(cls, name, stage):
+    original = getattr(cls, name)
+    def wrapper(self, *args, **kwargs):
+        push("llvm", stage)
+        try:
+            return original(self, *args, **kwargs)
+        finally:
+            pop()
+    setattr(cls, name, wrapper)
+
+timed(codegen.CPUCodeLibrary, "_optimize_functions", "LLVM function passes")
+timed(codegen.CPUCodeLibrary, "_optimize_final_module", "LLVM module passes")
+timed(codegen.JITCodeLibrary, "_finalize_specific", "machine code")
+event.register("numba:compile", Compiles())
+event.register("numba:run_pass", Passes())
+import nsdrake.control
+from nsdrake.control import kernels as k
+start, wall = clock(), time.monotonic()
+if "helper" in inspect.signature(k.compile_kernels).parameters:
+    k.compile_kernels(helper=False)  # one process: each kernel's own time
+else:
+    k.compile_kernels()
+out = {"cpu": clock() - start, "wall": time.monotonic() - wall, "compiles": len(order),
+       "kernels": {key: dict(kernels[key]) for key in dict.fromkeys(order)}}
+json.dump(out, open(sys.argv[1], "w"))
+"""
+
+# compile_kernels() as a run calls it; prints its wall time, this process's CPU time and
+# its helper processes' (on an idle machine the wall time is about the larger CPU time).
+COMPILE = """
+import resource, time
+import nsdrake.control
+from nsdrake.control.kernels import compile_kernels
+start, cpu = time.monotonic(), time.process_time()
+compile_kernels()
+helpers = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(time.monotonic() - start, time.process_time() - cpu, helpers.ru_utime + helpers.ru_stime)
+"""
+
+STAGES = ("typing", "lowering", "numba passes", "LLVM function passes", "LLVM module passes")
+STAGES += ("machine code", "other")
+
 SCENARIOS = (
     "fig3", "fig3_vertical", "force_step", "lyapunov", "panda_self_motion", "panda_wipe",
     "priority_demo", "self_motion",
@@ -136,9 +231,73 @@ def first_run(tree: Path, scenario: str, cache: Path, out: Path, duration: float
     return row
 
 
+def compile_profile(trees: dict[str, Path]) -> dict:
+    """The ``--compile`` figures (module docstring), printed; returned for the JSON line."""
+    load_before = os.getloadavg()
+    print(f"load before: {load_before[0]:.1f} {load_before[1]:.1f} {load_before[2]:.1f}", flush=True)
+    profiles, runs = {}, {}
+    with tempfile.TemporaryDirectory(prefix="bench-kernels-") as scratch:
+        for name, tree in trees.items():
+            out = Path(scratch) / f"{name}.json"
+            cache = {"NUMBA_CACHE_DIR": str(Path(scratch) / name / "profile-cache")}
+            done, wall, cpu = child(tree, ["-c", PROFILE, str(out)], cache)
+            if done.returncode != 0:
+                print(done.stderr[-3000:], file=sys.stderr)
+                raise SystemExit(f"the compile profile of {name} failed")
+            profiles[name] = json.loads(out.read_text()) | {"process_cpu": cpu, "process_wall": wall}
+            cache = {"NUMBA_CACHE_DIR": str(Path(scratch) / name / "run-cache")}
+            done, wall, cpu = child(tree, ["-c", COMPILE], cache)
+            if done.returncode != 0:
+                print(done.stderr[-3000:], file=sys.stderr)
+                raise SystemExit(f"the compile of {name} failed")
+            compile_wall, own, helpers = map(float, done.stdout.split()[-3:])
+            runs[name] = {"compile_wall": compile_wall, "own_cpu": own, "helpers_cpu": helpers, "cpu": cpu}
+            print(f"  {name}: profiled and compiled", flush=True)
+    load_after = os.getloadavg()
+
+    def exclusive(stages: dict) -> float:
+        return sum(v for s, v in stages.items() if s != "inclusive")
+
+    new = profiles["new"]["kernels"]
+    other = {n: p["kernels"] for n, p in profiles.items() if n != "new"}
+    print("per kernel, CPU s of its own compile (exclusive of the kernels compiled inside it), new tree:")
+    header = "  ".join(f"{s[:12]:>12s}" for s in STAGES)
+    print(f"  {'own':>6s} {'incl.':>6s}  {'old':>6s} {'new/old':>7s}  {header}  kernel(argument types)")
+    for key, stages in sorted(new.items(), key=lambda kv: -exclusive(kv[1])):
+        old = other.get("old", {}).get(key)
+        mine = exclusive(stages)
+        ratio = f"{mine / exclusive(old):7.2f}" if old else "      -"
+        cells = "  ".join(f"{stages.get(s, 0.0):12.2f}" for s in STAGES)
+        old_cell = f"{exclusive(old):6.2f}" if old else "     -"
+        print(f"  {mine:6.2f} {stages.get('inclusive', 0.0):6.2f}  {old_cell} {ratio}  {cells}  {key[:160]}")
+    for name, kernels in other.items():
+        gone = [key for key in kernels if key not in new]
+        if gone:
+            print(f"kernels the {name} tree compiles and the new one does not (CPU s):")
+            for key in sorted(gone, key=lambda k: -exclusive(kernels[k])):
+                print(f"  {exclusive(kernels[key]):6.2f}  {key[:160]}")
+    print("in all (CPU s; compiles; by stage):")
+    for name, profile in profiles.items():
+        totals = {s: sum(k.get(s, 0.0) for k in profile["kernels"].values()) for s in STAGES}
+        stages = ", ".join(f"{s} {v:.1f}" for s, v in totals.items())
+        print(f"  {name}: compile_kernels {profile['cpu']:.1f} s CPU in one process "
+              f"({profile['compiles']} compiles; {stages})")  # fmt: skip
+    for name, run in runs.items():
+        idle = max(run["own_cpu"], run["helpers_cpu"])
+        print(f"  {name}: compile_kernels as a run calls it: {run['compile_wall']:.1f} s wall, "
+              f"{run['own_cpu']:.1f} s CPU in its process, {run['helpers_cpu']:.1f} s in its helper "
+              f"(idle, the wall time would be about {idle:.1f} s)")  # fmt: skip
+    if "old" in profiles:
+        print(f"  new/old: CPU {profiles['new']['cpu'] / profiles['old']['cpu']:.2f}, wall as a run "
+              f"{runs['new']['compile_wall'] / runs['old']['compile_wall']:.2f}")  # fmt: skip
+    print(f"load after: {load_after[0]:.1f} {load_after[1]:.1f} {load_after[2]:.1f}")
+    return {"profiles": profiles, "runs": runs, "load": [load_before, load_after]}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--old", type=Path, required=True, help="checkout of the code to compare with")
+    parser.add_argument("--old", type=Path, help="checkout of the code to compare with")
+    parser.add_argument("--compile", action="store_true", help="profile the compile alone, per kernel")
     parser.add_argument(
         "--duration", type=float, help="simulated time of each first run [s] (default: the scenario's)"
     )
@@ -148,6 +307,12 @@ def main():
     parser.add_argument("--rounds", type=int, default=3, help="rounds of the per-tick figures (median)")
     parser.add_argument("--calls", type=int, default=5000, help="ControllerStep calls per figure")
     args = parser.parse_args()
+    if args.compile:
+        trees = {"new": HERE} | ({"old": args.old.resolve()} if args.old else {})
+        print(json.dumps(compile_profile(trees)))
+        return
+    if args.old is None:
+        parser.error("--old is needed (but for --compile)")
     trees = {"old": args.old.resolve(), "new": HERE}
     load_before = os.getloadavg()
     print(f"load before: {load_before[0]:.1f} {load_before[1]:.1f} {load_before[2]:.1f}", flush=True)
@@ -165,6 +330,10 @@ def main():
                     f"{row['notices']} notice)",
                     flush=True,
                 )
+            traces = [Path(tmp) / name / scenario / "traces.csv" for name in trees]
+            same = all(t.is_file() for t in traces) and traces[0].read_bytes() == traces[1].read_bytes()
+            first["new"][scenario]["traces_identical"] = same
+            print(f"  {scenario}: traces.csv of old and new {'byte for byte the same' if same else 'DIFFER'}")
         ticks: dict[str, list[dict]] = {"old": [], "new": []}
         for k in range(args.rounds):
             for name, tree in trees.items():

@@ -102,7 +102,8 @@ class RobotTerms:
     H_inv_Jt: np.ndarray = field(init=False, repr=False, compare=False)  # (n, m) H⁻¹ Jᵀ
 
     def __post_init__(self):
-        derived = derived_terms(self.H_inv, self.J, self.dJ_dq, self.v)
+        # H⁻¹ C-contiguous, as the stages pass it: one compiled version (nsdrake.control.kernels)
+        derived = derived_terms(np.ascontiguousarray(self.H_inv), self.J, self.dJ_dq, self.v)
         for name, value in zip(("Jdot", "Jdot_v", "xdot", "H_inv_Jt"), derived, strict=True):
             object.__setattr__(self, name, value)
 
@@ -207,6 +208,8 @@ class JacobianPartials:
         J_v, then rotational rows of J_w), from the (3, n) angular Jacobian J_w (column
         k is the world axis of revolute joint k) and the (3, n) translational Jacobian
         J_v of the tool point."""
+        # C-contiguous (Drake's Jacobian rows are not): the kernel's one list of types
+        J_w, J_v = np.ascontiguousarray(J_w, dtype=float), np.ascontiguousarray(J_v, dtype=float)
         return _jacobian_partials(J_w, J_v, self._own, self._other, self._rows, self._rot_rows)
 
 

@@ -13,12 +13,23 @@ Three things numba leaves to its user:
   types (:func:`nsdrake.control.stages.run_stages`), and :func:`compile_kernels`, called
   where a controller is built, compiles every kernel nsdrake calls from Python with the
   types of its call sites, in one go: one compile per install covers a pose or a position
-  task, a sweep, joint limits, obstacles and any joint count (issue 36).
+  task, a sweep, joint limits, obstacles and any joint count (issue 36). Each kernel
+  compiles for one list of argument types only (the callers convert their arrays): no
+  kernel is specialised twice.
+- **Both cores.** numba compiles in one thread, and one process compiles one kernel at a
+  time. :func:`compile_kernels` therefore has a second process (:func:`_helper`) compile
+  the largest kernel, :func:`nsdrake.control.stages.run_stages`, into numba's on-disk
+  cache while this one compiles the others, then loads it. numba writes each cache file
+  whole (by rename), but it saves a kernel by reading that kernel's index, adding the new
+  entry and writing the index back: two processes saving two versions of one kernel (a
+  callee both compile, e.g. for two literal arguments) could lose one, or file one's
+  machine code under the other's types. So while :func:`compile_kernels` runs, every save
+  holds a lock shared by the processes (:func:`_saves_locked`).
 
 - **A notice.** Compiling takes tens of seconds, during which a run prints nothing.
   :func:`announce_compiling` listens to numba's compile events and prints one line, once
   per process, when the first of nsdrake's kernels starts compiling (not when they load
-  from the cache).
+  from the cache); :func:`compile_kernels` prints it when it starts the helper.
 - **Stale machine code.** numba invalidates a cached kernel when *its own* source file
   changes, not when a kernel it calls, defined in another file, does: after an edit or a
   partial update the cache would keep running the old callee. :func:`refresh_cache`
@@ -29,8 +40,12 @@ Three things numba leaves to its user:
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
+import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -39,8 +54,13 @@ from numba.core.caching import _CacheLocator
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
-# The one line a first run prints; the time is fig3's on 2 cores (docs/architecture.md).
-NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about a minute)…"
+# The one line a first run prints; the time is compile_kernels' wall time on 2 idle cores of
+# the project's machine kind: about the helper's CPU time (bench/bench_kernels.py --compile:
+# 74 CPU-s under load 11-16, the same chain 50 CPU-s at load 5-7; docs/architecture.md).
+NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about a minute on 2 cores)…"
+# The kernels the helper process compiles (module docstring): the longest chain, run_stages
+# and its callees, about two thirds of the CPU time (the run's process compiles the rest).
+HELPER_SHARE = ("run_stages", "segments_box", "segments_sphere")
 
 
 def kernel_sources(package: Path = PACKAGE) -> list[Path]:
@@ -107,9 +127,26 @@ class _CompileNotice(event.Listener):
             return
         module = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "") or ""
         if module.startswith("nsdrake."):
+            self.announce()
+
+    def announce(self):
+        """Prints :data:`NOTICE`, once."""
+        if not self.printed:
             self.printed = True
             sys.stderr.write(NOTICE + "\n")  # one write: workers compiling at once print whole lines
             sys.stderr.flush()
+
+    @contextlib.contextmanager
+    def waiting(self):
+        """A block that counts as a compile (:func:`compiling`, :meth:`compile_seconds`):
+        waiting for the helper process that compiles kernels for this one."""
+        if self.depth == 0:
+            self.started = self.clock()
+        self.depth += 1
+        try:
+            yield
+        finally:
+            self.on_end(None)
 
     def on_end(self, ev):
         self.depth = max(0, self.depth - 1)
@@ -147,8 +184,11 @@ def announce_compiling() -> None:
 
 def _entry_points() -> list[tuple[str, str, tuple]]:
     """Every kernel nsdrake calls from Python, with the argument types of each call site:
-    (module, name, argument types). Kernels called only by kernels compile with their
-    callers. The controller's stages take float64 and int64 arrays, C-contiguous, never a
+    (module, name, argument types), one list of types per kernel (the callers convert their
+    arrays to it: a second list would compile the kernel a second time). Kernels called
+    only by kernels compile with their callers (a kernel marked ``inline="always"`` is
+    compiled into them, not on its own: called from Python too, it is listed here). The
+    controller's stages take float64 and int64 arrays, C-contiguous, never a
     configuration-dependent type (:func:`nsdrake.control.stages.run_stages`); the others
     take the arrays Pinocchio and Drake return (column-major matrices, read-only vectors)."""
     from numba.core import types
@@ -156,46 +196,178 @@ def _entry_points() -> list[tuple[str, str, tuple]]:
     def A(dtype: str, ndim: int, layout: str = "C", readonly: bool = False):
         return types.Array(getattr(types, dtype), ndim, layout, readonly=readonly)
 
-    f1, f2, i1, i64, f64 = A("float64", 1), A("float64", 2), A("int64", 1), types.int64, types.float64
-    f2F, b2, f1_read = A("float64", 2, "F"), A("bool_", 2), A("float64", 1, readonly=True)
-    pose = (f2F, f1, f1)  # a rotation matrix, a position, a vector
+    f1, f2, f3, i1 = A("float64", 1), A("float64", 2), A("float64", 3), A("int64", 1)
+    i64, f64 = types.int64, types.float64
+    f2F, b2 = A("float64", 2, "F"), A("bool_", 2)
     return [
         # the controller's stages (nsdrake.control.plan): Pinocchio's arrays, then the plan's
-        ("nsdrake.control.stages", "terms_stage",
-         (f2F, f1, f1, f2F, f2F, A("float64", 3, "A", readonly=True), *pose, f1, f1, i1, i1, f1)),
-        ("nsdrake.control.stages", "complete_terms", (f1, f1, i1, i1)),  # the Drake terms' path
         ("nsdrake.control.stages", "run_stages", (i64, f64, f64, f1, i1, i1, f1, f2, f1, f1, f1, f1, f1)),
+        ("nsdrake.control.stages", "terms_stage",
+         (f2F, f1, f1, f2F, f2F, A("float64", 3, "A", readonly=True), f2F, f1, f1, f1, f1, i1, i1, f1)),
+        ("nsdrake.control.stages", "complete_terms", (f1, f1, i1, i1)),  # the Drake terms' path
         ("nsdrake.control.layout", "terms_size", (i1,)),
         ("nsdrake.control.layout", "tick_size", (i1,)),
         ("nsdrake.control.layout", "_take", (f1, i64, i64)),
         ("nsdrake.control.layout", "input_fault", (f1, i64)),
+        # the obstacle row from Drake's queries (nsdrake.control.plan)
+        ("nsdrake.control.stages", "pack_criterion", (f1, f1, f64, f64, f64)),
+        ("nsdrake.control.smoothing", "activation", (f64, f64)),
         # the model (nsdrake.control.model, nsdrake.control.dynamics): Drake's and Pinocchio's arrays
         ("nsdrake.control.model", "symmetric_and_inverse", (f2F,)),
-        ("nsdrake.control.dynamics", "derived_terms", (f2F, f2, A("float64", 3), f1)),
-        ("nsdrake.control.dynamics", "_jacobian_partials", (A("float64", 2, "A"),) * 2 + (b2, b2, i1, i1)),
+        ("nsdrake.control.dynamics", "derived_terms", (f2, f2, f3, f1)),
         ("nsdrake.control.dynamics", "_jacobian_partials", (f2, f2, b2, b2, i1, i1)),
         # the obstacle criterion by Drake's queries (nsdrake.control.criteria.obstacle)
-        ("nsdrake.control.criteria.obstacle", "_axis_segments", (A("float64", 3), f2, f2, f1)),
-        ("nsdrake.control.criteria.obstacle", "_in_body_frames", (A("float64", 3), A("float64", 2, "A"))),
-        ("nsdrake.control.criteria.distance", "segments_box", (f2, f2, f2F, f1_read, f1)),
-        ("nsdrake.control.criteria.distance", "segments_sphere", (f2, f2, f1_read, f64)),
-        # the station and the run's metrics
-        ("nsdrake.station.force_sensor", "contact_wrench", pose),
-        ("nsdrake.control.orientation", "orientation_error", (f2F, f2F)),
+        ("nsdrake.control.criteria.obstacle", "_axis_segments", (f3, f2, f2, f1)),
+        ("nsdrake.control.criteria.obstacle", "_in_body_frames", (f3, A("float64", 2, "A"))),
+        ("nsdrake.control.criteria.distance", "segments_box", (f2, f2, f2, f1, f1)),
+        ("nsdrake.control.criteria.distance", "segments_sphere", (f2, f2, f1, f64)),
+        # Fig. 1's selector from Python (nsdrake.control.priority's select_mode, ...)
+        ("nsdrake.control.priority", "select_mode_code", (f64, f64, f64, i64, f1)),
+        ("nsdrake.control.priority", "switch_state_update", (f1, f64, i64, f1)),
+        ("nsdrake.control.priority", "blend_weight_code", (f64, f64, f64)),
+        # the station, the run's metrics and the studies' measures
+        ("nsdrake.station.force_sensor", "contact_wrench", (f2F, f1, f1)),
+        ("nsdrake.control.orientation", "orientation_error", (f2, f2)),
+        ("nsdrake.control.null_space_laws", "posture_target", (f1, f1, f64, f64, f64)),
     ]  # fmt: skip
 
 
-def compile_kernels() -> None:
+def _dispatchers() -> list[tuple[object, tuple]]:
+    import importlib
+
+    return [(getattr(importlib.import_module(m), name), args) for m, name, args in _entry_points()]
+
+
+def _cached(dispatcher, arguments: tuple) -> bool:
+    """Whether numba's cache holds ``dispatcher`` compiled for ``arguments`` (or this
+    process already has it), without loading it."""
+    if tuple(arguments) in dispatcher.overloads:
+        return True
+    cache = dispatcher._cache
+    try:
+        key = cache._index_key(arguments, dispatcher.targetctx.codegen())
+        return key in cache._cache_file._load_index()
+    except Exception:  # numba's private API moved: take it as not cached (the helper only helps)
+        return False
+
+
+@contextlib.contextmanager
+def _saves_locked():
+    """A block in which numba saves each cached kernel holding an exclusive lock on one
+    file beside the stamp (:func:`refresh_cache`), so that processes compiling at once
+    never interleave a kernel index's read and write (module docstring)."""
+    try:
+        import fcntl
+
+        from numba.core.caching import IndexDataCacheFile
+    except ImportError:  # no POSIX locks, or numba's internals moved: saves as numba does
+        yield
+        return
+    lock_path = cache_folder(PACKAGE / "__init__.py") / "nsdrake-kernels.lock"
+    original = IndexDataCacheFile.save
+
+    def save(self, key, data):
+        try:
+            lock = open(lock_path, "ab")  # noqa: SIM115 (held across the save below)
+        except OSError:
+            return original(self, key, data)
+        with lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            return original(self, key, data)
+
+    IndexDataCacheFile.save = save
+    try:
+        yield
+    finally:
+        IndexDataCacheFile.save = original
+
+
+def compile_kernels(helper: bool = True) -> None:
     """Compiles (or loads from numba's cache) every kernel nsdrake calls from Python, with
     the types of its call sites (:func:`_entry_points`), once per process. A first run
     after an install thus compiles, in one go, the kernels of every configuration: a
     pose task or a position task, a sweep, joint limits, obstacles, any joint count; a
     later run of any scenario finds them all in the cache (issue 36). Called where a
-    controller is built (:class:`nsdrake.control.plan.ControllerPlan`)."""
+    controller is built (:class:`nsdrake.control.plan.ControllerPlan`).
+
+    When kernels are missing from the cache, a second process compiles
+    :data:`HELPER_SHARE` meanwhile (``helper``; module docstring); this one then loads
+    them, or compiles them itself if the helper could not."""
     if getattr(compile_kernels, "done", False):
         return
-    import importlib
-
-    for module, name, arguments in _entry_points():
-        getattr(importlib.import_module(module), name).compile(arguments)
+    with _saves_locked():
+        _compile(_dispatchers(), helper)
     compile_kernels.done = True
+
+
+def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
+    if helper and (os.cpu_count() or 1) > 1:
+        missing = [d.py_func.__name__ for d, a in kernels if not _cached(d, a)]
+        theirs = [k for k, (d, _) in enumerate(kernels) if d.py_func.__name__ in HELPER_SHARE]
+        if set(missing) & set(HELPER_SHARE) and len(missing) > len(theirs):
+            # A compile from the notice on (compiling(): a Ctrl-C then ends the run at once),
+            # waiting for the helper included.
+            with _notice.waiting():
+                _notice.announce()
+                started, compiled = _start_helper(theirs), False
+                try:
+                    for k, (dispatcher, arguments) in enumerate(kernels):
+                        if started is None or k not in theirs:
+                            dispatcher.compile(arguments)
+                    compiled = True
+                finally:
+                    if started is not None:
+                        _wait(started, compiled)
+    for dispatcher, arguments in kernels:  # loads what the helper compiled, compiles what it did not
+        dispatcher.compile(arguments)
+
+
+def _start_helper(indices: list[int]) -> subprocess.Popen | None:
+    """Starts the helper process compiling the kernels ``indices`` of :func:`_entry_points`
+    into the cache. It ends when this process ends (it reads its stdin until it closes)
+    and at a Ctrl-C in the terminal (SIGINT ends it: nothing to keep but whole cache files)."""
+    code = "from nsdrake.control.kernels import _helper; _helper()"
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-c", code, *map(str, indices)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=os.environ | {"NSDRAKE_KERNELS_HELPER": "1"},
+        )
+    except OSError:
+        return None
+
+
+def _wait(process: subprocess.Popen, wait: bool) -> None:
+    """Waits for the helper to end (``wait``; else ends it at once: this process failed),
+    and ends it if this process is interrupted meanwhile."""
+    try:
+        if wait:
+            process.wait()
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        with contextlib.suppress(OSError):
+            process.stdin.close()
+
+
+def _helper() -> None:
+    """The helper process (:func:`compile_kernels`): compiles the kernels whose indices are
+    its arguments into numba's cache, silently."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+    def orphaned():  # the parent ended: so does the helper, wherever its compile is
+        sys.stdin.buffer.read()
+        os._exit(1)
+
+    threading.Thread(target=orphaned, daemon=True).start()
+    _notice.printed = True  # the parent printed the notice
+    kernels = _dispatchers()
+    with _saves_locked():
+        for k in sys.argv[1:]:
+            dispatcher, arguments = kernels[int(k)]
+            dispatcher.compile(arguments)

@@ -118,4 +118,6 @@ def orientation_error(R_d: np.ndarray, R_WT: np.ndarray) -> np.ndarray:
 
 def orientation_error_angle(R_d: np.ndarray, R_WT: np.ndarray) -> float:
     """θ = ‖e_o‖, the angle between the desired and the measured tool frames [rad]."""
-    return float(np.linalg.norm(orientation_error(np.asarray(R_d, float), np.asarray(R_WT, float))))
+    # C-contiguous float arrays: the one list of types the kernel is compiled for
+    R_d, R_WT = np.ascontiguousarray(R_d, dtype=float), np.ascontiguousarray(R_WT, dtype=float)
+    return float(np.linalg.norm(orientation_error(R_d, R_WT)))

@@ -378,8 +378,9 @@ class ControllerPlan:
         model.plant.SetPositions(plant_context, q)
         pairs = self._distances.pairs(plant_context, influence, query=lambda: model.query_object(scratch))
         p, Phi = obstacle_potential(pairs, influence, self.n)
-        d_min = min((pair.distance for pair in pairs), default=np.inf)
-        pack_criterion(row, Phi, p, d_min, activation(d_min, influence))
+        d_min = float(min((pair.distance for pair in pairs), default=np.inf))
+        # floats, whatever the configuration's numbers: the kernels' one list of types
+        pack_criterion(row, Phi, float(p), d_min, activation(d_min, float(influence)))
 
 
 def _obstacle_distances(model: ControllerModel) -> ObstacleDistances | None:

@@ -113,7 +113,8 @@ class SelectorLimits:
 
     def as_array(self) -> np.ndarray:
         """[d_lim, d_band, w_lim, w_band, q_lim, q_band], as the compiled selector takes them."""
-        return np.array([self.d_lim, self.d_band, self.w_lim, self.w_band, self.q_lim, self.q_band])
+        limits = (self.d_lim, self.d_band, self.w_lim, self.w_band, self.q_lim, self.q_band)
+        return np.array(limits, dtype=float)
 
 
 def select_mode(
@@ -121,7 +122,7 @@ def select_mode(
 ) -> Mode:
     """Fig. 1's decision tree, extended by the joint-limit branch, with hysteresis (see
     the module docstring); ``margin`` is the smallest distance of a joint to its limits."""
-    return Mode(select_mode_code(d_min, w, margin, int(previous), limits.as_array()))
+    return Mode(select_mode_code(float(d_min), float(w), float(margin), int(previous), limits.as_array()))
 
 
 @njit(cache=True, inline="always")
@@ -282,7 +283,7 @@ INITIAL_SWITCH_STATE = (0.0, 0.0, -np.inf)  # [mode, previous, switch time]
 
 def update_switch_state(state: SwitchState, t: float, new_mode: Mode) -> SwitchState:
     out = np.empty(3)
-    switch_state_update(state.as_array(), t, int(new_mode), out)
+    switch_state_update(state.as_array(), float(t), int(new_mode), out)
     return SwitchState.from_array(out)
 
 
@@ -298,7 +299,7 @@ def switch_state_update(state: np.ndarray, t: float, new_mode: int, out: np.ndar
 
 def blend_weight(state: SwitchState, t: float, blend_time: float) -> float:
     """σ ∈ [0, 1]: the share of the current mode's ordering (1 once the blend is over)."""
-    return blend_weight_code(state.switch_time, t, blend_time)
+    return blend_weight_code(float(state.switch_time), float(t), float(blend_time))
 
 
 @njit(cache=True, inline="always")

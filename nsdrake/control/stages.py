@@ -167,7 +167,9 @@ def complete_terms(terms, plan, index, dims):
 def _complete_terms(T, P, ix):
     for r in range(ix.spatial_rows.shape[0]):
         T.J[r] = T.J_spatial[ix.spatial_rows[r]]
-    T.dJ_dq[:] = _jacobian_partials(T.J_spatial[:3], T.J_spatial[3:], ix.own, ix.other, ix.rows, ix.rot_rows)
+    # contiguous views (no copy), typed as Python's callers pass them: one compiled version
+    J_w, J_v = np.ascontiguousarray(T.J_spatial[:3]), np.ascontiguousarray(T.J_spatial[3:])
+    T.dJ_dq[:] = _jacobian_partials(J_w, J_v, ix.own, ix.other, ix.rows, ix.rot_rows)
     Jdot, Jdot_v, xdot, H_inv_Jt = derived_terms(T.H_inv, T.J, T.dJ_dq, T.v)
     T.Jdot[:], T.Jdot_v[:], T.xdot[:], T.H_inv_Jt[:] = Jdot, Jdot_v, xdot, H_inv_Jt
     T.Lambda[:] = task_inertia(

@@ -267,11 +267,12 @@ def orientation_errors(built: ControlledStation, q: np.ndarray) -> np.ndarray:
     ‖log(R_d R_WTᵀ)‖, for each column of ``q`` (n, k). (k,) [rad]."""
     plant, tool = built.station.plant, built.station.arm_model.tool_frame
     context = plant.CreateDefaultContext()
-    R_d = built.desired_orientation
+    R_d = np.ascontiguousarray(built.desired_orientation, dtype=float)  # the compiled kernel's types
     out = np.empty(q.shape[1])
     for k in range(q.shape[1]):
         plant.SetPositions(context, q[:, k])
-        out[k] = np.linalg.norm(orientation_error(R_d, tool.CalcPoseInWorld(context).rotation().matrix()))
+        R_WT = np.ascontiguousarray(tool.CalcPoseInWorld(context).rotation().matrix())
+        out[k] = np.linalg.norm(orientation_error(R_d, R_WT))
     return out
 
 

@@ -331,7 +331,7 @@ def law_columns(traces: Traces, scenario, arm) -> Traces:
         H_inv_Jt = terms.H_inv @ terms.J.T
         a = terms.J @ (terms.H_inv @ tau0[k])
         J_pinv = np.linalg.pinv(terms.J)
-        e = q[k] - posture_target(q_d0, offset, t[k], p.offset_time, p.offset_ramp_time)
+        e = q[k] - posture_target(q_d0, offset, float(t[k]), float(p.offset_time), float(p.offset_ramp_time))
         d = q[k] - q_push if push.enabled else zero
         null_e, null_d = e - J_pinv @ (terms.J @ e), d - J_pinv @ (terms.J @ d)
         null_e_H = e - H_inv_Jt @ np.linalg.solve(terms.J @ H_inv_Jt, terms.J @ e)  # (I − J̄ J) e

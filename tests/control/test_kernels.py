@@ -6,12 +6,15 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 from numba.core import config
 
 from nsdrake.control.kernels import NOTICE, STAMP, _CompileNotice, cache_folder, refresh_cache
+
+ROOT = Path(__file__).resolve().parents[2]  # the repository: tests.vendor_arm imports from there
 
 
 def _event(module: str):
@@ -86,6 +89,7 @@ def test_with_numba_cache_dir_the_stamp_and_the_deletions_are_there(tmp_path, mo
 # and running each must compile nothing. Prints nsdrake's kernels compiled afterwards.
 _EVERY_CONFIGURATION = """
 import dataclasses, sys
+from pathlib import Path
 import numpy as np
 from numba.core import event
 from pydrake.multibody.parsing import Parser
@@ -137,7 +141,46 @@ plant.Finalize()
 model = ControllerModel.from_plant(plant, tool_frame="tool", task_axes=("x", "y", "z"))
 step = ControllerStep(controller_model=model, normal=[0.0, 0.0, -1.0], config=ControllerConfig())
 steps(step, np.array([0.0, 0.3, 0.0, -2.0, 0.0, 2.3, 0.8]), step.config.period, 3, False)
+# a vendor's arm with OBJ meshes on its links and a ball obstacle: the obstacle row from
+# Drake's queries (issue 42), with Pinocchio's terms and with Drake's, a pose task
+import tempfile
+from pydrake.geometry import Sphere
+from pydrake.math import RigidTransform
+from nsdrake.control import Obstacle
+from tests.vendor_arm import Q0, write_vendor_arm
+arm = write_vendor_arm(Path(tempfile.mkdtemp()))
+for dynamics in ("pinocchio", "drake"):
+    ball = Obstacle("ball", Sphere(0.03), RigidTransform([0.3, 0.0, 0.9]))
+    pose = ("x", "y", "z", "rx", "ry", "rz")
+    model = ControllerModel.from_file(arm.urdf, tool_frame="tool", task_axes=pose, obstacles=[ball],
+                                      dynamics=dynamics)
+    config = ControllerConfig(period=0.001)
+    config.desired_null_space.criteria.obstacle.gain = 1.0
+    step = ControllerStep(controller_model=model, config=config)
+    zero = np.zeros(3)
+    for k in range(3):  # no force axis: no wrench, no f_d
+        R_d = np.array([1.0, 0, 0, 0])
+        step.step(0.001 * k, Q0, np.zeros(7), None, zero, zero, zero, None, R_d, zero, zero)
+    model.terms(model.create_scratch(), Q0, np.ones(7), True)  # the model's own RobotTerms
+# the selector and the orientation error from Python, as the API calls them (ints where a
+# user may write them)
+from nsdrake.control.orientation import orientation_error_angle
+from nsdrake.control.priority import (Mode, SelectorLimits, SwitchState, blend_weight, select_mode,
+                                      update_switch_state)
+limits = SelectorLimits(d_lim=1, d_band=0, w_lim=0, w_band=0, q_lim=0, q_band=0)
+select_mode(1, 0.5, Mode(0), limits, margin=2)
+state = update_switch_state(SwitchState.from_array(np.array([0.0, 0.0, -np.inf])), 1, Mode(1))
+blend_weight(state, 2, 1)
+orientation_error_angle(np.eye(3), np.asfortranarray(np.eye(3)))
+orientation_error_angle([[1, 0, 0], [0, 1, 0], [0, 0, 1]], np.eye(3))
 print("COMPILED", compiled)
+# no kernel specialised twice: every nsdrake kernel this process holds has one list of types
+import numba, sys as _sys
+twice = [f"{name}.{k}{[str(s) for s in d.signatures]}" for name, module in list(_sys.modules.items())
+         if name.startswith("nsdrake.") for k, d in vars(module).items()
+         if isinstance(d, numba.core.registry.CPUDispatcher) and d.py_func.__module__ == name
+         and len(d.signatures) > 1]
+print("TWICE", twice)
 """
 
 
@@ -146,31 +189,154 @@ def test_every_shipped_scenario_and_way_to_run_it_needs_no_further_compile():
     (compiled once per install, or loaded from the cache), every shipped scenario (pose and
     position tasks, sweep, posture, joint limits or none, obstacles in closed form, by
     Drake's queries or none; 4 and 7 joints) run through the named systems, the fused
-    system and a plain ControllerStep (its first t an int), and the Panda with Drake's
-    terms, compile nothing. Catches a configuration that specialises the compiled code
-    (run_stages compiled per pose task, sweep, limits and obstacles: up to 16 versions), a
-    time passed on as an int, and a kernel called from Python with types the list of
-    entry points lacks (a second compile notice in a later run)."""
+    system and a plain ControllerStep (its first t an int), the Panda with Drake's
+    terms, a vendor's arm with OBJ meshes on its links near a ball (the obstacle row from
+    Drake's queries; Pinocchio's and Drake's terms), the model's own terms and the
+    selector's and orientation error's API with ints, compile nothing; and the process
+    then holds each nsdrake kernel for one list of argument types only. Catches a
+    configuration that specialises the compiled code (run_stages compiled per pose task,
+    sweep, limits and obstacles: up to 16 versions), a time passed on as an int, a kernel
+    called from Python with types the list of entry points lacks (a second compile notice
+    in a later run: before issue 42's fix, activation and pack_criterion on mesh links),
+    and a Python caller passing another layout than the stages (_jacobian_partials called
+    with Drake's non-contiguous Jacobian rows: compiled twice)."""
     done = subprocess.run(
         [sys.executable, "-c", _EVERY_CONFIGURATION], capture_output=True, text=True, timeout=1800
     )
     assert done.returncode == 0, done.stderr[-3000:]
-    assert done.stdout.strip().splitlines()[-1] == "COMPILED []", done.stdout[-3000:]
+    assert done.stdout.strip().splitlines()[-2:] == ["COMPILED []", "TWICE []"], done.stdout[-3000:]
+
+
+# A user's own arm with OBJ meshes on its links, a ball obstacle, a pose task (issue 42).
+_MESH_OBSTACLE = """
+import sys, tempfile
+from pathlib import Path
+import numpy as np
+from pydrake.geometry import Sphere
+from pydrake.math import RigidTransform
+from nsdrake.control import ControllerConfig, ControllerModel, ControllerStep, Obstacle
+from tests.vendor_arm import Q0, write_vendor_arm
+arm = write_vendor_arm(Path(tempfile.mkdtemp()))
+ball = Obstacle("ball", Sphere(0.03), RigidTransform([0.3, 0.0, 0.9]))
+model = ControllerModel.from_file(arm.urdf, tool_frame="tool", task_axes=("x", "y", "z", "rx", "ry", "rz"),
+                                  obstacles=[ball])
+config = ControllerConfig(period=0.001)
+config.desired_null_space.criteria.obstacle.gain = 1.0
+step = ControllerStep(controller_model=model, config=config)
+zero = np.zeros(3)
+for k in range(3):
+    R_d = np.array([1.0, 0, 0, 0])
+    step.step(0.001 * k, Q0, np.zeros(7), None, np.zeros(3), zero, zero, None, R_d, zero, zero)
+"""
+
+# Prints, per nsdrake kernel in numba's cache, the argument types it is cached for.
+_CACHED_SIGNATURES = """
+import importlib
+import numba
+from nsdrake.control.kernels import PACKAGE, kernel_sources
+for source in kernel_sources():
+    name = ".".join(("nsdrake",) + source.relative_to(PACKAGE).with_suffix("").parts)
+    module = importlib.import_module(name)
+    for kernel, d in vars(module).items():
+        if isinstance(d, numba.core.registry.CPUDispatcher) and d.py_func.__module__ == name:
+            keys = d._cache._cache_file._load_index()
+            if keys:
+                print(f"{name}.{kernel}", len(keys), [str(k[0]) for k in keys])
+"""
 
 
 @pytest.mark.slow
-def test_on_a_fresh_cache_three_runs_print_the_compile_notice_once(tmp_path):
-    """Issue 36's acceptance: on a fresh kernel cache, `nsdrake run` of fig3, panda_wipe and
-    priority_demo (three processes, as a user's three commands) print the compile notice
-    once in all: the first run compiles every configuration's kernels. Catches kernels
-    compiled per configuration (before: fig3 compiled, then panda_wipe compiled again)."""
+def test_on_a_fresh_cache_a_user_s_commands_print_the_compile_notice_once(tmp_path):
+    """Issue 36's and issue 42's acceptance: on a fresh kernel cache, `nsdrake run` of fig3,
+    panda_wipe and priority_demo, a pose task given on the command line (panda_wipe held at
+    its start orientation by a --config file), and a user's arm whose links are OBJ meshes
+    near a ball obstacle (its obstacle row from Drake's queries) — five processes, as a
+    user's commands — print the compile notice once in all: the first run compiles every
+    configuration's kernels. And no kernel is in the cache for two lists of argument types
+    (a kernel specialised twice compiles twice). Catches kernels compiled per configuration
+    (before issue 36: fig3 compiled, then panda_wipe again), kernels only the obstacle row
+    from Drake's queries calls from Python (before: activation and pack_criterion compiled
+    in the mesh arm's process), and a caller passing another layout than the stages do (the
+    closed-form distances called with Drake's column-major rotation: segments_box twice)."""
     env = os.environ | {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
-    notices = []
-    for name in ("fig3", "panda_wipe", "priority_demo"):
-        command = [sys.executable, "-m", "nsdrake", "run", name, "--duration", "0.02", "--no-replay"]
+    (tmp_path / "pose.yaml").write_text("reference: {orientation: start}\n")
+    run = [sys.executable, "-m", "nsdrake", "run"]
+    short = ["--duration", "0.02", "--no-replay"]
+    commands = {
+        "fig3": [*run, "fig3", *short],
+        "panda_wipe": [*run, "panda_wipe", *short],
+        "priority_demo": [*run, "priority_demo", *short],
+        "pose task": [*run, "panda_wipe", *short, "--config", str(tmp_path / "pose.yaml")],
+        "mesh obstacle": [sys.executable, "-c", _MESH_OBSTACLE],
+    }
+    notices = {}
+    for k, (name, command) in enumerate(commands.items()):
+        out = ["--out", str(tmp_path / f"run{k}")] if command[:4] == run else []
         done = subprocess.run(
-            [*command, "--out", str(tmp_path / name)], env=env, capture_output=True, text=True, timeout=1800
+            [*command, *out], env=env, capture_output=True, text=True, timeout=1800, cwd=ROOT
         )
         assert done.returncode in (0, 1), done.stderr[-3000:]  # 1: a metric's bound on a short run
-        notices.append(done.stderr.count(NOTICE))
-    assert notices == [1, 0, 0]
+        notices[name] = done.stderr.count(NOTICE)
+    assert notices == {"fig3": 1, "panda_wipe": 0, "priority_demo": 0, "pose task": 0, "mesh obstacle": 0}
+    done = subprocess.run(
+        [sys.executable, "-c", _CACHED_SIGNATURES], env=env, capture_output=True, text=True, cwd=ROOT
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    cached = done.stdout.splitlines()
+    assert any(line.startswith("nsdrake.control.stages.run_stages 1 ") for line in cached), cached
+    assert [line for line in cached if line.split()[1] != "1"] == []
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux's /proc")
+def test_the_helper_compiling_for_a_killed_run_ends_with_it(tmp_path):
+    """compile_kernels on an empty cache has a helper process compile run_stages on the
+    second core. A run killed meanwhile (SIGKILL: no handler, no cleanup) must not leave
+    the helper compiling for a minute on a core of its own. Catches a helper that does not
+    watch its parent (its stdin closing)."""
+    import signal
+    import time
+
+    env = os.environ | {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    run = subprocess.Popen(
+        [sys.executable, "-c", "from nsdrake.control.kernels import compile_kernels; compile_kernels()"],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert run.stderr.readline().strip() == NOTICE  # the helper starts right after it
+        deadline = time.monotonic() + 60.0
+        while not (helpers := _children(run.pid)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert helpers, "no helper process started"
+    finally:
+        run.send_signal(signal.SIGKILL)
+        run.wait()
+    deadline = time.monotonic() + 10.0
+    alive = helpers
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [p for p in helpers if Path(f"/proc/{p}").exists() and "Z" not in _state(p)]
+    for p in alive:  # the test's own cleanup, whatever the verdict
+        os.kill(p, signal.SIGKILL)
+    assert alive == [], "the helper went on compiling after its run was killed"
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "Z"

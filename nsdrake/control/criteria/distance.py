@@ -43,7 +43,7 @@ def _dot(x, y):
     return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # inlined: a kernel of its own compiled once per literal transpose
 def _rotate(R, x, transpose):
     """R x, or Rᵀ x (3-vectors; no BLAS inside numba)."""
     out = np.empty(3)

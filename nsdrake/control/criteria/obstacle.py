@@ -132,7 +132,8 @@ class ObstacleDistances:
         forms = []
         for shape, (body, X_BG) in zip(self._shapes, self._poses, strict=True):
             X_WG = self.plant.EvalBodyPoseInWorld(plant_context, body) @ X_BG
-            R, p = X_WG.rotation().matrix(), X_WG.translation()
+            # C-contiguous, writable: the types the stages call the closed forms with (one compile)
+            R, p = np.ascontiguousarray(X_WG.rotation().matrix()), np.array(X_WG.translation())
             if isinstance(shape, Box):
                 half = 0.5 * np.array([shape.width(), shape.depth(), shape.height()])
                 forms.append(partial(_box_form, R, p, half))
