@@ -29,7 +29,10 @@ h_n is the geometric mean of the μ_i at the start posture (the Panda's pose tas
 direction, fig3's position task two): where the μ_i differ the rule is exact for none and
 the damping ratio spans a range, reported per row (:func:`null_space_loop`) with the
 discrete-time pole radius ρ_T of the sampled loop at the control period T (the torque held
-over each period; ρ_T < 1 is stable; a sampled damper alone diverges once T D/μ > 2).
+over each period; ρ_T < 1 is stable; a sampled damper alone diverges once T D/μ > 2) and
+the gain margin, without and with one period of computation delay (the torque computed
+from the sample at t_k applied from t_{k+1}, as ``realism.delay`` and a drive that
+answers status k with the command the robot applies at k + 1 run it).
 
 The figures (:func:`law_figures`), from the traces and the arm's model only, the same
 for every law:
@@ -142,28 +145,43 @@ def law_key(null_space, posture) -> str:
     return null_space.law
 
 
-def _sampled_loop(law: str, gains: dict, mu: float, T: float, g: float = 1.0) -> np.ndarray:
-    """The transition matrix over one period T of the null-space loop along a direction of
-    inertia μ (module docstring), the acceleration held over the period: state (s, ṡ) for
-    the PD laws, (s, ṡ, ṡ_d of the previous period) for the paper's (its feedforward q̈_dⁿ
-    is the backward difference of q̇_dⁿ). ``g`` multiplies the acceleration the torque
-    produces (the loop gain: an arm whose null-space inertia is μ/g where the law assumes μ,
-    or whose torque is g times the commanded)."""
-    step = np.array([[1.0, T], [0.0, 1.0]])
-    hold = g * np.array([T * T / 2.0, T])
+def _loop_parts(law: str, gains: dict, mu: float, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The null-space loop along a direction of inertia μ (module docstring), sampled at T,
+    as (Φ, Γ, F): x_{k+1} = Φ x_k + Γ u with u the acceleration held over the period, and
+    the law's acceleration computed from the sample x_k, u_k = F x_k. The state is (s, ṡ)
+    for the PD laws, (s, ṡ, ṡ_d of the previous period) for the paper's (its feedforward
+    q̈_dⁿ is the backward difference of q̇_dⁿ; Φ's last row stores ṡ_d,k = −a s_k)."""
     if law.startswith("paper"):
         a = abs(gains["gain"]) / (mu if law == "paper" else 1.0)
         K_n = gains["K_n"]
+        Phi = np.zeros((3, 3))
+        Phi[:2, :2] = [[1.0, T], [0.0, 1.0]]
+        Phi[2, 0] = -a
         # acc_k = (ṡ_d,k − ṡ_d,k−1)/T + K_n (ṡ_d,k − ṡ_k), ṡ_d,k = −a s_k
-        acc = np.array([-a / T - K_n * a, -K_n, -1.0 / T])
-        A = np.zeros((3, 3))
-        A[:2, :2] = step
-        A[:2, :] += np.outer(hold, acc)
-        A[2, 0] = -a
-        return A
+        return Phi, np.array([T * T / 2.0, T, 0.0]), np.array([-a / T - K_n * a, -K_n, -1.0 / T])
     K, D = gains["posture_stiffness"], gains["posture_damping"]
     scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
-    return step + np.outer(hold, [-K * scale, -D * scale])
+    return np.array([[1.0, T], [0.0, 1.0]]), np.array([T * T / 2.0, T]), np.array([-K * scale, -D * scale])
+
+
+def _sampled_loop(law: str, gains: dict, mu: float, T: float, g: float = 1.0, delay: int = 0) -> np.ndarray:
+    """The transition matrix over one period T of the null-space loop along a direction of
+    inertia μ (:func:`_loop_parts`), the acceleration held over the period. ``g`` multiplies
+    the acceleration the torque produces (the loop gain: an arm whose null-space inertia is
+    μ/g where the law assumes μ, or whose torque is g times the commanded). ``delay``: 0, the
+    acceleration computed from the sample at t_k is applied over [t_k, t_{k+1}); 1, over
+    [t_{k+1}, t_{k+2}), as ``realism.delay`` (one period) and a drive that answers status k
+    with the command the robot applies at k + 1 run it: the state then carries the pending
+    acceleration u_{k−1}, x_{k+1} = Φ x_k + g Γ u_{k−1}, u_k = F x_k."""
+    Phi, Gamma, F = _loop_parts(law, gains, mu, T)
+    if delay == 0:
+        return Phi + g * np.outer(Gamma, F)
+    if delay != 1:
+        raise ValueError(f"delay must be 0 or 1 period, got {delay!r}")
+    n = len(Gamma)
+    A = np.zeros((n + 1, n + 1))
+    A[:n, :n], A[:n, n], A[n, :n] = Phi, g * Gamma, F
+    return A
 
 
 def _continuous_poles(law: str, gains: dict, mu: float) -> np.ndarray:
@@ -182,27 +200,32 @@ def damping_ratio(poles: np.ndarray) -> float:
     return float((-(p1 + p2) / (2.0 * np.sqrt(p1 * p2))).real)
 
 
-def _pole_radius(law: str, gains: dict, mu: float, period: float, g: float = 1.0) -> float:
-    return float(np.max(np.abs(np.linalg.eigvals(_sampled_loop(law, gains, mu, period, g)))))
+def _pole_radius(law: str, gains: dict, mu: float, period: float, g: float = 1.0, delay: int = 0) -> float:
+    return float(np.max(np.abs(np.linalg.eigvals(_sampled_loop(law, gains, mu, period, g, delay)))))
 
 
 GAIN_MARGIN_MAX = 1e4  # the search's end: a margin beyond it is reported as this
 
 
-def gain_margin(law: str, gains: dict, mu: float, period: float) -> float:
+def gain_margin(law: str, gains: dict, mu: float, period: float, delay: int = 0) -> float:
     """The loop's gain margin along a direction of inertia μ: the factor g by which the
     acceleration its torque produces may grow (:func:`_sampled_loop`) before the sampled
-    loop's pole radius reaches 1 (< 1 where the loop is unstable as tuned). Found on a
+    loop's pole radius reaches 1 (< 1 where the loop is unstable as tuned); ``delay`` 1 for
+    the loop with one period of computation delay (:func:`_sampled_loop`). Found on a
     logarithmic grid, then by bisection to 1e-6 relative; :data:`GAIN_MARGIN_MAX` where the
-    loop stays stable up to it. For a PD held over the period the Jury test gives it in
-    closed form, 2μ/(D T) where K T < 2 D (2/(D T) for the H-weighted PD;
+    loop stays stable up to it. For a PD held over the period without delay the Jury test
+    gives it in closed form, 2μ/(D T) where K T < 2 D (2/(D T) for the H-weighted PD;
     tests/studies/test_null_space_laws_family.py)."""
-    if _pole_radius(law, gains, mu, period) >= 1.0:
+
+    def stable(g: float) -> bool:
+        return _pole_radius(law, gains, mu, period, g, delay) < 1.0
+
+    if not stable(1.0):
         low, high = 0.0, 1.0
     else:
         low, high = 1.0, None
         for g in np.geomspace(1.0, GAIN_MARGIN_MAX, 161)[1:]:
-            if _pole_radius(law, gains, mu, period, float(g)) >= 1.0:
+            if not stable(float(g)):
                 high = float(g)
                 break
             low = float(g)
@@ -210,7 +233,7 @@ def gain_margin(law: str, gains: dict, mu: float, period: float) -> float:
             return GAIN_MARGIN_MAX
     while high - low > 1e-6 * high:
         middle = 0.5 * (low + high)
-        low, high = (middle, high) if _pole_radius(law, gains, mu, period, middle) < 1.0 else (low, middle)
+        low, high = (middle, high) if stable(middle) else (low, middle)
     return 0.5 * (low + high)
 
 
@@ -218,28 +241,30 @@ def null_space_loop(law: str, gains: dict, masses: np.ndarray, period: float) ->
     """The row's loop figures over the null-space directions of inertias ``masses``: the
     damping ratios' range, the slowest pole's rate [rad/s], the largest discrete-time pole
     radius ρ_T at the control period (< 1: stable; module docstring) and the smallest gain
-    margin (:func:`gain_margin`)."""
-    zetas, slow, rho, margin = [], math.inf, 0.0, math.inf
+    margin (:func:`gain_margin`), without and with one period of computation delay."""
+    zetas, slow, rho, margin, delayed = [], math.inf, 0.0, math.inf, math.inf
     for mu in masses:
         poles = _continuous_poles(law, gains, float(mu))
         zetas.append(damping_ratio(poles))
         slow = min(slow, float(np.min(-poles.real)))
         rho = max(rho, _pole_radius(law, gains, float(mu), period))
         margin = min(margin, gain_margin(law, gains, float(mu), period))
+        delayed = min(delayed, gain_margin(law, gains, float(mu), period, delay=1))
     return {
         "zeta_min": min(zetas),
         "zeta_max": max(zetas),
         "slowest_pole": slow,
         "pole_radius": rho,
         "gain_margin": margin,
+        "gain_margin_delay": delayed,
     }
 
 
 def loop_along_run(law: str, gains: dict, arm, q: np.ndarray, period: float) -> dict:
     """:func:`null_space_loop` at each posture of ``q`` (rows of a run's traces): the range
     over the run of the damping ratio and of the slowest pole, and the smallest gain
-    margin. The null-space inertias change with the posture (the start's figures hold
-    there only)."""
+    margins (without and with a period's delay). The null-space inertias change with the
+    posture (the start's figures hold there only)."""
     loops = [null_space_loop(law, gains, null_space_masses(arm, qk), period) for qk in q]
     return {
         "zeta_min": min(lp["zeta_min"] for lp in loops),
@@ -247,6 +272,7 @@ def loop_along_run(law: str, gains: dict, arm, q: np.ndarray, period: float) -> 
         "slowest_pole_min": min(lp["slowest_pole"] for lp in loops),
         "slowest_pole_max": max(lp["slowest_pole"] for lp in loops),
         "gain_margin_min": min(lp["gain_margin"] for lp in loops),
+        "gain_margin_delay_min": min(lp["gain_margin_delay"] for lp in loops),
     }
 
 
@@ -380,7 +406,8 @@ RUN_SAMPLE = 0.01  # [s] the postures of a run at which its loop is evaluated (l
 
 def loop_figures(scenario, arm, q_run: np.ndarray | None = None) -> dict:
     """The row's null-space loop from its own gains and period (:func:`null_space_loop`)
-    at the start posture: damping ratio, slowest pole, pole radius ρ_T, gain margin; and
+    at the start posture: damping ratio, slowest pole, pole radius ρ_T, gain margin without
+    and with a period's delay; and
     with the run's postures ``q_run``, the same along the run (:func:`loop_along_run`)."""
     key = law_key(scenario.null_space, scenario.desired_null_space.posture)
     q0 = np.array([scenario.arm.initial_positions[j] for j in arm.joint_names])
@@ -391,6 +418,7 @@ def loop_figures(scenario, arm, q_run: np.ndarray | None = None) -> dict:
         "slowest_pole": loop["slowest_pole"],
         "pole_radius_T": loop["pole_radius"],
         "gain_margin": loop["gain_margin"],
+        "gain_margin_delay": loop["gain_margin_delay"],
     }
     if q_run is not None and len(q_run):
         run = loop_along_run(key, gains, arm, q_run, T)
@@ -398,6 +426,7 @@ def loop_figures(scenario, arm, q_run: np.ndarray | None = None) -> dict:
             "damping_ratio_run": _span(run["zeta_min"], run["zeta_max"]),
             "slowest_pole_run": _span(run["slowest_pole_min"], run["slowest_pole_max"]),
             "gain_margin_run_min": run["gain_margin_min"],
+            "gain_margin_delay_run_min": run["gain_margin_delay_min"],
         }
     return row
 

@@ -295,6 +295,101 @@ def test_the_papers_gain_margin_is_where_scipys_sampled_loop_turns_unstable(law)
             assert abs(s) > 1.0 if grows else abs(s) < 1e-6, (omega, factor, s)
 
 
+def _delayed_characteristic_roots(law: str, g: dict, mu: float, T: float, gain: float) -> np.ndarray:
+    """The closed-loop poles of the law's null-space loop with one period of computation
+    delay, from transfer-function polynomials (not a state matrix): the plant s̈ = u/μ
+    discretised with SciPy's zero-order hold (cont2discrete, then ss2tf: s = n_s(z)/den(z) u,
+    ṡ = n_v(z)/den(z) u), the law's torque u_k = c_s(z) s + c_v ṡ (the paper's c_s with its
+    backward difference, a z⁻¹ term), applied a period late (z⁻¹) and scaled by ``gain``:
+    den(z) z² − gain · (z c_s(z) n_s(z) + z c_v n_v(z)) = 0."""
+    from scipy.signal import ss2tf
+
+    Ad, Bd, *_ = cont2discrete(
+        (np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), np.zeros((2, 1))),
+        T,
+        method="zoh",
+    )
+    num, den = ss2tf(Ad, Bd, np.eye(2), np.zeros((2, 1)))
+    n_s, n_v = num[0], num[1]
+    if law.startswith("paper"):
+        a = abs(g["gain"]) / (mu if law == "paper" else 1.0)
+        z_c_s = np.array([-a / T - g["K_n"] * a, a / T])  # z (−a(1 − z⁻¹)/T − K_n a)
+        z_c_v = np.array([-g["K_n"], 0.0])
+    else:
+        scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
+        z_c_s = np.array([-scale * g["posture_stiffness"], 0.0])
+        z_c_v = np.array([-scale * g["posture_damping"], 0.0])
+    loop = np.polyadd(np.polymul(z_c_s, n_s), np.polymul(z_c_v, n_v))
+    return np.roots(np.polysub(np.polymul(den, [1.0, 0.0, 0.0]), gain * loop))
+
+
+@pytest.mark.parametrize(
+    "law", ["paper", "paper_moore_penrose", "kinematic_posture_pd", "dynamically_consistent_posture_pd"]
+)
+@pytest.mark.parametrize("omega, h_n, mu, T", [(20.0, 0.0263, 0.0263, 0.001), (50.0, 0.0049, 0.0018, 0.002)])
+def test_the_delayed_gain_margin_is_where_the_delayed_loops_polynomial_turns_unstable(law, omega, h_n, mu, T):
+    """gain_margin with one period of delay against the roots of the delayed loop's
+    characteristic polynomial built from SciPy's transfer functions
+    (:func:`_delayed_characteristic_roots`): stable at 0.999 × the margin and on a grid
+    below it, unstable at 1.001 ×; and the delay costs margin (below the delay-free one).
+    The Panda's rule (μ = h_n) and fig3's light direction. Catches a delayed loop that
+    applies u_k at once (the delay-free margin: 50, not 24.9 for the Panda's PDs), a
+    pending torque not scaled by g, or a margin that is not the first crossing."""
+    g = tuned_gains(law, omega, h_n)
+    margin = gain_margin(law, g, mu, T, delay=1)
+
+    def radius(gain):
+        return np.max(np.abs(_delayed_characteristic_roots(law, g, mu, T, gain)))
+
+    assert 1.0 < margin < gain_margin(law, g, mu, T)
+    assert radius(0.999 * margin) < 1.0 < radius(1.001 * margin)
+    assert all(radius(x) < 1.0 for x in np.linspace(0.001, 0.999, 200) * margin)
+
+
+@pytest.mark.slow
+def test_a_run_with_a_periods_delay_settles_below_the_delayed_margin_and_diverges_above():
+    """End to end, the project's own delay (``realism.delay``, one period) on fig3 with the
+    rule's torque PD (``fig3 / dyn. consistent PD (torque)``), its K and D scaled by g: at
+    0.92 × the delayed margin (``gain_margin_delay`` at the start, 1.80) the posture's
+    ring after first contact dies out (‖τ₀‖ over the last 0.5 s below a tenth of its peak
+    after contact); at 1.05 × it diverges; without the delay the same 1.05 × settles (the
+    delay-free margin is 3.69). 3 s runs. Catches a delayed margin computed without the
+    delay (0.92 × 3.69 diverges) or one that is not the loop the drive runs."""
+    from nsdrake.experiment.simulate import DivergenceError, run
+    from nsdrake.studies.null_space_laws import loop_figures
+
+    family = load_family("null_space_laws")
+    index = [v.name for v in family.variants].index("fig3 / dyn. consistent PD (torque)")
+    base = variant_scenario(family, index, None, 3.0)
+    arm = build_diagram(base).station.arm_model
+    margin = loop_figures(base, arm)["gain_margin_delay"]
+    assert 1.7 < margin < 1.9
+
+    def scaled(factor, delayed=True):
+        ns = dataclasses.replace(
+            base.null_space,
+            posture_stiffness=factor * base.null_space.posture_stiffness,
+            posture_damping=factor * base.null_space.posture_damping,
+        )
+        delay = dataclasses.replace(base.realism.delay, enabled=delayed, periods=1)
+        return dataclasses.replace(
+            base, null_space=ns, realism=dataclasses.replace(base.realism, delay=delay)
+        )
+
+    def settles(scenario):
+        try:
+            traces, _ = run(scenario)
+        except DivergenceError:
+            return False
+        t, tau0 = traces["t"], np.linalg.norm(traces.block("tau0_"), axis=1)
+        contact = t[np.flatnonzero(traces["f_n"] >= scenario.reference.contact_threshold)[0]]
+        return tau0[t >= t[-1] - 0.5].max() < 0.1 * tau0[t >= contact].max()
+
+    assert settles(scaled(0.92 * margin))
+    assert not settles(scaled(1.05 * margin))
+    assert settles(scaled(1.05 * margin, delayed=False))
+
+
 def test_the_loop_along_a_run_spans_its_postures():
     """loop_along_run over a few postures of fig3's arm: the range of ζ is the range of the
     per-posture damping ratios computed here from Drake's own mass matrix and Jacobian
@@ -310,7 +405,7 @@ def test_the_loop_along_a_run_spans_its_postures():
     qs = np.array([q0 + d for d in (0.0, 0.15, -0.2, 0.3)])
     g = tuned_gains("dynamically_consistent_torque_pd", 50.0, 0.0049)
     T = 0.001
-    zetas, margins = [], []
+    zetas, margins, mus = [], [], []
     for q in qs:
         plant.SetPositions(context, q)
         H = plant.CalcMassMatrix(context)
@@ -323,6 +418,7 @@ def test_the_loop_along_a_run_spans_its_postures():
             plant.world_frame(),
         )[arm.rows]
         Z = null_space(J)
+        mus += list(np.linalg.eigvalsh(Z.T @ H @ Z))
         for mu in np.linalg.eigvalsh(Z.T @ H @ Z):
             zetas.append(g["posture_damping"] / (2 * np.sqrt(g["posture_stiffness"] * mu)))
             margins.append(2 * mu / (g["posture_damping"] * T))
@@ -330,6 +426,8 @@ def test_the_loop_along_a_run_spans_its_postures():
     assert run["zeta_min"] == pytest.approx(min(zetas), rel=1e-6)
     assert run["zeta_max"] == pytest.approx(max(zetas), rel=1e-6)
     assert run["gain_margin_min"] == pytest.approx(min(margins), rel=1e-5)
+    delayed = min(gain_margin("dynamically_consistent_torque_pd", g, mu, T, delay=1) for mu in mus)
+    assert run["gain_margin_delay_min"] == pytest.approx(delayed, rel=1e-9)
     assert max(zetas) / min(zetas) > 1.05  # the postures differ enough to tell
 
 
