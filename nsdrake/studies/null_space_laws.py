@@ -145,6 +145,16 @@ def law_key(null_space, posture) -> str:
     return null_space.law
 
 
+# Two loops beside the laws' null-space loops, for a run's report (nsdrake/reporting/loops.py):
+# a task axis under the impedance law, ẍ = −K_p x − K_v ẋ (Eq. 10 with an exact model: each
+# task direction a unit mass, as the H-weighted posture PD's null-space directions), and the
+# paper's null-space velocity loop ėⁿ = −K_n eⁿ where q̇_dⁿ does not depend on the posture
+# (criteria, sweep), a first-order loop.
+TASK_AXIS = "task_axis"
+VELOCITY_LOOP = "velocity_loop"
+UNIT_MASS_LAWS = ("dynamically_consistent_posture_pd", TASK_AXIS)
+
+
 def _loop_parts(law: str, gains: dict, mu: float, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The null-space loop along a direction of inertia μ (module docstring), sampled at T,
     as (Φ, Γ, F): x_{k+1} = Φ x_k + Γ u with u the acceleration held over the period, and
@@ -159,8 +169,10 @@ def _loop_parts(law: str, gains: dict, mu: float, T: float) -> tuple[np.ndarray,
         Phi[2, 0] = -a
         # acc_k = (ṡ_d,k − ṡ_d,k−1)/T + K_n (ṡ_d,k − ṡ_k), ṡ_d,k = −a s_k
         return Phi, np.array([T * T / 2.0, T, 0.0]), np.array([-a / T - K_n * a, -K_n, -1.0 / T])
+    if law == VELOCITY_LOOP:  # ėⁿ = −K_n eⁿ: state eⁿ, acceleration −K_n eⁿ
+        return np.array([[1.0]]), np.array([T]), np.array([-gains["K_n"]])
     K, D = gains["posture_stiffness"], gains["posture_damping"]
-    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
+    scale = 1.0 if law in UNIT_MASS_LAWS else 1.0 / mu
     return np.array([[1.0, T], [0.0, 1.0]]), np.array([T * T / 2.0, T]), np.array([-K * scale, -D * scale])
 
 
@@ -189,13 +201,18 @@ def _continuous_poles(law: str, gains: dict, mu: float) -> np.ndarray:
     if law.startswith("paper"):
         a = abs(gains["gain"]) / (mu if law == "paper" else 1.0)
         return np.array([-a, -gains["K_n"]], dtype=complex)
+    if law == VELOCITY_LOOP:
+        return np.array([-gains["K_n"]], dtype=complex)
     K, D = gains["posture_stiffness"], gains["posture_damping"]
-    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
+    scale = 1.0 if law in UNIT_MASS_LAWS else 1.0 / mu
     return np.roots([1.0, D * scale, K * scale]).astype(complex)
 
 
 def damping_ratio(poles: np.ndarray) -> float:
-    """ζ of a pair of poles: −(p₁ + p₂) / (2 √(p₁ p₂)) (1 for a double pole, > 1 real)."""
+    """ζ of a pair of poles: −(p₁ + p₂) / (2 √(p₁ p₂)) (1 for a double pole, > 1 real);
+    nan for a first-order loop (one pole: no ζ)."""
+    if len(poles) == 1:
+        return math.nan
     p1, p2 = poles
     return float((-(p1 + p2) / (2.0 * np.sqrt(p1 * p2))).real)
 
