@@ -879,7 +879,15 @@ def run_family(
 
 
 # The files a comparison writes beside its variants' traces (declared before any is written).
-COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png", "laws.png", "bandwidth.png")
+COMPARE_FILES = (
+    "table.md",
+    "table.csv",
+    "compare.png",
+    "force.png",
+    "laws.png",
+    "bandwidth.png",
+    *(f"{name}/table.md" for name in ("task", "posture", "push")),  # null_space_laws' further tables
+)
 
 
 def _run_family(family, out, folders, config, duration, jobs, isolate, progress, timeout) -> FamilyResult:
@@ -953,7 +961,9 @@ def _format(value) -> str:
 
 
 def write_table(out: Path, family: Family, table: list[dict]) -> None:
-    """table.csv (full precision) and table.md (4 significant digits)."""
+    """table.csv (full precision) and table.md (4 significant digits); for null_space_laws,
+    table.md holds the loops and the further tables task/, posture/ and push/ the rest
+    (:func:`nsdrake.studies.null_space_laws.table_parts`)."""
     columns = list(dict.fromkeys(key for row in table for key in row))
     for key in ("note", "error"):  # why a variant has no (or blank) figures, next to its name
         if key in columns:
@@ -964,12 +974,25 @@ def write_table(out: Path, family: Family, table: list[dict]) -> None:
         writer.writeheader()
         for row in table:
             writer.writerow({k: row.get(k, "") for k in columns})
-    lines = [f"# {family.name}", "", family.description, ""]
+    if family.measure != "null_space_laws":
+        _write_markdown(out / "table.md", f"# {family.name}", family.description, columns, table)
+        return
+    from nsdrake.studies.null_space_laws import table_parts
+
+    for folder, header, rows in table_parts(table):  # the loops in table.md, the rest beside it
+        if folder:
+            (out / folder).mkdir(exist_ok=True)
+        title = f"# {family.name}" + (f"/{folder}" if folder else "")
+        _write_markdown(out / folder / "table.md", title, family.description, header, rows)
+
+
+def _write_markdown(path: Path, title: str, description: str, columns: list[str], rows: list[dict]) -> None:
+    lines = [title, "", description, ""]
     lines.append("| " + " | ".join(columns) + " |")
     lines.append("|" + "---|" * len(columns))
-    for row in table:
+    for row in rows:
         lines.append("| " + " | ".join(_format(row.get(k, "")) for k in columns) + " |")
-    (out / "table.md").write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines) + "\n")
 
 
 def plot_family(path: Path, family: Family, variants: list[Variant], traces: list[Traces]) -> None:

@@ -119,7 +119,7 @@ def paper_poles_gains(omega: float, h_n: float) -> dict[str, float]:
     return {"posture_stiffness": 2.0 * omega**2 * h_n, "posture_damping": 3.0 * omega * h_n}
 
 
-# Gains as two libraries ship them (not the rule): the variants "… franka_ros's gains" and
+# Gains as two libraries ship them (not the rule): the variants "… franka_ros's initial gains" and
 # "… robosuite's gains" of null_space_laws.
 # franka_ros, franka_example_controllers CartesianImpedanceExampleController: the null-space
 # stiffness starts at 20 (nullspace_stiffness_{20.0} in its header), damping 2√K, through
@@ -519,6 +519,86 @@ def push_figures(traces: Traces, push, pos_err: np.ndarray) -> dict:
         "push_posture_deviation_peak": peak,
         "push_return_time": float(t[outside[-1] + 1] - push.start_time) if returned else math.inf,
     }
+
+
+# --- the tables ----------------------------------------------------------------------------
+
+# The family's table in parts (issue 45: 28 columns scrolled the variant out of view): the
+# loops in table.md, the rest in further tables beside it (NAME/table.md), each headed by
+# its columns with their units; the push table has the push rows only. table.csv keeps
+# every column. By table: (folder, "" for table.md itself; its columns, (key, unit)).
+LAW_TABLES = (
+    (
+        "",
+        (
+            ("law", ""),
+            ("damping_ratio", ""),
+            ("slowest_pole", "rad/s"),
+            ("pole_radius_T", ""),
+            ("gain_margin", ""),
+            ("gain_margin_delay", ""),
+            ("damping_ratio_run", ""),
+            ("slowest_pole_run", "rad/s"),
+            ("gain_margin_run_min", ""),
+            ("gain_margin_delay_run_min", ""),
+        ),
+    ),
+    (
+        "task",
+        (
+            ("force_error_rms", "N"),
+            ("force_error_peak", "N"),
+            ("position_error_rms", "m"),
+            ("orientation_error_rms", "rad"),
+            ("task_disturbance_rms", "m/s²"),
+            ("task_disturbance_peak", "m/s²"),
+            ("link_contact_at", "s"),
+        ),
+    ),
+    (
+        "posture",
+        (
+            ("posture_error_rms", "rad"),
+            ("posture_error_end", "rad"),
+            ("posture_error_H_rms", "rad"),
+            ("posture_error_H_end", "rad"),
+            ("posture_lag_predicted_rms", "rad"),
+            ("tau0_rms", "N m"),
+            ("nu_rms", "J"),
+        ),
+    ),
+    (
+        "push",
+        (
+            ("push_tau0_limited_time", "s"),
+            ("push_position_error_peak", "m"),
+            ("push_position_error_before", "m"),
+            ("push_posture_deviation_peak", "rad"),
+            ("push_return_time", "s"),
+        ),
+    ),
+)
+
+
+def table_parts(rows: list[dict]) -> list[tuple[str, list[str], list[dict]]]:
+    """The family's rows as :data:`LAW_TABLES`' tables: (folder, header, rows), each row
+    keyed by its header (the column with its unit, "slowest_pole [rad/s]"); the variant
+    first, and why a variant has no figures ("note", "error") in every table; a table's
+    rows are those with at least one of its figures (every row for the first)."""
+    parts = []
+    for k, (folder, columns) in enumerate(LAW_TABLES):
+        why = [key for key in ("note", "error") if any(key in row for row in rows)]
+        header = ["variant", *why, *(f"{key} [{unit}]" if unit else key for key, unit in columns)]
+        keys = ["variant", *why, *(key for key, _ in columns)]
+        mine = [row for row in rows if k == 0 or any(key in row for key, _ in columns)]
+        parts.append(
+            (
+                folder,
+                header,
+                [{h: row.get(key, "") for h, key in zip(header, keys, strict=True)} for row in mine],
+            )
+        )
+    return parts
 
 
 # --- the plot ------------------------------------------------------------------------------

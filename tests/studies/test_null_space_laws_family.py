@@ -49,11 +49,11 @@ LAWS = (
     "dyn. consistent PD (H)",
     "dyn. consistent PD (torque)",
 )
-TASKS = ["panda_wipe", "panda_self_motion", "panda_off_path", "fig3", "push", "push, no rate limit"]
+TASKS = ["panda_wipe", "panda_self_motion", "panda_off_path", "fig3", "push"]
 # the rows beside the rule's (referee, issue 38), on panda_wipe and panda_self_motion
 EXTRAS = {
     "dyn. consistent PD (torque), the paper's poles": "paper_poles",
-    "kinematic PD, damped inverse, franka_ros's gains": "franka_ros",
+    "kinematic PD, damped inverse, franka_ros's initial gains": "franka_ros",
     "dyn. consistent PD (H), robosuite's gains": "robosuite",
 }
 
