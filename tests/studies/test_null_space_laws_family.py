@@ -27,6 +27,7 @@ from nsdrake.studies.compare import load_family, run_family, variant_scenario
 from nsdrake.studies.null_space_laws import (
     FRANKA_ROS_GAINS,
     LAW_KEYS,
+    LAW_TABLES,
     ROBOSUITE_GAINS,
     _continuous_poles,
     damping_ratio,
@@ -38,6 +39,7 @@ from nsdrake.studies.null_space_laws import (
     null_space_masses,
     paper_poles_gains,
     row_gains,
+    table_parts,
     tuned_gains,
 )
 
@@ -477,8 +479,11 @@ def test_short_family_dynamically_consistent_laws_leave_the_task_alone(tmp_path)
     for row in rows.values():
         assert row["pole_radius_T"] < 1.0
     assert math.isfinite(rows["paper"]["nu_rms"]) and rows["kinematic PD"]["nu_rms"] == ""
-    for name in ("table.md", "table.csv", "laws.png"):
+    for name in ("table.md", "table.csv", "laws.png", "task/table.md", "posture/table.md"):
         assert (tmp_path / name).stat().st_size > 0
+    # every figure a row has is in one of the markdown tables (none only in table.csv)
+    shown = {key for _, columns in LAW_TABLES for key, _ in columns} | {"variant", "note", "error"}
+    assert {key for row in result.rows for key in row} <= shown
 
 
 @pytest.mark.parametrize("arm_name", ["panda", "arm4"])
@@ -526,3 +531,24 @@ def test_the_off_path_posture_is_off_the_self_motion():
     assert np.linalg.norm(offset) == pytest.approx(0.3)
     assert np.linalg.norm(Z @ (Z.T @ offset)) < 1e-9 * np.linalg.norm(offset)
     assert np.linalg.norm(Z.T @ T.H @ offset) > 1e-3 * np.linalg.norm(T.H @ offset)
+
+
+def test_the_table_parts_show_each_figure_once_with_its_unit_and_the_push_rows_alone():
+    """table_parts on two rows, a task's and a push's, each with every figure: each figure
+    is a column of exactly one table, headed with its unit where it has one
+    ("force_error_rms [N]"), the variant first in every table; the push table holds the
+    push row only, the others both. Catches a figure in two tables or none, a header
+    without its unit, or push columns blank on every other row (the 28-column table)."""
+    keys = [key for _, columns in LAW_TABLES for key, _ in columns]
+    push_keys = {key for folder, columns in LAW_TABLES if folder == "push" for key, _ in columns}
+    task_row = {"variant": "panda_wipe / paper", **{k: 1.0 for k in keys if k not in push_keys}}
+    push_row = {"variant": "push / paper", **{k: 2.0 for k in keys}}
+    parts = {folder: (header, rows) for folder, header, rows in table_parts([task_row, push_row])}
+    assert set(parts) == {"", "task", "posture", "push"}
+    headers = [h for header, _ in parts.values() for h in header if h != "variant"]
+    assert sorted(h.split(" [")[0] for h in headers) == sorted(keys)
+    assert "force_error_rms [N]" in parts["task"][0] and "slowest_pole [rad/s]" in parts[""][0]
+    assert all(header[0] == "variant" for header, _ in parts.values())
+    assert [row["variant"] for row in parts["push"][1]] == ["push / paper"]
+    assert [row["variant"] for row in parts["task"][1]] == ["panda_wipe / paper", "push / paper"]
+    assert parts["push"][1][0]["push_return_time [s]"] == 2.0
