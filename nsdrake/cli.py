@@ -36,6 +36,7 @@ from nsdrake.experiment.output import (
     release_unused,
 )
 from nsdrake.experiment.scenario import ScenarioError, load_scenario, shipped_scenarios
+from nsdrake.reporting.metrics import metric_line
 from nsdrake.reporting.progress import Progress
 from nsdrake.reporting.run_folder import check_scenario, run_to_folder
 from nsdrake.station.visualization import start_meshcat
@@ -282,9 +283,7 @@ def _run(args) -> int:
         print(f"nsdrake: interrupted (Ctrl-C) as the run ended; the whole run is in {out}/", file=sys.stderr)
         return INTERRUPTED
     for m in result.metrics:
-        mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
-        bound = f"  (bound: {m.bound})" if m.bound else ""
-        print(f"  {m.name:38s} {m.value:12.6g} {m.unit:9s}{mark}{bound}")
+        print(metric_line(m))
     for note in result.notes:
         print(f"nsdrake: {note}")
     if result.failure:
@@ -400,9 +399,7 @@ def _drive_locked(args, scenario, realtime) -> int:
         )
         return INTERRUPTED
     for m in result.metrics:
-        mark = "" if m.passed is None else ("  pass" if m.passed else "  FAIL")
-        bound = f"  (bound: {m.bound})" if m.bound else ""
-        print(f"  {m.name:38s} {m.value:12.6g} {m.unit:9s}{mark}{bound}")
+        print(metric_line(m))
     print(f"nsdrake: {timing_line(run.timing)}")
     if run.failure:
         print(f"nsdrake: error: {args.scenario}: drive: {run.failure}", file=sys.stderr)

@@ -22,6 +22,8 @@ from nsdrake.studies.null_space_laws import (
     LAW_KEYS,
     ROBOSUITE_GAINS,
     null_space_inertia,
+    null_space_loop,
+    null_space_masses,
     paper_poles_gains,
     self_motion_posture,
     tuned_gains,
@@ -36,14 +38,13 @@ NAMES = {
     "dynamically_consistent_posture_pd": "dyn. consistent PD (H)",
     "dynamically_consistent_torque_pd": "dyn. consistent PD (torque)",
 }
-PANDA_OMEGA, FIG3_OMEGA = 20.0, 50.0  # [rad/s] the scenarios' K_n / 2 (40 and 100)
+# [rad/s] the rule's ω: the scenarios' K_n / 2 (40 and 100); on fig3 the slowest pole of the
+# laws whose poles see the null-space inertia is below it (the family's description)
+PANDA_OMEGA, FIG3_OMEGA = 20.0, 50.0
 BANDWIDTHS = (5.0, 10.0, 20.0, 40.0, 80.0)  # [rad/s] null_space_bandwidth's sweep
 # [rad] q_d's offset off the self-motion: joint 4 toward straight (from -2.4), the elbow opens
 OFF_PATH = {"panda_joint4": 0.3}
 PUSH = {"body": "panda_link4", "force": [0.0, 20.0, 0.0], "start_time": 3.5, "duration": 0.05}
-NO_RATE_LIMIT = {
-    f"panda_joint{k}": 1e9 for k in range(1, 8)
-}  # [N m/s] no bound a torque step meets (the field takes no inf)
 
 
 def _g(x: float) -> float:
@@ -95,7 +96,7 @@ EXTRAS = {
         "dynamically_consistent_torque_pd",
         paper_poles_gains,
     ),
-    "kinematic PD, damped inverse, franka_ros's gains": (
+    "kinematic PD, damped inverse, franka_ros's initial gains": (
         "kinematic_posture_pd_damped",
         lambda omega, h_n: FRANKA_ROS_GAINS,
     ),
@@ -141,23 +142,27 @@ def main() -> None:
     }
     moved = {"offset_time": 2.3, "offset_ramp_time": 1.0}
     on, off = {"q_d": q_d, "offset": on_path, **moved}, {"q_d": q_d, "offset": OFF_PATH, **moved}
-    push, unlimited = {"duration": 6.0, "push": PUSH}, {"torque_rate": NO_RATE_LIMIT}
+    push = {"duration": 6.0, "push": PUSH}
     panda = (PANDA_OMEGA, h_panda)
     tasks = [  # (task name, base scenario, extra overrides, posture, criteria switched off, ω, h_n)
         ("panda_wipe", "panda_wipe", {"obstacles": []}, {"q_d": q_d}, wipe_off, *panda),
         ("panda_self_motion", "panda_self_motion", {}, on, {}, *panda),
         ("panda_off_path", "panda_self_motion", {}, off, {}, *panda),
         ("fig3", "fig3", {}, {"q_d": q_d3}, fig3_off, FIG3_OMEGA, h_fig3),
+        # with the Panda's 1000 N m/s torque-rate limit, which the push does not make bind
+        # (push_tau0_limited_time): a twin without it gave the same rows to the last digit
         ("push", "panda_self_motion", push, {"q_d": q_d}, {}, *panda),
-        (
-            "push, no rate limit",
-            "panda_self_motion",
-            push | {"actuator_limits": unlimited},
-            {"q_d": q_d},
-            {},
-            *panda,
-        ),
     ]
+    # fig3's slowest poles under the rule: ω where the law's poles do not see the inertia
+    # (J⁺, the H-weighted PD), less in the heavier direction where they do
+    masses3 = null_space_masses(arm3, q3)
+    fig3_poles = {
+        law: null_space_loop(law, tuned_gains(law, FIG3_OMEGA, h_fig3), masses3, fig3.control_period)[
+            "slowest_pole"
+        ]
+        for law in LAW_KEYS
+    }
+    slow3 = min(fig3_poles.values())
     text = [
         "# Written by scripts/write_null_space_families.py from the tuning rule of\n"
         "# nsdrake/studies/null_space_laws.py (tuned_gains); do not edit by hand.\n"
@@ -167,15 +172,18 @@ def main() -> None:
         "  the dynamically consistent posture PD multiplied by H and the same on a torque PD) on the\n"
         "  same arm, task impedance and posture objective q_d, each tuned by this project's rule (a rule,\n"
         "  not the libraries' own defaults) for the\n"
-        f"  same null-space bandwidth (slowest pole {PANDA_OMEGA:g} rad/s on the Panda,\n"
-        f"  {FIG3_OMEGA:g} on fig3),\n"
+        f"  same null-space bandwidth omega ({PANDA_OMEGA:g} rad/s on the Panda, every law's slowest pole;\n"
+        f"  {FIG3_OMEGA:g} rad/s on fig3, at the geometric mean of its two null-space inertias, which puts\n"
+        f"  the slowest pole at {slow3:.4g} rad/s for the four laws that see the inertia and\n"
+        f"  at {FIG3_OMEGA:g} for the paper's law through the Moore-Penrose inverse and the H-weighted PD),\n"
         "  about critically damped and stable at the control period (damping_ratio and pole_radius_T\n"
         "  per row). Tasks: panda_wipe, q_d moved along the self-motion (panda_self_motion) and off it\n"
         "  (panda_off_path: joint 4 0.3 rad toward straight, the elbow opened), fig3, and a 20 N,\n"
         "  50 ms push on the\n"
-        "  Panda's elbow with and without the 1000 N m/s torque-rate limit. On panda_wipe and\n"
+        "  Panda's elbow, with its 1000 N m/s torque-rate limit. On panda_wipe and\n"
         "  panda_self_motion also the torque PD at the paper's poles (-w and -2w) and two laws at\n"
-        "  their library's gains (franka_ros's kinematic PD, robosuite's H-weighted PD).\n"
+        "  their library's gains (franka_ros's kinematic PD at its header's initial stiffness,\n"
+        "  robosuite's H-weighted PD).\n"
         "scenario: panda_wipe\nmeasure: null_space_laws\nvariants:\n"
     ]
     for task, base, extra, posture, off, omega, h_n in tasks:

@@ -407,19 +407,24 @@ class ResultsDirective(SphinxDirective):
 
         family = self.arguments[0]
         docs = Path(self.env.srcdir)
-        family_file = docs.parent / "nsdrake" / "studies" / "families" / f"{family}.yaml"
+        families = docs.parent / "nsdrake" / "studies" / "families"
+        family_file = families / f"{family}.yaml"
         command_file = docs / "results" / family / "command"
         if not command_file.exists():  # a further table its parent's command wrote (drive/filter)
             command_file = command_file.parent.parent / "command"
+        # a part of a family's table (null_space_laws/task): the table only, its family's
+        # description and command are above its first part
+        part = "/" in family and (families / f"{family.split('/')[0]}.yaml").exists()
         out = []
         if family_file.exists():  # a comparison family: its description, then its command
             spec = yaml.safe_load(family_file.read_text())
             out.append(nodes.paragraph("", "", *inline(" ".join(spec["description"].split()))))
             command = f"nsdrake compare {family}"
-        else:  # a benchmark's table (bench/bench_FAMILY.py): the command it was measured with
+            out.append(nodes.literal_block(command, command, language="bash"))
+        elif not part:  # a benchmark's table (bench/bench_FAMILY.py): the command it was measured with
             self.env.note_dependency(str(command_file))
             command = command_file.read_text().strip()
-        out.append(nodes.literal_block(command, command, language="bash"))
+            out.append(nodes.literal_block(command, command, language="bash"))
         table_file = docs / "results" / family / "table.md"
         container = nodes.container(classes=["nsdrake-results"])
         if table_file.exists():
@@ -427,7 +432,7 @@ class ResultsDirective(SphinxDirective):
             text = table_file.read_text().splitlines()
             if text and text[0].startswith("# "):  # the file's title: the page's section has one
                 text = text[1:]
-            if family_file.exists():  # the description is the family file's, shown above
+            if family_file.exists() or part:  # the description is the family file's, shown above
                 text = text[next((k for k, line in enumerate(text) if line.startswith("|")), len(text)) :]
             self.state.nested_parse(StringList(text, source=str(table_file)), 0, container)
         else:  # a page asks for a table nobody committed: an error under -W, no placeholder

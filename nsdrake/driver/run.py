@@ -41,9 +41,18 @@ from nsdrake.experiment.output import declare, record_written
 from nsdrake.experiment.scenario import Scenario, ScenarioError
 from nsdrake.experiment.simulate import collect_traces
 from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.loops import controller_box, loops_json
 from nsdrake.reporting.metrics import contact_events, write_metrics
 from nsdrake.reporting.report import write_report
-from nsdrake.reporting.run_folder import RunResult, compute_metrics, contact_note, scenario_yaml, write_plots
+from nsdrake.reporting.run_folder import (
+    RunResult,
+    compute_metrics,
+    contact_note,
+    controller_loops,
+    scenario_name,
+    scenario_yaml,
+    write_plots,
+)
 
 
 @dataclass
@@ -327,6 +336,9 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     }
     if run.failure:
         extra["failure"] = run.failure
+    station = run.loop.drive.station
+    box, loops = controller_box(scenario, station), controller_loops(scenario, station)
+    extra["loops"] = loops_json(loops)
     write_metrics(out / "metrics.json", metrics, extra)
     with warnings.catch_warnings():  # a drive stopped early: the tool has not moved on the surface yet
         warnings.filterwarnings("ignore", message="Attempting to set identical low and high [xy]lims")
@@ -335,7 +347,7 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     write_report(
         out,
         title=f"nsdrake drive {out.resolve().name}",
-        description=f"{scenario.description} (scenario: {scenario.source or 'built in code'}; "
+        description=f"{scenario.description} (scenario: {scenario_name(scenario)}; "
         f"through the Panda's LCM messages, {extra['driver']})",
         parameters=yaml.safe_load(scenario_yaml(scenario)),
         metrics=metrics,
@@ -344,5 +356,8 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
         replay=None,
         notes=notes,
         failure=run.failure,
+        controller=box,
+        loops=loops,
+        delay_periods=1,  # the drive answers status k with the command the robot applies at k + 1
     )
     return RunResult(out=out, metrics=metrics, notes=notes, failure=run.failure, interrupted=run.interrupted)

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.units import number, quantity, split_quantity
 
 SETTLE_TIME = 0.5  # [s] after first contact, start of the window
 FORCE_RMS_BOUND = 0.02  # RMS(f_n − f_d) ≤ 2% of f_d
@@ -46,6 +47,17 @@ TORQUE_STEP_RATIO_BOUND = 2.0  # largest torque step at a switch ≤ 2 × the 99
 CONTACT_PEAK_BOUND = FORCE_MAX_BOUND  # the force's peak while settling ≤ (1 + 10%) of f_d
 OFF_SURFACE_BOUND = 0.0  # [s] time off the surface after first contact (the tool bounced)
 CONTACT_ONSET_EXCLUDED = (-0.01, 0.3)  # [s] around first contact, excluded from the torque-step baseline
+RISE_SHARE = 0.9  # the contact's rise time: from the touch until f_n first reaches this share of f_d
+SETTLING_BAND = 0.05  # the contact's settling time: until f_n stays within ±5% of f_d
+# The first contact's figures (first_contact_metrics, contact_transient_metrics)
+FIRST_CONTACT_METRICS = (
+    "contact_force_peak",
+    "time_off_surface",
+    "contact_rise_time",
+    "contact_overshoot",
+    "contact_settling_time",
+)
+NO_LAW_FIGURE = "n/a"  # the bound column of a metric the run's null-space law does not have
 
 
 @dataclass
@@ -76,6 +88,21 @@ DESCRIPTIONS: tuple[tuple[str, str], ...] = (
     (
         r"time_off_surface",
         "how long the tool was off the surface after it first touched it (0: it never bounced)",
+    ),
+    (
+        r"contact_rise_time",
+        f"time from the touch until the contact force first reached {RISE_SHARE:.0%} of f_d "
+        "(f_d itself rises over reference.force_ramp_time)",
+    ),
+    (
+        r"contact_overshoot",
+        "how far the contact force rose above f_d while the first contact settled (from the "
+        "touch to the measuring window), as a share of f_d (0: it never exceeded f_d)",
+    ),
+    (
+        r"contact_settling_time",
+        f"time from the touch until the contact force stayed within ±{SETTLING_BAND:.0%} of f_d "
+        "to the end of the run (∞: it never did)",
     ),
     (r"window_start", f"start of the measuring window ({WINDOW_WORDS})"),
     (r"window_rows", "control periods in the measuring window (how many samples the figures below average)"),
@@ -171,12 +198,25 @@ def describe(name: str) -> str:
     return ""
 
 
-UNIT_WORDS = {"N^2 m^2": "N² m²", "m^2": "m²", "-": "ratio", "rows": "control periods"}
+UNIT_WORDS = {"N^2 m^2": "N² m²", "m^2": "m²", "m/s^2": "m/s²", "-": "ratio", "rows": "control periods"}
 
 
 def unit_words(unit: str) -> str:
-    """A metric's unit as a reader writes it (N² m², not N^2 m^2)."""
-    return UNIT_WORDS.get(unit, unit)
+    """A metric's unit as a reader writes it (N² m², not N^2 m^2; µm/s², a prefixed one)."""
+    return UNIT_WORDS.get(unit, unit.replace("^2", "²").replace("^3", "³"))
+
+
+def metric_line(m: Metric) -> str:
+    """One metric as the terminal shows it: name, value in engineering units (62.91 µm),
+    verdict (n/a where the run's law has no such figure) and bound."""
+    value, unit = split_quantity(m.value, m.unit)
+    if m.passed is None:
+        mark = "  n/a" if m.bound.startswith(NO_LAW_FIGURE) else ""
+    else:
+        mark = "  pass" if m.passed else "  FAIL"
+    bound = f"  (bound: {m.bound})" if m.bound and not m.bound.startswith(NO_LAW_FIGURE) else ""
+    why = f"  ({m.bound})" if m.bound.startswith(NO_LAW_FIGURE) else ""
+    return f"  {m.name:38s} {value:>12s} {unit_words(unit):14s}{mark}{bound}{why}"
 
 
 def _json_number(x: float):
@@ -233,6 +273,7 @@ def fig3_metrics(
     contact_threshold: float,
     p_tau_without_null_space_task: float | None = None,
     d_lim: float | None = None,
+    null_space_law: str = "paper",
 ) -> list[Metric]:
     """The acceptance figures of the fig3 issue from one run's traces.
 
@@ -245,11 +286,14 @@ def fig3_metrics(
             run with q̇_dⁿ = 0, if it was run.
         d_lim: the selector's obstacle limit: after the first second d_min must
             stay above it [m].
+        null_space_law: the run's ``null_space.law``; a law other than the paper's has no
+            q̇_dⁿ and no eⁿ, and its null-space figures read n/a (:func:`_null_space_metrics`).
     """
     metrics, window = _window(traces, contact_threshold)
     if window is None:
         return metrics
-    metrics += _force_metrics(traces, window)
+    metrics += first_contact_metrics(traces, contact_threshold)
+    metrics += contact_transient_metrics(traces, contact_threshold) + _force_metrics(traces, window)
     x = np.column_stack([traces[a] for a in task_axes])[window]
     x_d = np.column_stack([traces[f"{a}_d"] for a in task_axes])[window]
     rms_x = _rms((x - x_d) @ tangent)
@@ -258,20 +302,28 @@ def fig3_metrics(
             "tangential_position_error_rms",
             rms_x,
             "m",
-            f"<= {POSITION_RMS_BOUND:g} m",
+            f"<= {quantity(POSITION_RMS_BOUND, 'm')}",
             rms_x <= POSITION_RMS_BOUND,
         )
     )
-    metrics += _null_space_metrics(traces, window)
+    metrics += _null_space_metrics(traces, window, null_space_law)
     if d_lim is not None and "d_min" in traces:
         metrics.append(_d_min_after_metric(traces, d_lim))
     metrics.append(forbidden_contacts_metric(traces))
     return metrics + _p_tau_metrics(traces, p_tau_without_null_space_task)
 
 
-def _null_space_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
+def _null_space_metrics(traces: Traces, window: np.ndarray, law: str = "paper") -> list[Metric]:
     """RMS ‖q̇_dⁿ‖ and RMS ‖eⁿ‖ over the window; the error's bound is relative to the
-    command, with an absolute floor for a run that commands almost nothing."""
+    command, with an absolute floor for a run that commands almost nothing. A law other
+    than the paper's (a posture PD: a torque, no velocity command) has neither: both read
+    n/a, ungraded (nan, no bound), not a failure."""
+    if law != "paper":
+        why = f"{NO_LAW_FIGURE}: the {law} law commands a torque, no q̇_dⁿ (no eⁿ)"
+        return [
+            Metric("null_space_command_rms", math.nan, "rad/s", why, None),
+            Metric("null_space_error_rms", math.nan, "rad/s", why, None),
+        ]
     en = np.linalg.norm(traces.block("en")[window], axis=1)
     qns = np.linalg.norm(traces.block("qns")[window], axis=1)
     rms_en, rms_qns = _rms(en), _rms(qns)
@@ -282,7 +334,8 @@ def _null_space_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
             "null_space_error_rms",
             rms_en,
             "rad/s",
-            f"<= max(5% of RMS ||q̇_dⁿ||, 1e-3 rad/s) = {bound:.3g} rad/s",
+            f"<= max(5% of RMS ||q̇_dⁿ||, {quantity(NULL_SPACE_ABSOLUTE_BOUND, 'rad/s')}) = "
+            f"{quantity(bound, 'rad/s', 3)}",
             rms_en <= bound,
         ),
     ]
@@ -292,7 +345,9 @@ def _d_min_after_metric(traces: Traces, d_lim: float) -> Metric:
     """The smallest d_min from D_MIN_AFTER on, against the selector's d_lim."""
     late = traces["t"] >= D_MIN_AFTER
     d_late = float(traces["d_min"][late].min()) if late.any() else math.inf
-    return Metric(f"d_min_after_{D_MIN_AFTER:g}s", d_late, "m", f"> d_lim = {d_lim:g} m", d_late > d_lim)
+    return Metric(
+        f"d_min_after_{D_MIN_AFTER:g}s", d_late, "m", f"> d_lim = {quantity(d_lim, 'm')}", d_late > d_lim
+    )
 
 
 def _p_tau_metrics(traces: Traces, p_tau_without_null_space_task: float | None) -> list[Metric]:
@@ -306,7 +361,7 @@ def _p_tau_metrics(traces: Traces, p_tau_without_null_space_task: float | None) 
             "p_tau_end",
             p_end,
             "N^2 m^2",
-            f"< p_tau_end_without_null_space_task = {p_tau_without_null_space_task:.4g}",
+            f"< p_tau_end_without_null_space_task = {number(p_tau_without_null_space_task)} N² m²",
             p_end < p_tau_without_null_space_task,
         ),
         Metric("p_tau_end_without_null_space_task", p_tau_without_null_space_task, "N^2 m^2", "", None),
@@ -374,15 +429,19 @@ _CRITERION_UNITS = {"d_min": "m", "p_tau": "N^2 m^2", "w": "m^2", "q_margin": "r
 
 
 def _modes_visited_metric(mode: np.ndarray, required_modes: tuple[int, ...]) -> Metric:
+    """How many modes the run visited; bounded only where the scenario requires modes
+    (``report.required_modes``): then every one of them must be among those visited. (Which
+    modes, in order: the report's modes section.)"""
     visited = sorted({int(m) for m in mode})
     if not required_modes:
-        return Metric("modes_visited", float(len(visited)), "modes", f"visited {visited}", None)
+        return Metric("modes_visited", float(len(visited)), "modes", "", None)
     missing = sorted(set(required_modes) - set(visited))
+    words = ", ".join(str(m) for m in required_modes)
     return Metric(
         "modes_visited",
         float(len(visited)),
         "modes",
-        f"includes {list(required_modes)} (visited {visited}, missing {missing})",
+        f"visits modes {words}" + (f" (missed {', '.join(str(m) for m in missing)})" if missing else ""),
         not missing,
     )
 
@@ -392,14 +451,20 @@ def _control_period(traces: Traces) -> float:
     return float(np.median(np.diff(t))) if len(t) > 1 else 0.0
 
 
+def _row_durations(t: np.ndarray) -> np.ndarray:
+    """How long each row's state lasted: t_{k+1} − t_k, 0 for the last row (the run ends
+    there), so the rows' durations sum to the run's t[-1] − t[0]."""
+    return np.append(np.diff(t), 0.0) if len(t) else np.zeros(0)
+
+
 def _mode_criterion_metrics(
     traces: Traces, mode: np.ndarray, m: int, column: str, sign: int, words: str, blend_time: float
 ) -> list[Metric]:
     """The time spent in mode ``m`` and, over its intervals of at least ``blend_time``,
     the smallest improvement of its criterion from the interval's start to its end."""
-    t, h = traces["t"], _control_period(traces)
+    t = traces["t"]
     spans = _intervals(mode == m)
-    metrics = [Metric(f"mode{m}_time", float(sum((t[b] - t[a] + h) for a, b in spans)), "s", "", None)]
+    metrics = [Metric(f"mode{m}_time", float(np.sum(_row_durations(t)[mode == m])), "s", "", None)]
     judged = [(a, b) for a, b in spans if t[b] - t[a] >= blend_time]
     if not judged:
         return metrics
@@ -445,7 +510,8 @@ def _switch_step_metrics(
             "torque_step_at_switch_max",
             largest,
             "N m",
-            f"<= {TORQUE_STEP_RATIO_BOUND:g} x p99 elsewhere = {TORQUE_STEP_RATIO_BOUND * p99:.4g} N m",
+            f"<= {TORQUE_STEP_RATIO_BOUND:g} x p99 elsewhere = "
+            f"{quantity(TORQUE_STEP_RATIO_BOUND * p99, 'N m')}",
             largest <= TORQUE_STEP_RATIO_BOUND * p99,
         ),
     ]
@@ -498,16 +564,48 @@ def first_contact_metrics(traces: Traces, contact_threshold: float) -> list[Metr
             "contact_force_peak",
             peak,
             "N",
-            f"<= f_d + {CONTACT_PEAK_BOUND:.0%} = {(1 + CONTACT_PEAK_BOUND) * f_ref:.4g} N",
+            f"<= f_d + {CONTACT_PEAK_BOUND:.0%} = {quantity((1 + CONTACT_PEAK_BOUND) * f_ref, 'N')}",
             peak <= (1 + CONTACT_PEAK_BOUND) * f_ref,
         ),
         Metric(
             "time_off_surface",
             off,
             "s",
-            f"<= {OFF_SURFACE_BOUND:g} s (the tool never leaves the plate once it touched)",
+            f"<= {quantity(OFF_SURFACE_BOUND, 's')} (the tool never leaves the plate once it touched)",
             off <= OFF_SURFACE_BOUND,
         ),
+    ]
+
+
+def contact_transient_metrics(traces: Traces, contact_threshold: float) -> list[Metric]:
+    """The first contact's transient, from the first row whose normal force reaches the
+    threshold (the touch): ``contact_rise_time``, until f_n first reaches RISE_SHARE of f_d
+    (its final value); ``contact_overshoot``, the largest f_n − f_d before the measuring
+    window (SETTLE_TIME after the touch) over f_d [1], 0 if f_n never exceeded f_d;
+    ``contact_settling_time``, until |f_n − f_d| stays within SETTLING_BAND of f_d to the
+    end of the run (inf if it is outside at the end). The paper gives no bound for any of
+    them: reported, not graded. Nothing when the tool never touched."""
+    k0 = first_contact_index(traces, contact_threshold)
+    if k0 is None:
+        return []
+    t, f_n = traces["t"], traces["f_n"]
+    f_ref = float(np.max(traces["f_d"]))
+    after = np.arange(len(t)) >= k0
+    reached = np.flatnonzero(after & (f_n >= RISE_SHARE * f_ref))
+    rise = float(t[reached[0]] - t[k0]) if reached.size else math.inf
+    settling = after & (t < t[k0] + SETTLE_TIME)
+    overshoot = max(0.0, float(np.max(f_n[settling]) - f_ref) / f_ref) if f_ref > 0 else math.nan
+    outside = np.flatnonzero(after & (np.abs(f_n - f_ref) > SETTLING_BAND * f_ref))
+    if not outside.size:
+        settle = 0.0
+    elif outside[-1] + 1 < len(t):
+        settle = float(t[outside[-1] + 1] - t[k0])
+    else:
+        settle = math.inf
+    return [
+        Metric("contact_rise_time", rise, "s", "", None),
+        Metric("contact_overshoot", overshoot * 100.0, "%", "", None),
+        Metric("contact_settling_time", settle, "s", "", None),
     ]
 
 
@@ -528,14 +626,14 @@ def _force_metrics(traces: Traces, window: np.ndarray) -> list[Metric]:
             "force_error_rms",
             rms_f,
             "N",
-            f"<= {FORCE_RMS_BOUND:.0%} of f_d = {FORCE_RMS_BOUND * f_ref:.4g} N",
+            f"<= {FORCE_RMS_BOUND:.0%} of f_d = {quantity(FORCE_RMS_BOUND * f_ref, 'N')}",
             rms_f <= FORCE_RMS_BOUND * f_ref,
         ),
         Metric(
             "force_error_max",
             max_f,
             "N",
-            f"<= {FORCE_MAX_BOUND:.0%} of f_d = {FORCE_MAX_BOUND * f_ref:.4g} N",
+            f"<= {FORCE_MAX_BOUND:.0%} of f_d = {quantity(FORCE_MAX_BOUND * f_ref, 'N')}",
             max_f <= FORCE_MAX_BOUND * f_ref,
         ),
     ]
@@ -632,15 +730,24 @@ def pose_metrics(
     metrics, window = _window(traces, contact_threshold)
     if window is None:
         return metrics
-    metrics += first_contact_metrics(traces, contact_threshold) + _force_metrics(traces, window)
+    metrics += first_contact_metrics(traces, contact_threshold)
+    metrics += contact_transient_metrics(traces, contact_threshold) + _force_metrics(traces, window)
     rms_x = _rms(in_plane_errors(traces, normal, task_axes)[window])
     metrics.append(
-        Metric("position_error_rms", rms_x, "m", f"<= {POSITION_RMS_BOUND:g} m", rms_x <= POSITION_RMS_BOUND)
+        Metric(
+            "position_error_rms",
+            rms_x,
+            "m",
+            f"<= {quantity(POSITION_RMS_BOUND, 'm')}",
+            rms_x <= POSITION_RMS_BOUND,
+        )
     )
     metrics += _orientation_metrics(traces, window)
     for name in obstacles:
         closest = float(traces[f"d_{name}"].min())
-        metrics.append(Metric(f"d_{name}_min", closest, "m", f"> d_lim = {d_lim:g} m", closest > d_lim))
+        metrics.append(
+            Metric(f"d_{name}_min", closest, "m", f"> d_lim = {quantity(d_lim, 'm')}", closest > d_lim)
+        )
     if "d_plate" in traces:
         closest = float(traces["d_plate"].min())
         metrics.append(Metric("d_plate_min", closest, "m", "> 0 (no link touches the plate)", closest > 0))
@@ -679,6 +786,7 @@ def self_motion_metrics(
     if window is None:
         return metrics
     metrics += first_contact_metrics(traces, contact_threshold)
+    metrics += contact_transient_metrics(traces, contact_threshold)
     swivel = traces["swivel"][window]
     travel = float(swivel.max() - swivel.min())
     metrics.append(
@@ -696,7 +804,7 @@ def self_motion_metrics(
             "position_error_max",
             largest,
             "m",
-            f"<= {POSITION_RMS_BOUND:g} m",
+            f"<= {quantity(POSITION_RMS_BOUND, 'm')}",
             largest <= POSITION_RMS_BOUND,
         )
     )

@@ -1,7 +1,12 @@
 """report.html: one run on one page, opened from the file system with no network.
 
-The page holds the scenario's parameters, every metric with its bound and
-whether it passed, the plots (PNG, inlined as base64), the diagram's picture
+The page opens with the controller as the run set it up (period, the task's gains per
+axis, the force loop, the null-space law, its projector and gains) and its loops' figures
+(damping ratio, slowest pole, gain margin without and with a period's delay:
+:mod:`nsdrake.reporting.loops`), then holds every metric with its bound and whether it
+passed (n/a, ungraded, where the run's law has no such figure), every value in
+engineering units (:mod:`nsdrake.reporting.units`: 62.91 µm, never e-notation), the
+scenario's parameters, the plots (PNG, inlined as base64), the diagram's picture
 (the SVG inlined, or the .dot source and how to render it), and relative links
 to the replay and the run's other files. It loads nothing from anywhere: no
 script, no font, no style sheet outside the file.
@@ -15,8 +20,9 @@ import html
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from nsdrake.reporting.metrics import Metric, describe, unit_words
+from nsdrake.reporting.metrics import NO_LAW_FIGURE, Metric, describe, unit_words
 from nsdrake.reporting.replay import DiagramPicture
+from nsdrake.reporting.units import number, split_quantity
 
 _STYLE = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 2em auto;
@@ -26,6 +32,7 @@ h2 { font-size: 1.2em; margin-top: 1.8em; border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; font-size: 0.92em; }
 th, td { border: 1px solid #ddd; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }
 th { background: #f3f3f3; }
+table.box th { text-align: left; font-weight: normal; white-space: nowrap; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
 .pass { color: #176b2c; font-weight: bold; }
 .fail { color: #b0151b; font-weight: bold; }
@@ -89,14 +96,17 @@ def _format_value(value) -> str:
     if isinstance(value, dict):
         return "{}" if not value else ", ".join(f"{k}: {_format_value(v)}" for k, v in value.items())
     if isinstance(value, float):
-        return f"{value:.6g}"
+        return number(value, 6)
     return str(value)
 
 
 def _metric_rows(metrics: Sequence[Metric]) -> str:
     rows = []
     for m in metrics:
-        if m.passed is None:
+        value, unit = split_quantity(m.value, m.unit)
+        if m.passed is None and m.bound.startswith(NO_LAW_FIGURE):
+            verdict = '<td class="none">n/a</td>'
+        elif m.passed is None:
             verdict = '<td class="none">no bound</td>'
         elif m.passed:
             verdict = '<td class="pass">&#10003; pass</td>'
@@ -107,7 +117,7 @@ def _metric_rows(metrics: Sequence[Metric]) -> str:
         rows.append(
             f'<tr data-metric="{_e(m.name)}"><td>{_e(words)}{link}<br>'
             f'<code class="name">{_e(m.name)}</code></td>'
-            f'<td class="num">{_e(f"{m.value:.6g}")}</td><td>{_e(unit_words(m.unit))}</td>'
+            f'<td class="num">{_e(value)}</td><td>{_e(unit_words(unit))}</td>'
             f"<td>{_e(m.bound) if m.bound else '&mdash;'}</td>{verdict}</tr>"
         )
     return "\n".join(rows)
@@ -137,12 +147,18 @@ def render_report(
     failure: str | None = None,
     defaults: dict | None = None,
     modes: Sequence[int] = (),
+    controller: Sequence[tuple[str, str]] = (),
+    loops: Sequence = (),
+    delay_periods: int = 0,
 ) -> str:
     """The report page as a string; paths in ``replay`` and ``files`` are relative links.
     ``failure``: why the run stopped early (it is then marked failed). ``defaults``: the
     parameters of a scenario that sets nothing (the scenario table shows first what
     ``parameters`` changes from them, the rest folded away). ``modes``: the modes of Fig. 1
-    the run visited, in order (the modes' section explains them)."""
+    the run visited, in order (the modes' section explains them). ``controller``: the
+    controller as set up, (what, value) rows (:func:`nsdrake.reporting.loops.controller_box`),
+    shown first; ``loops``: its loops' figures (:class:`nsdrake.reporting.loops.Loop`), and
+    ``delay_periods`` the run's computation delay (which margin column applies)."""
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -159,6 +175,7 @@ def render_report(
             "t = 0 with its play button and time slider at the top)</span></p>"
         )
     parts += [f'<p class="muted">{_e(note)}</p>' for note in notes]
+    parts += _controller_section(controller) + _loops_section(loops, delay_periods)
     parts += [
         '<h2 id="metrics">Metrics</h2>',
         '<p class="muted">Each figure is computed from traces.csv (metrics.json holds the same); the '
@@ -171,6 +188,54 @@ def render_report(
     parts += _plot_section(plots) + _modes_section(modes, parameters)
     parts += _diagram_section(diagram) + _scenario_and_files(parameters, files, defaults)
     return "\n".join(p for p in parts if p)
+
+
+def _controller_section(rows: Sequence[tuple[str, str]]) -> list[str]:
+    """The controller as the run set it up, one row per setting; nothing without rows."""
+    if not rows:
+        return []
+    return [
+        '<h2 id="controller">The controller</h2>',
+        '<table class="box"><tbody>',
+        "\n".join(f"<tr><th>{_e(what)}</th><td>{_e(value)}</td></tr>" for what, value in rows),
+        "</tbody></table>",
+    ]
+
+
+def _margin(value: float) -> str:
+    from nsdrake.studies.null_space_laws import GAIN_MARGIN_MAX
+
+    return f"> {number(GAIN_MARGIN_MAX)}" if value >= GAIN_MARGIN_MAX else f"× {number(value)}"
+
+
+def _loops_section(loops: Sequence, delay_periods: int) -> list[str]:
+    """The loops' figures: ζ, the slowest pole and the gain margin without and with one
+    period of computation delay; nothing without loops."""
+    if not loops:
+        return []
+    applies = "without delay" if delay_periods == 0 else "with a period's delay"
+    rows = "\n".join(
+        f'<tr data-loop="{_e(lp.name)}"><td>{_e(lp.name)}<br><span class="name">{_e(lp.gains)}</span></td>'
+        f'<td class="num">{_e(lp.zeta) if lp.zeta else "n/a (first order)"}</td>'
+        f'<td class="num">{_e(number(lp.slowest_pole))} rad/s</td>'
+        f'<td class="num">{_e(_margin(lp.margin))}</td>'
+        f'<td class="num">{_e(_margin(lp.margin_delay))}</td></tr>'
+        for lp in loops
+    )
+    return [
+        '<h2 id="loops">The loops</h2>',
+        '<p class="muted">Each loop sampled at the control period with the torque held over it, with '
+        "an exact model (each task direction a unit mass; the null space along each of its directions, "
+        "at the start posture): the damping ratio ζ (a range over the null-space directions), the slowest "
+        "pole, and the gain margin: the factor by which the acceleration the loop's torque produces may "
+        "grow before the loop turns unstable, without delay and with one period of computation delay "
+        "(the torque computed from the sample at t_k applied from t_{k+1}, as a real drive runs it). "
+        f"This run: {applies}.</p>",
+        "<table><thead><tr><th>loop</th><th>ζ</th><th>slowest pole</th><th>gain margin</th>"
+        "<th>gain margin, a period's delay</th></tr></thead><tbody>",
+        rows,
+        "</tbody></table>",
+    ]
 
 
 def _modes_section(modes: Sequence[int], parameters: dict) -> list[str]:

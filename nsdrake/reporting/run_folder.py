@@ -7,6 +7,7 @@ diagram's picture, the 3D replay and the HTML report.
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from nsdrake.experiment.scenario import Scenario
 from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.experiment.simulate import DivergenceError, RunInterrupted, run
 from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.loops import controller_box, loops_json, null_space_loop_of, task_loops
 from nsdrake.reporting.metrics import (
     Metric,
     contact_events,
@@ -153,6 +155,8 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
     }
     if failure:
         extra["failure"] = failure
+    box, loops = controller_box(scenario, sim.built.station), controller_loops(scenario, sim.built.station)
+    extra["loops"] = loops_json(loops)
     write_metrics(out / "metrics.json", metrics, extra)
     title = run_title(scenario, traces, events, failure)
     plots = write_plots(scenario, sim.built, traces, sim.baseline, out, title=title)
@@ -161,19 +165,38 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
     write_report(
         out,
         title=title,
-        description=f"The scenario ({scenario.source or 'built in code'}, folder {out.resolve().name}): "
+        description=f"The scenario ({scenario_name(scenario)}, folder {out.resolve().name}): "
         f"{scenario.description}",
         parameters=yaml.safe_load(scenario_yaml(scenario)),
         defaults=yaml.safe_load(scenario_yaml(Scenario())),
         modes=modes_in_order(traces),
         metrics=metrics,
         plots=plots,
-        diagram=picture,
+        diagram=dataclasses.replace(picture, note=report_note(picture.note, out)),
         replay=replay_path.name if replay_path else None,
-        notes=notes,
+        notes=[report_note(note, out) for note in notes],
         failure=failure,
+        controller=box,
+        loops=loops,
+        delay_periods=scenario.realism.delay.periods if scenario.realism.delay.enabled else 0,
     )
     return RunResult(out=out, metrics=metrics, notes=notes, failure=failure, interrupted=sim.interrupted)
+
+
+def controller_loops(scenario: Scenario, station) -> list:
+    """The task's loops and the null-space loop (nsdrake/reporting/loops.py)."""
+    return [*task_loops(scenario, station), null_space_loop_of(scenario, station)]
+
+
+def scenario_name(scenario: Scenario) -> str:
+    """The scenario as a report names it: its file's name, never a machine's path."""
+    return Path(scenario.source).name if scenario.source else "built in code"
+
+
+def report_note(note: str, out: Path) -> str:
+    """A note for the report, which lives in ``out``: the run's files by their names (the
+    terminal's note names them by path)."""
+    return note.replace(f"{out}{os.sep}", "").replace(f"{out.resolve()}{os.sep}", "")
 
 
 @dataclass
@@ -319,6 +342,7 @@ def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Trace
             contact_threshold=threshold,
             p_tau_without_null_space_task=float(baseline["p_tau"][-1]) if baseline is not None else None,
             d_lim=selector.d_lim,
+            null_space_law=scenario.null_space.law,
         )
     if "priority" in scenario.report.checks:
         metrics += priority_metrics(

@@ -49,7 +49,13 @@ from nsdrake.experiment.scenario import (
     read_yaml,
 )
 from nsdrake.experiment.traces import Traces
-from nsdrake.reporting.metrics import SETTLE_TIME, first_contact_index, measuring_window_gap, torque_steps
+from nsdrake.reporting.metrics import (
+    FIRST_CONTACT_METRICS,
+    SETTLE_TIME,
+    first_contact_index,
+    measuring_window_gap,
+    torque_steps,
+)
 from nsdrake.studies.measures import (
     MODE_CRITERION,
     MODE_NAME,
@@ -327,11 +333,11 @@ def measure_fig3(traces: Traces, ctx: RunFacts) -> dict:
 
     s = dataclasses.replace(ctx.scenario, report=dataclasses.replace(ctx.scenario.report, checks=["fig3"]))
     metrics = compute_metrics(s, ctx.station, traces, None)
-    row = {
-        m.name: m.value
-        for m in metrics
-        if m.name not in ("window_start", "window_rows", "p_tau_end_without_null_space_task")
-    }
+    # the first contact's figures (a run's report has them since issue 45) are not this
+    # measure's columns: its tables compare the window
+    left_out = ("window_start", "window_rows", "p_tau_end_without_null_space_task", *FIRST_CONTACT_METRICS)
+    metrics = [m for m in metrics if m.name not in left_out]
+    row = {m.name: m.value for m in metrics}
     row["all_bounds_met"] = all(m.passed for m in metrics if m.passed is not None)
     row["torque_step_max"] = float(torque_steps(traces).max())
     gap = measuring_window_gap(traces, s.reference.contact_threshold)
@@ -873,7 +879,15 @@ def run_family(
 
 
 # The files a comparison writes beside its variants' traces (declared before any is written).
-COMPARE_FILES = ("table.md", "table.csv", "compare.png", "force.png", "laws.png", "bandwidth.png")
+COMPARE_FILES = (
+    "table.md",
+    "table.csv",
+    "compare.png",
+    "force.png",
+    "laws.png",
+    "bandwidth.png",
+    *(f"{name}/table.md" for name in ("task", "posture", "push")),  # null_space_laws' further tables
+)
 
 
 def _run_family(family, out, folders, config, duration, jobs, isolate, progress, timeout) -> FamilyResult:
@@ -947,7 +961,9 @@ def _format(value) -> str:
 
 
 def write_table(out: Path, family: Family, table: list[dict]) -> None:
-    """table.csv (full precision) and table.md (4 significant digits)."""
+    """table.csv (full precision) and table.md (4 significant digits); for null_space_laws,
+    table.md holds the loops and the further tables task/, posture/ and push/ the rest
+    (:func:`nsdrake.studies.null_space_laws.table_parts`)."""
     columns = list(dict.fromkeys(key for row in table for key in row))
     for key in ("note", "error"):  # why a variant has no (or blank) figures, next to its name
         if key in columns:
@@ -958,12 +974,25 @@ def write_table(out: Path, family: Family, table: list[dict]) -> None:
         writer.writeheader()
         for row in table:
             writer.writerow({k: row.get(k, "") for k in columns})
-    lines = [f"# {family.name}", "", family.description, ""]
+    if family.measure != "null_space_laws":
+        _write_markdown(out / "table.md", f"# {family.name}", family.description, columns, table)
+        return
+    from nsdrake.studies.null_space_laws import table_parts
+
+    for folder, header, rows in table_parts(table):  # the loops in table.md, the rest beside it
+        if folder:
+            (out / folder).mkdir(exist_ok=True)
+        title = f"# {family.name}" + (f"/{folder}" if folder else "")
+        _write_markdown(out / folder / "table.md", title, family.description, header, rows)
+
+
+def _write_markdown(path: Path, title: str, description: str, columns: list[str], rows: list[dict]) -> None:
+    lines = [title, "", description, ""]
     lines.append("| " + " | ".join(columns) + " |")
     lines.append("|" + "---|" * len(columns))
-    for row in table:
+    for row in rows:
         lines.append("| " + " | ".join(_format(row.get(k, "")) for k in columns) + " |")
-    (out / "table.md").write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines) + "\n")
 
 
 def plot_family(path: Path, family: Family, variants: list[Variant], traces: list[Traces]) -> None:

@@ -29,7 +29,10 @@ h_n is the geometric mean of the μ_i at the start posture (the Panda's pose tas
 direction, fig3's position task two): where the μ_i differ the rule is exact for none and
 the damping ratio spans a range, reported per row (:func:`null_space_loop`) with the
 discrete-time pole radius ρ_T of the sampled loop at the control period T (the torque held
-over each period; ρ_T < 1 is stable; a sampled damper alone diverges once T D/μ > 2).
+over each period; ρ_T < 1 is stable; a sampled damper alone diverges once T D/μ > 2) and
+the gain margin, without and with one period of computation delay (the torque computed
+from the sample at t_k applied from t_{k+1}, as ``realism.delay`` and a drive that
+answers status k with the command the robot applies at k + 1 run it).
 
 The figures (:func:`law_figures`), from the traces and the arm's model only, the same
 for every law:
@@ -116,7 +119,7 @@ def paper_poles_gains(omega: float, h_n: float) -> dict[str, float]:
     return {"posture_stiffness": 2.0 * omega**2 * h_n, "posture_damping": 3.0 * omega * h_n}
 
 
-# Gains as two libraries ship them (not the rule): the variants "… franka_ros's gains" and
+# Gains as two libraries ship them (not the rule): the variants "… franka_ros's initial gains" and
 # "… robosuite's gains" of null_space_laws.
 # franka_ros, franka_example_controllers CartesianImpedanceExampleController: the null-space
 # stiffness starts at 20 (nullspace_stiffness_{20.0} in its header), damping 2√K, through
@@ -142,28 +145,55 @@ def law_key(null_space, posture) -> str:
     return null_space.law
 
 
-def _sampled_loop(law: str, gains: dict, mu: float, T: float, g: float = 1.0) -> np.ndarray:
-    """The transition matrix over one period T of the null-space loop along a direction of
-    inertia μ (module docstring), the acceleration held over the period: state (s, ṡ) for
-    the PD laws, (s, ṡ, ṡ_d of the previous period) for the paper's (its feedforward q̈_dⁿ
-    is the backward difference of q̇_dⁿ). ``g`` multiplies the acceleration the torque
-    produces (the loop gain: an arm whose null-space inertia is μ/g where the law assumes μ,
-    or whose torque is g times the commanded)."""
-    step = np.array([[1.0, T], [0.0, 1.0]])
-    hold = g * np.array([T * T / 2.0, T])
+# Two loops beside the laws' null-space loops, for a run's report (nsdrake/reporting/loops.py):
+# a task axis under the impedance law, ẍ = −K_p x − K_v ẋ (Eq. 10 with an exact model: each
+# task direction a unit mass, as the H-weighted posture PD's null-space directions), and the
+# paper's null-space velocity loop ėⁿ = −K_n eⁿ where q̇_dⁿ does not depend on the posture
+# (criteria, sweep), a first-order loop.
+TASK_AXIS = "task_axis"
+VELOCITY_LOOP = "velocity_loop"
+UNIT_MASS_LAWS = ("dynamically_consistent_posture_pd", TASK_AXIS)
+
+
+def _loop_parts(law: str, gains: dict, mu: float, T: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The null-space loop along a direction of inertia μ (module docstring), sampled at T,
+    as (Φ, Γ, F): x_{k+1} = Φ x_k + Γ u with u the acceleration held over the period, and
+    the law's acceleration computed from the sample x_k, u_k = F x_k. The state is (s, ṡ)
+    for the PD laws, (s, ṡ, ṡ_d of the previous period) for the paper's (its feedforward
+    q̈_dⁿ is the backward difference of q̇_dⁿ; Φ's last row stores ṡ_d,k = −a s_k)."""
     if law.startswith("paper"):
         a = abs(gains["gain"]) / (mu if law == "paper" else 1.0)
         K_n = gains["K_n"]
+        Phi = np.zeros((3, 3))
+        Phi[:2, :2] = [[1.0, T], [0.0, 1.0]]
+        Phi[2, 0] = -a
         # acc_k = (ṡ_d,k − ṡ_d,k−1)/T + K_n (ṡ_d,k − ṡ_k), ṡ_d,k = −a s_k
-        acc = np.array([-a / T - K_n * a, -K_n, -1.0 / T])
-        A = np.zeros((3, 3))
-        A[:2, :2] = step
-        A[:2, :] += np.outer(hold, acc)
-        A[2, 0] = -a
-        return A
+        return Phi, np.array([T * T / 2.0, T, 0.0]), np.array([-a / T - K_n * a, -K_n, -1.0 / T])
+    if law == VELOCITY_LOOP:  # ėⁿ = −K_n eⁿ: state eⁿ, acceleration −K_n eⁿ
+        return np.array([[1.0]]), np.array([T]), np.array([-gains["K_n"]])
     K, D = gains["posture_stiffness"], gains["posture_damping"]
-    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
-    return step + np.outer(hold, [-K * scale, -D * scale])
+    scale = 1.0 if law in UNIT_MASS_LAWS else 1.0 / mu
+    return np.array([[1.0, T], [0.0, 1.0]]), np.array([T * T / 2.0, T]), np.array([-K * scale, -D * scale])
+
+
+def _sampled_loop(law: str, gains: dict, mu: float, T: float, g: float = 1.0, delay: int = 0) -> np.ndarray:
+    """The transition matrix over one period T of the null-space loop along a direction of
+    inertia μ (:func:`_loop_parts`), the acceleration held over the period. ``g`` multiplies
+    the acceleration the torque produces (the loop gain: an arm whose null-space inertia is
+    μ/g where the law assumes μ, or whose torque is g times the commanded). ``delay``: 0, the
+    acceleration computed from the sample at t_k is applied over [t_k, t_{k+1}); 1, over
+    [t_{k+1}, t_{k+2}), as ``realism.delay`` (one period) and a drive that answers status k
+    with the command the robot applies at k + 1 run it: the state then carries the pending
+    acceleration u_{k−1}, x_{k+1} = Φ x_k + g Γ u_{k−1}, u_k = F x_k."""
+    Phi, Gamma, F = _loop_parts(law, gains, mu, T)
+    if delay == 0:
+        return Phi + g * np.outer(Gamma, F)
+    if delay != 1:
+        raise ValueError(f"delay must be 0 or 1 period, got {delay!r}")
+    n = len(Gamma)
+    A = np.zeros((n + 1, n + 1))
+    A[:n, :n], A[:n, n], A[n, :n] = Phi, g * Gamma, F
+    return A
 
 
 def _continuous_poles(law: str, gains: dict, mu: float) -> np.ndarray:
@@ -171,38 +201,48 @@ def _continuous_poles(law: str, gains: dict, mu: float) -> np.ndarray:
     if law.startswith("paper"):
         a = abs(gains["gain"]) / (mu if law == "paper" else 1.0)
         return np.array([-a, -gains["K_n"]], dtype=complex)
+    if law == VELOCITY_LOOP:
+        return np.array([-gains["K_n"]], dtype=complex)
     K, D = gains["posture_stiffness"], gains["posture_damping"]
-    scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
+    scale = 1.0 if law in UNIT_MASS_LAWS else 1.0 / mu
     return np.roots([1.0, D * scale, K * scale]).astype(complex)
 
 
 def damping_ratio(poles: np.ndarray) -> float:
-    """ζ of a pair of poles: −(p₁ + p₂) / (2 √(p₁ p₂)) (1 for a double pole, > 1 real)."""
+    """ζ of a pair of poles: −(p₁ + p₂) / (2 √(p₁ p₂)) (1 for a double pole, > 1 real);
+    nan for a first-order loop (one pole: no ζ)."""
+    if len(poles) == 1:
+        return math.nan
     p1, p2 = poles
     return float((-(p1 + p2) / (2.0 * np.sqrt(p1 * p2))).real)
 
 
-def _pole_radius(law: str, gains: dict, mu: float, period: float, g: float = 1.0) -> float:
-    return float(np.max(np.abs(np.linalg.eigvals(_sampled_loop(law, gains, mu, period, g)))))
+def _pole_radius(law: str, gains: dict, mu: float, period: float, g: float = 1.0, delay: int = 0) -> float:
+    return float(np.max(np.abs(np.linalg.eigvals(_sampled_loop(law, gains, mu, period, g, delay)))))
 
 
 GAIN_MARGIN_MAX = 1e4  # the search's end: a margin beyond it is reported as this
 
 
-def gain_margin(law: str, gains: dict, mu: float, period: float) -> float:
+def gain_margin(law: str, gains: dict, mu: float, period: float, delay: int = 0) -> float:
     """The loop's gain margin along a direction of inertia μ: the factor g by which the
     acceleration its torque produces may grow (:func:`_sampled_loop`) before the sampled
-    loop's pole radius reaches 1 (< 1 where the loop is unstable as tuned). Found on a
+    loop's pole radius reaches 1 (< 1 where the loop is unstable as tuned); ``delay`` 1 for
+    the loop with one period of computation delay (:func:`_sampled_loop`). Found on a
     logarithmic grid, then by bisection to 1e-6 relative; :data:`GAIN_MARGIN_MAX` where the
-    loop stays stable up to it. For a PD held over the period the Jury test gives it in
-    closed form, 2μ/(D T) where K T < 2 D (2/(D T) for the H-weighted PD;
+    loop stays stable up to it. For a PD held over the period without delay the Jury test
+    gives it in closed form, 2μ/(D T) where K T < 2 D (2/(D T) for the H-weighted PD;
     tests/studies/test_null_space_laws_family.py)."""
-    if _pole_radius(law, gains, mu, period) >= 1.0:
+
+    def stable(g: float) -> bool:
+        return _pole_radius(law, gains, mu, period, g, delay) < 1.0
+
+    if not stable(1.0):
         low, high = 0.0, 1.0
     else:
         low, high = 1.0, None
         for g in np.geomspace(1.0, GAIN_MARGIN_MAX, 161)[1:]:
-            if _pole_radius(law, gains, mu, period, float(g)) >= 1.0:
+            if not stable(float(g)):
                 high = float(g)
                 break
             low = float(g)
@@ -210,7 +250,7 @@ def gain_margin(law: str, gains: dict, mu: float, period: float) -> float:
             return GAIN_MARGIN_MAX
     while high - low > 1e-6 * high:
         middle = 0.5 * (low + high)
-        low, high = (middle, high) if _pole_radius(law, gains, mu, period, middle) < 1.0 else (low, middle)
+        low, high = (middle, high) if stable(middle) else (low, middle)
     return 0.5 * (low + high)
 
 
@@ -218,28 +258,30 @@ def null_space_loop(law: str, gains: dict, masses: np.ndarray, period: float) ->
     """The row's loop figures over the null-space directions of inertias ``masses``: the
     damping ratios' range, the slowest pole's rate [rad/s], the largest discrete-time pole
     radius ρ_T at the control period (< 1: stable; module docstring) and the smallest gain
-    margin (:func:`gain_margin`)."""
-    zetas, slow, rho, margin = [], math.inf, 0.0, math.inf
+    margin (:func:`gain_margin`), without and with one period of computation delay."""
+    zetas, slow, rho, margin, delayed = [], math.inf, 0.0, math.inf, math.inf
     for mu in masses:
         poles = _continuous_poles(law, gains, float(mu))
         zetas.append(damping_ratio(poles))
         slow = min(slow, float(np.min(-poles.real)))
         rho = max(rho, _pole_radius(law, gains, float(mu), period))
         margin = min(margin, gain_margin(law, gains, float(mu), period))
+        delayed = min(delayed, gain_margin(law, gains, float(mu), period, delay=1))
     return {
         "zeta_min": min(zetas),
         "zeta_max": max(zetas),
         "slowest_pole": slow,
         "pole_radius": rho,
         "gain_margin": margin,
+        "gain_margin_delay": delayed,
     }
 
 
 def loop_along_run(law: str, gains: dict, arm, q: np.ndarray, period: float) -> dict:
     """:func:`null_space_loop` at each posture of ``q`` (rows of a run's traces): the range
     over the run of the damping ratio and of the slowest pole, and the smallest gain
-    margin. The null-space inertias change with the posture (the start's figures hold
-    there only)."""
+    margins (without and with a period's delay). The null-space inertias change with the
+    posture (the start's figures hold there only)."""
     loops = [null_space_loop(law, gains, null_space_masses(arm, qk), period) for qk in q]
     return {
         "zeta_min": min(lp["zeta_min"] for lp in loops),
@@ -247,6 +289,7 @@ def loop_along_run(law: str, gains: dict, arm, q: np.ndarray, period: float) -> 
         "slowest_pole_min": min(lp["slowest_pole"] for lp in loops),
         "slowest_pole_max": max(lp["slowest_pole"] for lp in loops),
         "gain_margin_min": min(lp["gain_margin"] for lp in loops),
+        "gain_margin_delay_min": min(lp["gain_margin_delay"] for lp in loops),
     }
 
 
@@ -380,7 +423,8 @@ RUN_SAMPLE = 0.01  # [s] the postures of a run at which its loop is evaluated (l
 
 def loop_figures(scenario, arm, q_run: np.ndarray | None = None) -> dict:
     """The row's null-space loop from its own gains and period (:func:`null_space_loop`)
-    at the start posture: damping ratio, slowest pole, pole radius ρ_T, gain margin; and
+    at the start posture: damping ratio, slowest pole, pole radius ρ_T, gain margin without
+    and with a period's delay; and
     with the run's postures ``q_run``, the same along the run (:func:`loop_along_run`)."""
     key = law_key(scenario.null_space, scenario.desired_null_space.posture)
     q0 = np.array([scenario.arm.initial_positions[j] for j in arm.joint_names])
@@ -391,6 +435,7 @@ def loop_figures(scenario, arm, q_run: np.ndarray | None = None) -> dict:
         "slowest_pole": loop["slowest_pole"],
         "pole_radius_T": loop["pole_radius"],
         "gain_margin": loop["gain_margin"],
+        "gain_margin_delay": loop["gain_margin_delay"],
     }
     if q_run is not None and len(q_run):
         run = loop_along_run(key, gains, arm, q_run, T)
@@ -398,6 +443,7 @@ def loop_figures(scenario, arm, q_run: np.ndarray | None = None) -> dict:
             "damping_ratio_run": _span(run["zeta_min"], run["zeta_max"]),
             "slowest_pole_run": _span(run["slowest_pole_min"], run["slowest_pole_max"]),
             "gain_margin_run_min": run["gain_margin_min"],
+            "gain_margin_delay_run_min": run["gain_margin_delay_min"],
         }
     return row
 
@@ -475,6 +521,86 @@ def push_figures(traces: Traces, push, pos_err: np.ndarray) -> dict:
     }
 
 
+# --- the tables ----------------------------------------------------------------------------
+
+# The family's table in parts (issue 45: 28 columns scrolled the variant out of view): the
+# loops in table.md, the rest in further tables beside it (NAME/table.md), each headed by
+# its columns with their units; the push table has the push rows only. table.csv keeps
+# every column. By table: (folder, "" for table.md itself; its columns, (key, unit)).
+LAW_TABLES = (
+    (
+        "",
+        (
+            ("law", ""),
+            ("damping_ratio", ""),
+            ("slowest_pole", "rad/s"),
+            ("pole_radius_T", ""),
+            ("gain_margin", ""),
+            ("gain_margin_delay", ""),
+            ("damping_ratio_run", ""),
+            ("slowest_pole_run", "rad/s"),
+            ("gain_margin_run_min", ""),
+            ("gain_margin_delay_run_min", ""),
+        ),
+    ),
+    (
+        "task",
+        (
+            ("force_error_rms", "N"),
+            ("force_error_peak", "N"),
+            ("position_error_rms", "m"),
+            ("orientation_error_rms", "rad"),
+            ("task_disturbance_rms", "m/s²"),
+            ("task_disturbance_peak", "m/s²"),
+            ("link_contact_at", "s"),
+        ),
+    ),
+    (
+        "posture",
+        (
+            ("posture_error_rms", "rad"),
+            ("posture_error_end", "rad"),
+            ("posture_error_H_rms", "rad"),
+            ("posture_error_H_end", "rad"),
+            ("posture_lag_predicted_rms", "rad"),
+            ("tau0_rms", "N m"),
+            ("nu_rms", "J"),
+        ),
+    ),
+    (
+        "push",
+        (
+            ("push_tau0_limited_time", "s"),
+            ("push_position_error_peak", "m"),
+            ("push_position_error_before", "m"),
+            ("push_posture_deviation_peak", "rad"),
+            ("push_return_time", "s"),
+        ),
+    ),
+)
+
+
+def table_parts(rows: list[dict]) -> list[tuple[str, list[str], list[dict]]]:
+    """The family's rows as :data:`LAW_TABLES`' tables: (folder, header, rows), each row
+    keyed by its header (the column with its unit, "slowest_pole [rad/s]"); the variant
+    first, and why a variant has no figures ("note", "error") in every table; a table's
+    rows are those with at least one of its figures (every row for the first)."""
+    parts = []
+    for k, (folder, columns) in enumerate(LAW_TABLES):
+        why = [key for key in ("note", "error") if any(key in row for row in rows)]
+        header = ["variant", *why, *(f"{key} [{unit}]" if unit else key for key, unit in columns)]
+        keys = ["variant", *why, *(key for key, _ in columns)]
+        mine = [row for row in rows if k == 0 or any(key in row for key, _ in columns)]
+        parts.append(
+            (
+                folder,
+                header,
+                [{h: row.get(key, "") for h, key in zip(header, keys, strict=True)} for row in mine],
+            )
+        )
+    return parts
+
+
 # --- the plot ------------------------------------------------------------------------------
 
 
@@ -505,19 +631,23 @@ def plot_laws(path, family, rows: list[dict], traces: list[Traces]) -> None:
     axes[1, 0].set_ylabel(r"$\|J H^{-1} \tau_0\|$ [m/s²]")
     axes[2, 0].set_ylabel(r"posture error $\|(I - J^+J)(q - q_d)\|$ [rad]")
     axes[0, 0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{family.name}: force, task disturbance by the null space, elbow drift", fontsize=9)
+    fig.suptitle(f"{family.name}: force, task disturbance by the null space, posture error", fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 def plot_bandwidth(path, family, rows: list[dict]) -> None:
-    """Per law (a variant is named "ω rad/s / LAW"), against the bandwidth (the row's slowest
-    pole): the task disturbance ‖J H⁻¹ τ₀‖ RMS, the orientation error RMS and the posture
-    error RMS in joint space and in the inertia metric."""
+    """Per law (a variant is named "ω rad/s / LAW"), the task disturbance ‖J H⁻¹ τ₀‖ RMS, the
+    orientation error RMS and the posture error RMS in joint space and in the inertia metric:
+    in the top row against the row's slowest null-space pole (``slowest_pole``, not the
+    nominal ω of its name: on the Panda they agree, and the paper's law has its second pole
+    at 2ω, so at one slowest pole its loop is the stiffer), in the bottom row against the
+    effort it took, ‖τ₀‖ RMS (``tau0_rms``), which puts the laws on an equal footing."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
     panels = (
         ("task_disturbance_rms", r"$\|J H^{-1} \tau_0\|$ RMS [m/s²]"),
@@ -525,18 +655,36 @@ def plot_bandwidth(path, family, rows: list[dict]) -> None:
         ("posture_error_rms", "posture error RMS, joint space [rad]"),
         ("posture_error_H_rms", "posture error RMS, inertia metric [rad]"),
     )
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), constrained_layout=True)
+    abscissae = (
+        ("slowest_pole", "slowest null-space pole [rad/s]\n(the paper's law: a second pole at 2ω)"),
+        ("tau0_rms", r"effort $\|\tau_0\|$ RMS [N m]"),
+    )
+    fig, axes = plt.subplots(2, len(panels), figsize=(4.2 * len(panels), 7.6), constrained_layout=True)
     laws = list(dict.fromkeys(row["variant"].partition(" / ")[2] for row in rows))
+    # the sweep's poles to one digit, once each (79.15 and 80 would print on one another)
+    poles = sorted({float(f"{float(row['slowest_pole']):.1g}") for row in rows if "force_error_rms" in row})
     for law in laws:
         mine = [row for row in rows if row["variant"].partition(" / ")[2] == law and "force_error_rms" in row]
-        omega = [float(row["variant"].split(" rad/s")[0]) for row in mine]
-        for ax, (key, _) in zip(axes, panels, strict=True):
-            ax.loglog(omega, [max(float(row[key]), 1e-18) for row in mine], "o-", lw=1, ms=4, label=law)
-    for ax, (_, label) in zip(axes, panels, strict=True):
-        ax.set_xlabel("null-space bandwidth ω [rad/s]")
-        ax.set_ylabel(label)
-        ax.grid(True, which="both", lw=0.3)
-    axes[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{family.name}: task disturbance and posture error against the bandwidth", fontsize=9)
+        for line, (x_key, _) in zip(axes, abscissae, strict=True):
+            x = [float(row[x_key]) for row in mine]
+            for ax, (key, _) in zip(line, panels, strict=True):
+                plot = ax.loglog if x_key == "slowest_pole" else ax.semilogy  # the effort: one decade
+                plot(x, [max(float(row[key]), 1e-18) for row in mine], "o-", lw=1, ms=4, label=law)
+    for line, (x_key, x_label) in zip(axes, abscissae, strict=True):
+        for ax, (_, label) in zip(line, panels, strict=True):
+            ax.set_xlabel(x_label, fontsize=8)
+            ax.set_ylabel(label, fontsize=8)
+            ax.grid(True, which="both", lw=0.3)
+            if x_key == "slowest_pole":  # the sweep's poles, written out (no overlapping labels)
+                ax.xaxis.set_major_locator(FixedLocator([p for p in poles if p > 0]))
+                ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+                ax.xaxis.set_minor_locator(FixedLocator([]))
+                ax.xaxis.set_minor_formatter(NullFormatter())
+    axes[0, 0].legend(fontsize=7, loc="best")
+    fig.suptitle(
+        f"{family.name}: task disturbance and posture error against the slowest null-space pole (top) "
+        "and against the effort (bottom)",
+        fontsize=9,
+    )
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -49,7 +49,7 @@ from nsdrake.experiment.scenario import (
     shipped_scenarios,
     validate,
 )
-from nsdrake.reporting.metrics import D_MIN_AFTER
+from nsdrake.reporting.metrics import D_MIN_AFTER, FIRST_CONTACT_METRICS
 from nsdrake.reporting.run_folder import scenario_yaml
 
 SWEEP_DIR = Path(__file__).resolve().parent / "sweeps"
@@ -62,6 +62,7 @@ FIG3_METRICS = (
     "first_contact_time",
     "window_start",
     "window_rows",
+    *FIRST_CONTACT_METRICS,  # the first contact's transient (issue 45)
     "normal_force_min",
     "force_error_rms",
     "force_error_max",

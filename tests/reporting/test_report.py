@@ -8,11 +8,14 @@ import json
 from html.parser import HTMLParser
 from pathlib import Path
 
+import pytest
 import yaml
 
 from nsdrake.reporting.metrics import Metric, describe, unit_words
 from nsdrake.reporting.replay import DiagramPicture
 from nsdrake.reporting.report import flatten, render_report
+
+PREFIX = {"": 1.0, "m": 1e-3, "µ": 1e-6, "n": 1e-9, "p": 1e-12}
 
 
 class _Page(HTMLParser):
@@ -64,8 +67,11 @@ def test_report_lists_every_metric_with_its_bound_and_verdict(short_run):
     for m in result.metrics:
         what, value, unit, bound, verdict = page.rows[m.name]
         assert what.startswith(describe(m.name)) and what.endswith(m.name)  # words first, the key after
-        assert unit == unit_words(m.unit)
-        assert float(value) == float(f"{m.value:.6g}")
+        # the value in engineering units: the number times its unit's prefix is the metric
+        # to the 4 significant digits shown
+        prefix = unit[: len(unit) - len(unit_words(m.unit))] if unit != unit_words(m.unit) else ""
+        assert unit_words(prefix + m.unit) == unit, (m.name, unit)
+        assert float(value) * PREFIX[prefix] == pytest.approx(m.value, rel=5e-4, abs=1e-300), (m.name, value)
         assert bound == (m.bound or "—")
         assert verdict == {None: "no bound", True: "✓ pass", False: "✗ FAIL"}[m.passed]
 
@@ -216,3 +222,128 @@ def test_the_modes_are_explained_and_linked(short_run):
             assert 'href="#modes"' in row, m.name
     captions = text.split("<figcaption>")[1:]
     assert len(captions) == 2 and all('href="#modes"' in c for c in captions)
+
+
+def _visible(text: str) -> str:
+    """The page without its inlined pictures (base64 PNGs, an SVG) and its style sheet
+    (colours such as #dff3e4): what a reader reads."""
+    import re
+
+    text = re.sub(r'src="data:[^"]*"', 'src=""', text)
+    return re.sub(r"<svg.*?</svg>|<style>.*?</style>", "", text, flags=re.S)
+
+
+def test_no_value_in_e_notation_and_no_machine_path(short_run):
+    """Every figure on fig3's page (metrics, bounds, loops, the controller box, the
+    scenario's parameters) is in engineering units, never e-notation (62.91 µm, not
+    6.29073e-05 m); the scenario is named by its file's name and neither the scenario's
+    folder nor the run's absolute path appears. Catches a value printed with :g (the old
+    :.6g), a parameter like the rate limit's 1e9, or the subtitle's scenario.source."""
+    import re
+
+    from nsdrake.experiment.scenario import load_scenario
+
+    out, _ = short_run
+    text = _visible((out / "report.html").read_text(encoding="utf-8"))
+    assert re.findall(r"\d(?:\.\d+)?[eE][+-]?\d", text) == []
+    source = Path(load_scenario("fig3").source)
+    assert "(fig3.yaml, folder" in text
+    assert str(source.parent) not in text and str(out.resolve()) not in text
+    # a parameter at the ends of the range (the family's 1e9 N m/s "no rate limit", a 1e-5 step)
+    text = render_report(
+        title="t",
+        description="",
+        parameters={"torque_rate": 1e9, "step": 1e-5},
+        metrics=[Metric("tangential_position_error_rms", 6.29073e-05, "m", "<= 1 mm", True)],
+        plots=[],
+        diagram=None,
+        replay=None,
+        files=[],
+    )
+    assert re.findall(r"\d(?:\.\d+)?[eE][+-]?\d", _visible(text)) == []
+    assert "1 × 10⁹" in text and "1 × 10⁻⁵" in text and ">62.91</td><td>µm<" in text
+
+
+def test_the_report_opens_with_the_controller_and_its_loops(short_run):
+    """Before the metrics: the controller box (period, the task's gains per axis, K_f,
+    f_d, the law, its projector, K_n) and the loops, whose figures are checked against
+    closed forms: along the plate ẍ = −400 x − 40 ẋ, ζ = 40/(2√400) = 1, slowest pole
+    20 rad/s, the Jury margin 2/(K_v T) = 25; fig3's null space, the velocity loop
+    ėⁿ = −K_n eⁿ: pole K_n = 100 rad/s, margin 2/(K_n T) = 10 without delay and, with one
+    period of delay (z² − z + g K_n T = 0), 1/(K_n T) = 5. Catches the box or the loops
+    missing or after the metrics, the two margins swapped, or a loop read off the wrong
+    gains."""
+    out, _ = short_run
+    text, page = _read(out)
+    assert text.index('id="controller"') < text.index('id="loops"') < text.index('id="metrics"')
+    box = text.split('id="controller"', 1)[1].split("</table>", 1)[0]
+    for shown in (
+        "control period T</th><td>2 ms",
+        "task axis x (along the plate)</th><td>K_p 400 1/s², K_v 40 1/s",
+        "task axis y (normal to the plate)</th><td>K_p 100 1/s², K_v 200 1/s",
+        "force gain K_f</th><td>1 m/(s² N)",
+        "desired force f_d</th><td>10 N",
+        "null-space velocity gain K_n</th><td>100 1/s",
+        "null-space projector</th><td>I − J̄ J with the dynamically consistent J̄",
+    ):
+        assert shown in box, shown
+    loops = {}
+    for row in text.split('<tr data-loop="')[1:]:
+        name, rest = row.split("</tr>", 1)[0].split('"', 1)
+        loops[name] = [c.split("</td>")[0] for c in rest.split('<td class="num">')[1:]]
+
+    def figures(name):
+        zeta, pole, margin, delayed = loops[name]
+        return zeta, float(pole.removesuffix(" rad/s")), float(margin[2:]), float(delayed[2:])
+
+    zeta, pole, margin, delayed = figures("task, along the plate")
+    assert (zeta, pole) == ("1", 20.0) and margin == pytest.approx(25.0, rel=1e-3) and 1.0 < delayed < margin
+    zeta, pole, margin, delayed = figures("null space: the velocity loop ėⁿ = −K_n eⁿ")
+    assert (zeta, pole) == ("n/a (first order)", 100.0)
+    assert margin == pytest.approx(10.0, rel=1e-3) and delayed == pytest.approx(5.0, rel=1e-3)
+
+
+def test_a_metric_the_law_does_not_have_reads_na_not_fail(short_run):
+    """fig3's traces measured as the run of a posture-PD law (dynamically consistent torque
+    PD): it has no q̇_dⁿ and no eⁿ, so null_space_error_rms and null_space_command_rms are
+    n/a, ungraded (the report's result column reads n/a, the banner does not count them),
+    where the paper's law with the same, non-finite, eⁿ is graded FAIL. Catches a report
+    that grades a figure the law lacks (the nan compared with its bound: FAIL)."""
+    import dataclasses
+    import math
+
+    from nsdrake.experiment.diagram import build_diagram
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.experiment.traces import Traces
+    from nsdrake.reporting.run_folder import compute_metrics
+
+    out, _ = short_run
+    traces = Traces.read_csv(out / "traces.csv")
+    columns = {name: traces[name] for name in traces.names}
+    for name in columns:
+        if name.startswith(("en", "qns")) and name[-1].isdigit():
+            columns[name] = columns[name] * math.nan  # what a posture law logs: no eⁿ
+    traces = Traces(columns)
+    scenario = load_scenario("fig3", duration=2.0)
+    station = build_diagram(scenario).station
+    pd = dataclasses.replace(
+        scenario, null_space=dataclasses.replace(scenario.null_space, law="dynamically_consistent_torque_pd")
+    )
+    for law_scenario, graded in ((pd, False), (scenario, True)):
+        metrics = compute_metrics(law_scenario, station, traces, None)
+        error = next(m for m in metrics if m.name == "null_space_error_rms")
+        assert (error.passed is not None) == graded, law_scenario.null_space.law
+        text = render_report(
+            title="t",
+            description="",
+            parameters={},
+            metrics=metrics,
+            plots=[],
+            diagram=None,
+            replay=None,
+            files=[],
+        )
+        verdict = _Page(text).rows["null_space_error_rms"][-1]
+        assert verdict == ("✗ FAIL" if graded else "n/a"), verdict
+        banner = text.split('class="banner', 1)[1].split("</span>", 1)[0]
+        assert ("null_space_error_rms" in banner) == graded, banner

@@ -27,6 +27,7 @@ from nsdrake.studies.compare import load_family, run_family, variant_scenario
 from nsdrake.studies.null_space_laws import (
     FRANKA_ROS_GAINS,
     LAW_KEYS,
+    LAW_TABLES,
     ROBOSUITE_GAINS,
     _continuous_poles,
     damping_ratio,
@@ -38,6 +39,7 @@ from nsdrake.studies.null_space_laws import (
     null_space_masses,
     paper_poles_gains,
     row_gains,
+    table_parts,
     tuned_gains,
 )
 
@@ -49,11 +51,11 @@ LAWS = (
     "dyn. consistent PD (H)",
     "dyn. consistent PD (torque)",
 )
-TASKS = ["panda_wipe", "panda_self_motion", "panda_off_path", "fig3", "push", "push, no rate limit"]
+TASKS = ["panda_wipe", "panda_self_motion", "panda_off_path", "fig3", "push"]
 # the rows beside the rule's (referee, issue 38), on panda_wipe and panda_self_motion
 EXTRAS = {
     "dyn. consistent PD (torque), the paper's poles": "paper_poles",
-    "kinematic PD, damped inverse, franka_ros's gains": "franka_ros",
+    "kinematic PD, damped inverse, franka_ros's initial gains": "franka_ros",
     "dyn. consistent PD (H), robosuite's gains": "robosuite",
 }
 
@@ -295,6 +297,101 @@ def test_the_papers_gain_margin_is_where_scipys_sampled_loop_turns_unstable(law)
             assert abs(s) > 1.0 if grows else abs(s) < 1e-6, (omega, factor, s)
 
 
+def _delayed_characteristic_roots(law: str, g: dict, mu: float, T: float, gain: float) -> np.ndarray:
+    """The closed-loop poles of the law's null-space loop with one period of computation
+    delay, from transfer-function polynomials (not a state matrix): the plant s̈ = u/μ
+    discretised with SciPy's zero-order hold (cont2discrete, then ss2tf: s = n_s(z)/den(z) u,
+    ṡ = n_v(z)/den(z) u), the law's torque u_k = c_s(z) s + c_v ṡ (the paper's c_s with its
+    backward difference, a z⁻¹ term), applied a period late (z⁻¹) and scaled by ``gain``:
+    den(z) z² − gain · (z c_s(z) n_s(z) + z c_v n_v(z)) = 0."""
+    from scipy.signal import ss2tf
+
+    Ad, Bd, *_ = cont2discrete(
+        (np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), np.zeros((2, 1))),
+        T,
+        method="zoh",
+    )
+    num, den = ss2tf(Ad, Bd, np.eye(2), np.zeros((2, 1)))
+    n_s, n_v = num[0], num[1]
+    if law.startswith("paper"):
+        a = abs(g["gain"]) / (mu if law == "paper" else 1.0)
+        z_c_s = np.array([-a / T - g["K_n"] * a, a / T])  # z (−a(1 − z⁻¹)/T − K_n a)
+        z_c_v = np.array([-g["K_n"], 0.0])
+    else:
+        scale = 1.0 if law == "dynamically_consistent_posture_pd" else 1.0 / mu
+        z_c_s = np.array([-scale * g["posture_stiffness"], 0.0])
+        z_c_v = np.array([-scale * g["posture_damping"], 0.0])
+    loop = np.polyadd(np.polymul(z_c_s, n_s), np.polymul(z_c_v, n_v))
+    return np.roots(np.polysub(np.polymul(den, [1.0, 0.0, 0.0]), gain * loop))
+
+
+@pytest.mark.parametrize(
+    "law", ["paper", "paper_moore_penrose", "kinematic_posture_pd", "dynamically_consistent_posture_pd"]
+)
+@pytest.mark.parametrize("omega, h_n, mu, T", [(20.0, 0.0263, 0.0263, 0.001), (50.0, 0.0049, 0.0018, 0.002)])
+def test_the_delayed_gain_margin_is_where_the_delayed_loops_polynomial_turns_unstable(law, omega, h_n, mu, T):
+    """gain_margin with one period of delay against the roots of the delayed loop's
+    characteristic polynomial built from SciPy's transfer functions
+    (:func:`_delayed_characteristic_roots`): stable at 0.999 × the margin and on a grid
+    below it, unstable at 1.001 ×; and the delay costs margin (below the delay-free one).
+    The Panda's rule (μ = h_n) and fig3's light direction. Catches a delayed loop that
+    applies u_k at once (the delay-free margin: 50, not 24.9 for the Panda's PDs), a
+    pending torque not scaled by g, or a margin that is not the first crossing."""
+    g = tuned_gains(law, omega, h_n)
+    margin = gain_margin(law, g, mu, T, delay=1)
+
+    def radius(gain):
+        return np.max(np.abs(_delayed_characteristic_roots(law, g, mu, T, gain)))
+
+    assert 1.0 < margin < gain_margin(law, g, mu, T)
+    assert radius(0.999 * margin) < 1.0 < radius(1.001 * margin)
+    assert all(radius(x) < 1.0 for x in np.linspace(0.001, 0.999, 200) * margin)
+
+
+@pytest.mark.slow
+def test_a_run_with_a_periods_delay_settles_below_the_delayed_margin_and_diverges_above():
+    """End to end, the project's own delay (``realism.delay``, one period) on fig3 with the
+    rule's torque PD (``fig3 / dyn. consistent PD (torque)``), its K and D scaled by g: at
+    0.92 × the delayed margin (``gain_margin_delay`` at the start, 1.80) the posture's
+    ring after first contact dies out (‖τ₀‖ over the last 0.5 s below a tenth of its peak
+    after contact); at 1.05 × it diverges; without the delay the same 1.05 × settles (the
+    delay-free margin is 3.69). 3 s runs. Catches a delayed margin computed without the
+    delay (0.92 × 3.69 diverges) or one that is not the loop the drive runs."""
+    from nsdrake.experiment.simulate import DivergenceError, run
+    from nsdrake.studies.null_space_laws import loop_figures
+
+    family = load_family("null_space_laws")
+    index = [v.name for v in family.variants].index("fig3 / dyn. consistent PD (torque)")
+    base = variant_scenario(family, index, None, 3.0)
+    arm = build_diagram(base).station.arm_model
+    margin = loop_figures(base, arm)["gain_margin_delay"]
+    assert 1.7 < margin < 1.9
+
+    def scaled(factor, delayed=True):
+        ns = dataclasses.replace(
+            base.null_space,
+            posture_stiffness=factor * base.null_space.posture_stiffness,
+            posture_damping=factor * base.null_space.posture_damping,
+        )
+        delay = dataclasses.replace(base.realism.delay, enabled=delayed, periods=1)
+        return dataclasses.replace(
+            base, null_space=ns, realism=dataclasses.replace(base.realism, delay=delay)
+        )
+
+    def settles(scenario):
+        try:
+            traces, _ = run(scenario)
+        except DivergenceError:
+            return False
+        t, tau0 = traces["t"], np.linalg.norm(traces.block("tau0_"), axis=1)
+        contact = t[np.flatnonzero(traces["f_n"] >= scenario.reference.contact_threshold)[0]]
+        return tau0[t >= t[-1] - 0.5].max() < 0.1 * tau0[t >= contact].max()
+
+    assert settles(scaled(0.92 * margin))
+    assert not settles(scaled(1.05 * margin))
+    assert settles(scaled(1.05 * margin, delayed=False))
+
+
 def test_the_loop_along_a_run_spans_its_postures():
     """loop_along_run over a few postures of fig3's arm: the range of ζ is the range of the
     per-posture damping ratios computed here from Drake's own mass matrix and Jacobian
@@ -310,7 +407,7 @@ def test_the_loop_along_a_run_spans_its_postures():
     qs = np.array([q0 + d for d in (0.0, 0.15, -0.2, 0.3)])
     g = tuned_gains("dynamically_consistent_torque_pd", 50.0, 0.0049)
     T = 0.001
-    zetas, margins = [], []
+    zetas, margins, mus = [], [], []
     for q in qs:
         plant.SetPositions(context, q)
         H = plant.CalcMassMatrix(context)
@@ -323,6 +420,7 @@ def test_the_loop_along_a_run_spans_its_postures():
             plant.world_frame(),
         )[arm.rows]
         Z = null_space(J)
+        mus += list(np.linalg.eigvalsh(Z.T @ H @ Z))
         for mu in np.linalg.eigvalsh(Z.T @ H @ Z):
             zetas.append(g["posture_damping"] / (2 * np.sqrt(g["posture_stiffness"] * mu)))
             margins.append(2 * mu / (g["posture_damping"] * T))
@@ -330,6 +428,8 @@ def test_the_loop_along_a_run_spans_its_postures():
     assert run["zeta_min"] == pytest.approx(min(zetas), rel=1e-6)
     assert run["zeta_max"] == pytest.approx(max(zetas), rel=1e-6)
     assert run["gain_margin_min"] == pytest.approx(min(margins), rel=1e-5)
+    delayed = min(gain_margin("dynamically_consistent_torque_pd", g, mu, T, delay=1) for mu in mus)
+    assert run["gain_margin_delay_min"] == pytest.approx(delayed, rel=1e-9)
     assert max(zetas) / min(zetas) > 1.05  # the postures differ enough to tell
 
 
@@ -379,8 +479,11 @@ def test_short_family_dynamically_consistent_laws_leave_the_task_alone(tmp_path)
     for row in rows.values():
         assert row["pole_radius_T"] < 1.0
     assert math.isfinite(rows["paper"]["nu_rms"]) and rows["kinematic PD"]["nu_rms"] == ""
-    for name in ("table.md", "table.csv", "laws.png"):
+    for name in ("table.md", "table.csv", "laws.png", "task/table.md", "posture/table.md"):
         assert (tmp_path / name).stat().st_size > 0
+    # every figure a row has is in one of the markdown tables (none only in table.csv)
+    shown = {key for _, columns in LAW_TABLES for key, _ in columns} | {"variant", "note", "error"}
+    assert {key for row in result.rows for key in row} <= shown
 
 
 @pytest.mark.parametrize("arm_name", ["panda", "arm4"])
@@ -428,3 +531,24 @@ def test_the_off_path_posture_is_off_the_self_motion():
     assert np.linalg.norm(offset) == pytest.approx(0.3)
     assert np.linalg.norm(Z @ (Z.T @ offset)) < 1e-9 * np.linalg.norm(offset)
     assert np.linalg.norm(Z.T @ T.H @ offset) > 1e-3 * np.linalg.norm(T.H @ offset)
+
+
+def test_the_table_parts_show_each_figure_once_with_its_unit_and_the_push_rows_alone():
+    """table_parts on two rows, a task's and a push's, each with every figure: each figure
+    is a column of exactly one table, headed with its unit where it has one
+    ("force_error_rms [N]"), the variant first in every table; the push table holds the
+    push row only, the others both. Catches a figure in two tables or none, a header
+    without its unit, or push columns blank on every other row (the 28-column table)."""
+    keys = [key for _, columns in LAW_TABLES for key, _ in columns]
+    push_keys = {key for folder, columns in LAW_TABLES if folder == "push" for key, _ in columns}
+    task_row = {"variant": "panda_wipe / paper", **{k: 1.0 for k in keys if k not in push_keys}}
+    push_row = {"variant": "push / paper", **{k: 2.0 for k in keys}}
+    parts = {folder: (header, rows) for folder, header, rows in table_parts([task_row, push_row])}
+    assert set(parts) == {"", "task", "posture", "push"}
+    headers = [h for header, _ in parts.values() for h in header if h != "variant"]
+    assert sorted(h.split(" [")[0] for h in headers) == sorted(keys)
+    assert "force_error_rms [N]" in parts["task"][0] and "slowest_pole [rad/s]" in parts[""][0]
+    assert all(header[0] == "variant" for header, _ in parts.values())
+    assert [row["variant"] for row in parts["push"][1]] == ["push / paper"]
+    assert [row["variant"] for row in parts["task"][1]] == ["panda_wipe / paper", "push / paper"]
+    assert parts["push"][1][0]["push_return_time [s]"] == 2.0
