@@ -24,6 +24,7 @@ from pydrake.multibody.tree import SpatialInertia, UnitInertia
 from nsdrake.cli import main
 from nsdrake.control.actuator_limits import limited_torque
 from nsdrake.control.step import ControllerStep
+from nsdrake.control.validation import ControllerConfigError
 from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError
 from nsdrake.driver.panda import command_problem
@@ -404,3 +405,19 @@ def test_a_command_beyond_the_limits_stops_the_drive_before_it_is_sent(side):
     )
     assert line.endswith("stopped commanding after 0 command(s)")
     assert beyond(hostile.command, None)
+
+
+def test_robot_adds_gravity_is_a_boolean(side):
+    """ControllerStep's robot_adds_gravity takes True or False only: 1, "yes" or None are
+    refused in one line naming it (catches a truthy value taken as True)."""
+    c = side.controller
+    for bad in (1, "yes", None):
+        with pytest.raises(ControllerConfigError) as info:
+            ControllerStep(
+                controller_model=c.model,
+                normal=c.normal,
+                config=c.config,
+                wrench_point=c.wrench_point,
+                robot_adds_gravity=bad,
+            )
+        assert str(info.value) == f"robot_adds_gravity: must be True or False, got {bad!r}"
