@@ -7,8 +7,12 @@ actuators' range. So τ₀ gives way first:
 
     τ = τ_task + s τ₀,   s = max S,   S = {s ∈ [0, 1] : lo_j ≤ τ_task,j + s τ₀,j ≤ hi_j ∀ j},
 
-for each joint's window [lo_j, hi_j] = [−τ_max, τ_max] ∩ [τ_prev − ρ_max T, τ_prev + ρ_max T]
-(:func:`torque_window`). Each joint allows an interval of s (:func:`scale_interval`),
+for each joint's window [lo_j, hi_j] = [c − τ_max, c + τ_max] ∩ [τ_prev − ρ_max T, τ_prev + ρ_max T]
+(:func:`torque_window`). The centre c is 0 for actuators that apply τ; for a robot that adds
+its own g(q) to the command it is sent (Franka's torque interface), what its joints are
+asked for is τ − g(q), and its limits bound that: c = g(q), so that τ − g(q) ∈ ±τ_max by
+the limiter's own guarantee (:class:`nsdrake.control.step.ControllerStep`'s
+``robot_adds_gravity``). Each joint allows an interval of s (:func:`scale_interval`),
 S is their intersection with [0, 1], an interval too. For a τ₀ with J H⁻¹ τ₀ = 0 (Eq. 11:
 the paper's law, the dynamically consistent posture PDs) scaling τ₀ leaves the task
 untouched; only the null-space velocity tracking slows down. A τ₀ outside that null space
@@ -97,21 +101,24 @@ def limit_torque(tau_task, tau0, lower, upper):
 
 
 @njit(cache=True)
-def torque_window(tau_max, rate_max, period, tau_prev, has_previous):
-    """(lower, upper) per joint: ±τ_max, narrowed to τ_prev ± ρ_max T when a previous
-    torque exists (``has_previous`` False: the first period, no rate limit, ``tau_prev``
-    ignored). [N m]."""
+def torque_window(tau_max, rate_max, period, tau_prev, has_previous, centre):
+    """(lower, upper) per joint: ``centre`` ± τ_max (the centre c of the module docstring:
+    zeros, or g(q) for a robot that adds g(q) itself), narrowed to τ_prev ± ρ_max T when a
+    previous torque exists (``has_previous`` False: the first period, no rate limit,
+    ``tau_prev`` ignored). [N m]."""
+    lower, upper = centre - tau_max, centre + tau_max
     if not has_previous:
-        return -tau_max, tau_max.copy()
+        return lower, upper
     step = rate_max * period
-    return np.maximum(-tau_max, tau_prev - step), np.minimum(tau_max, tau_prev + step)
+    return np.maximum(lower, tau_prev - step), np.minimum(upper, tau_prev + step)
 
 
 @njit(cache=True)
-def limited_torque(tau_task, tau0, tau_max, rate_max, period, tau_prev, has_previous):
-    """[τ; s; clipped] (n + 2): :func:`limit_torque` within :func:`torque_window`, in one
-    compiled call (``has_previous`` False: no previous torque, ``tau_prev`` ignored)."""
-    lower, upper = torque_window(tau_max, rate_max, period, tau_prev, has_previous)
+def limited_torque(tau_task, tau0, tau_max, rate_max, period, tau_prev, has_previous, centre):
+    """[τ; s; clipped] (n + 2): :func:`limit_torque` within :func:`torque_window` (about
+    ``centre``), in one compiled call (``has_previous`` False: no previous torque,
+    ``tau_prev`` ignored)."""
+    lower, upper = torque_window(tau_max, rate_max, period, tau_prev, has_previous, centre)
     tau, s, clipped = limit_torque(tau_task, tau0, lower, upper)
     out = np.empty(tau.shape[0] + 2)
     out[: tau.shape[0]] = tau

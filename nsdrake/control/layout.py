@@ -65,6 +65,9 @@ PlanView = namedtuple(
         # null space (Eq. 21) and actuator limits
         "K_n", "period", "task_velocity_compensation", "coriolis_compensation", "feedforward",
         "tau_max", "rate_max",
+        # the torque window about g(q), not 0: the robot adds g(q) to the command τ − g(q)
+        # (nsdrake.control.actuator_limits; ControllerStep's robot_adds_gravity)
+        "limits_about_gravity",
         # the null-space law (nsdrake.control.null_space_laws) and the posture objective
         "law", "posture_stiffness", "posture_damping", "projector_damping", "posture_source", "posture_gain",
         "posture_offset_time", "posture_ramp_time", "q_d", "posture_offset", "posture_weight",
@@ -149,7 +152,7 @@ def plan_size(dims) -> int:
     # in the order of plan_views
     return (
         m * m + m * m + m + 7 + 3 + m + n + n + 5 + k * LINK_WIDTH + k * n + o * OBSTACLE_WIDTH
-        + CRITERIA + 6 + 4 + n + n + 4 + 5 + n + n + POSTURE_SCALARS + 3 * n
+        + CRITERIA + 6 + 4 + n + n + 4 + 5 + n + n + 1 + POSTURE_SCALARS + 3 * n
     )  # fmt: skip
 
 
@@ -182,6 +185,7 @@ def plan_views(buf, dims) -> PlanView:
     ns, o = _take(buf, o, 5)  # K_n, period, task velocity, Coriolis, feedforward
     tau_max, o = _take(buf, o, n)
     rate_max, o = _take(buf, o, n)
+    about_gravity, o = _take(buf, o, 1)
     # law, K_ns, D_ns, λ, posture source, K of Eq. 30, offset time, offset ramp time
     law, o = _take(buf, o, POSTURE_SCALARS)
     q_d, o = _take(buf, o, n)
@@ -196,7 +200,7 @@ def plan_views(buf, dims) -> PlanView:
         gains, selector_limits, e[0], e[1] != 0.0, e[2] != 0.0, command_limits,
         e[3] != 0.0, direction, sweep_wave,
         ns[0], ns[1], ns[2] != 0.0, ns[3] != 0.0, ns[4] != 0.0,
-        tau_max, rate_max,
+        tau_max, rate_max, about_gravity[0] != 0.0,
         int(law[0]), law[1], law[2], law[3], law[4] != 0.0, law[5], law[6], law[7],
         q_d, posture_offset, posture_weight,
     )  # fmt: skip

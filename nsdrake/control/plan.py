@@ -135,6 +135,8 @@ class ControllerPlan:
             zeros when the task has no force axis (``has_force_axis`` False).
         dims, plan, index: the flat arrays of :mod:`nsdrake.control.layout`.
         n, m, m_t, m_r: joints, task axes (translational, rotational).
+        limits_about_gravity: the torque window is centred on g(q), for a robot that adds
+            g(q) to the command τ − g(q) it is sent (:mod:`nsdrake.control.actuator_limits`).
     """
 
     def __init__(
@@ -144,6 +146,7 @@ class ControllerPlan:
         config: ControllerConfig,
         normal: np.ndarray | None,
         wrench_point: Sequence[float] | None,
+        limits_about_gravity: bool = False,
     ):
         compile_kernels()  # every configuration's kernels at once, the first time (issue 36)
         self.model, self.config = model, config
@@ -153,6 +156,7 @@ class ControllerPlan:
         self.has_force_axis = normal is not None
         self.normal = np.zeros(self.m_t) if normal is None else np.asarray(normal, dtype=float)
         self.inverse = generalized_inverse(config)
+        self.limits_about_gravity = bool(limits_about_gravity)
         pin = model.pinocchio
         self._distances = _obstacle_distances(model)
         self.obstacle_mode = _obstacle_mode(model, self._distances)
@@ -239,7 +243,7 @@ class ControllerPlan:
             [sw.amplitude, sw.frequency, sw.start_time, sw.ramp_time],
             [ns.K_n, config.period, ns.task_velocity_compensation, ns.coriolis_compensation,
              ns.acceleration_feedforward],
-            torque_limits(config, model), self.rate_limits,
+            torque_limits(config, model), self.rate_limits, [self.limits_about_gravity],
             *posture_constants(config, model.joint_names),
         ]  # fmt: skip
         plan = np.concatenate([np.asarray(p, dtype=float).ravel() for p in parts])

@@ -20,7 +20,8 @@ the math inside each stage is the math of its own module, called, never restated
    backward difference from the stored previous q̇_dⁿ; or, with ``null_space.law`` a
    posture law, that law's τ₀ (:mod:`null_space_laws`);
 6. **actuator limits** (``LIMITS``): τ = τ_task + s τ₀ within the torque and rate windows
-   (:mod:`actuator_limits`), from the stored previous τ.
+   (:mod:`actuator_limits`), from the stored previous τ; the torque window about g(q) of
+   stage 1 for a robot that adds g itself (the plan's ``limits_about_gravity``).
 
 Stages 2–6 and the two discrete updates are one compiled function, :func:`run_stages`,
 which runs the stages it is asked for (a bit set) in this order; each named system asks
@@ -235,7 +236,7 @@ def run_stages(
         else:
             _posture_law(T, P, t, out.null_space)
     if stages & LIMITS:
-        _actuator_limits(P, out.task, out.null_space[:n], previous_tau, out.limited)
+        _actuator_limits(T, P, out.task, out.null_space[:n], previous_tau, out.limited)
     if stages & COPY:
         out.criteria[:], out.x[:] = criteria, T.x
     if stages & STORE:
@@ -503,11 +504,15 @@ def _posture_velocity(T, P, t):
 
 
 @njit(cache=True, inline="always")
-def _actuator_limits(P, tau_task, tau0, previous, out):
-    """Stage 6: out = [τ (n); s; clipped] within the torque window, narrowed by the rate
-    limit around ``previous`` = [τ (n); 1 if stored]."""
+def _actuator_limits(T, P, tau_task, tau0, previous, out):
+    """Stage 6: out = [τ (n); s; clipped] within the torque window (about g(q) when the
+    robot adds g itself, else 0), narrowed by the rate limit around ``previous`` = [τ (n);
+    1 if stored]."""
     n = tau_task.shape[0]
-    out[:] = limited_torque(tau_task, tau0, P.tau_max, P.rate_max, P.period, previous[:n], previous[n] != 0.0)
+    centre = T.g if P.limits_about_gravity else np.zeros(n)
+    out[:] = limited_torque(
+        tau_task, tau0, P.tau_max, P.rate_max, P.period, previous[:n], previous[n] != 0.0, centre
+    )
 
 
 # ---------------------------------------------------------------- the discrete state

@@ -53,6 +53,7 @@ from nsdrake.control.stages import (
     state_parts,
 )
 from nsdrake.control.validation import (
+    ControllerConfigError,
     ControllerInputError,
     entry_names,
     finite_problem,
@@ -107,7 +108,13 @@ class ControllerStep:
     tick (module docstring).
 
     Args: as :class:`nsdrake.NullSpaceImpedanceController` (``controller_model``, ``normal``,
-    ``config``, ``tool_frame``, ``task_axes``, ``wrench_point``).
+    ``config``, ``tool_frame``, ``task_axes``, ``wrench_point``), and ``robot_adds_gravity``:
+    the robot adds g(q) to the torque it is sent (Franka's torque interface does), so the
+    loop sends τ − g(q) (:attr:`gravity`) and the actuator limits bound that, not τ: the
+    torque window is centred on g(q) (τ − g(q) ∈ ±τ_max) and the torque-rate limit's
+    reference, the previous τ, is moved by g's change since the previous call (the change
+    of τ − g(q) at most ρ_max T). False (the default, and the Diagram's only way): the
+    actuators apply τ, the windows about 0.
 
     Call :meth:`step` once per control period ``config.period``, with the time and the
     state of that tick.
@@ -128,13 +135,23 @@ class ControllerStep:
         tool_frame: str = "tool",
         task_axes: Sequence[str] = ("x", "y"),
         wrench_point: Sequence[float] | None = None,
+        robot_adds_gravity: bool = False,
     ):
         from nsdrake.control.controller import as_controller_model
 
         model = as_controller_model(controller_model, tool_frame, task_axes)
         normal = validate_controller(config=config, model=model, normal=normal, wrench_point=wrench_point)
+        if not isinstance(robot_adds_gravity, bool):
+            raise ControllerConfigError(
+                "robot_adds_gravity", f"must be True or False, got {robot_adds_gravity!r}"
+            )
+        self.robot_adds_gravity = robot_adds_gravity
         self.plan = plan = ControllerPlan(
-            model=model, config=config, normal=normal, wrench_point=wrench_point
+            model=model,
+            config=config,
+            normal=normal,
+            wrench_point=wrench_point,
+            limits_about_gravity=robot_adds_gravity,
         )
         self.model, self.config = model, config
         n, m_t = plan.n, plan.m_t
@@ -166,6 +183,7 @@ class ControllerStep:
         # g(q) (n) [N m] of the last call's q, the model's gravity term (τ = … + g, the torque
         # that holds the arm against gravity): a view, rewritten by each call
         self.gravity = plan.terms_field(self._terms, "g")
+        self._gravity_previous = np.zeros(n)  # g(q) of the last call (robot_adds_gravity)
         self.reset()
 
     @property
@@ -173,16 +191,6 @@ class ControllerStep:
         """The discrete state [switch (3); previous q̇_dⁿ (n + 1); previous τ (n + 1)], a view."""
         b = self._buffers
         return np.concatenate([b.switch, b.previous_qdot, b.previous_tau])
-
-    def shift_rate_reference(self, delta: np.ndarray) -> None:
-        """Moves the torque-rate limit's reference, the previous call's τ, by ``delta`` (n)
-        [N m] before the next call (nothing before a first call). For a loop whose actuators
-        see τ − o, o changing between calls (a robot that adds its own g(q) to the command
-        it is sent: nsdrake/driver/controller_side.py): shifted by o_k − o_{k−1}, the limit
-        bounds the change of what they see, (τ_k − o_k) − (τ_{k−1} − o_{k−1}), by ρ_max T."""
-        previous = self._buffers.previous_tau
-        if previous[self._n] != 0.0:
-            previous[: self._n] += delta
 
     def reset(self) -> None:
         """Forget the discrete state: the next call is the first tick (no previous q̇_dⁿ or τ,
@@ -304,6 +312,11 @@ class ControllerStep:
         """The stages on the checked inputs (``qdot``: a prescribed q̇_dⁿ, or None)."""
         b, plan = self._buffers, self.plan
         plan.terms(b.scratch, self._q, self._v, self._terms)
+        if self.robot_adds_gravity:  # the rate limit on τ − g(q): its reference moved by g's change
+            previous = b.previous_tau
+            if previous[self._n] != 0.0:
+                previous[: self._n] += self.gravity - self._gravity_previous
+            self._gravity_previous[:] = self.gravity
         stages = PLAIN_STEP if self._t_previous is not None else PLAIN_STEP & ~COMMIT  # first: none pending
         t_previous = 0.0 if self._t_previous is None else self._t_previous
         if qdot is None:

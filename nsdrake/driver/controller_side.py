@@ -8,12 +8,14 @@ plain calls, one tick per status (no Drake diagram runs per tick).
       ─► step.step(t_k, q, q̇, W, …)      ControllerStep: the scenario's controller, τ
       ─► command = τ − g(q) (robot_adds_gravity) ─► lcmt_panda_command (the status's utime)
 
-When the robot adds g(q), what its joints are asked for is the command, τ − g(q): the
-torque-rate limit of the controller's actuator limits is moved onto it (before each step
-the limiter's previous τ is shifted by g(q_k) − g(q_{k−1}), :meth:`ControllerStep.shift_rate_reference`),
-so that the command changes by at most ρ_max T per tick, as Franka's interface requires
-(the limiter alone bounds τ's change, and g moves under a moving arm). What is sent then
-passes the last gate (:func:`nsdrake.driver.panda.command_problem`, in the loop).
+When the robot adds g(q), what its joints are asked for is the command, τ − g(q), and
+Franka's limits bound that: the step is built with ``robot_adds_gravity``
+(:class:`nsdrake.control.step.ControllerStep`), so the controller's actuator limits act
+on the command, their torque window centred on g(q) (τ − g(q) within ±τ_max however much
+of τ_max the gravity of the arm and a payload takes) and their rate limit's reference
+moved by g's change under a moving arm (the command changes by at most ρ_max T per tick).
+What is sent then passes the last gate (:func:`nsdrake.driver.panda.command_problem`, in
+the loop), which catches only faults: the limiter keeps every command inside.
 
 The controller is the one ``nsdrake run`` builds for the scenario
 (:func:`nsdrake.experiment.diagram.build_controller`: its model, task, normal, wrench point
@@ -78,14 +80,10 @@ class ControllerSide:
         self._zero3 = np.zeros(3)
         self.command = np.zeros(NUM_JOINTS)
         self.adds_gravity = self.scenario.driver.robot_adds_gravity
-        self._gravity_context = self._plant.CreateDefaultContext()
-        self._g = np.zeros((2, NUM_JOINTS))  # g(q) of this tick and of the last [N m]
-        self._has_gravity = False  # the last tick's g is in self._g[1]
 
     def reset(self) -> None:
         self.step.reset()
         self.reference.reset()
-        self._has_gravity = False
 
     def estimated_wrench(self, q: np.ndarray, tau_ext: np.ndarray) -> np.ndarray:
         """W_T from the external joint torques (nsdrake/driver/wrench.py), J of the
@@ -109,13 +107,6 @@ class ControllerSide:
         own gravity term, which the step has just computed at q)."""
         desired = self.reference.tick(t, wrench)
         rotation = () if self._quaternion is None else (self._quaternion, self._zero3, self._zero3)
-        if self.adds_gravity:  # the rate limit on the command (module docstring)
-            plant, context, g = self._plant, self._gravity_context, self._g
-            plant.SetPositions(context, q)
-            np.negative(plant.CalcGravityGeneralizedForces(context), out=g[0])
-            if self._has_gravity:
-                self.step.shift_rate_reference(g[0] - g[1])
-            g[1], self._has_gravity = g[0], True
         result = self.step.step(t, q, v, wrench, *desired, *rotation)
         if self.adds_gravity:
             np.subtract(result.tau, self.step.gravity, out=self.command)
@@ -179,6 +170,7 @@ def build_controller_side(scenario: Scenario) -> ControllerSide:
         normal=controller.normal,
         config=controller.config,
         wrench_point=controller.wrench_point,
+        robot_adds_gravity=scenario.driver.robot_adds_gravity,  # its limits on τ − g(q)
     )
     path, common = surface_path(scenario, station)
     R_d = None

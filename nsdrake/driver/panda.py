@@ -5,14 +5,15 @@ specifications": joint torque limits 87 N m for joints 1–4 and 12 N m for join
 5–7, torque-rate limit 1000 N m/s for every joint) are applied twice:
 
 - by the controller's own actuator limits (:mod:`nsdrake.control.actuator_limits`) to
-  τ of the law, g included: the torque the joint produces;
-- by the last gate before the wire (:func:`command_problem`) to what is sent: the
-  command τ − g(q) when the robot adds g (Franka's torque interface checks its limits
-  on that command, the torque it is asked for on top of its own gravity compensation),
-  after everything that shapes it. The limiter does not see g, so a command can break
-  the limits that τ keeps (a payload's gravity beyond what the joint can hold: 431 N m
-  on joint 2 with 100 kg, issue 43); the gate stops the drive before such a command
-  leaves.
+  what the joints are asked for: τ of the law when the robot applies it, the command
+  τ − g(q) when the robot adds g itself (Franka's torque interface checks its limits on
+  that command, the torque it is asked for on top of its own gravity compensation): the
+  limiter's torque window is then centred on g(q) and its rate reference follows g
+  (:class:`nsdrake.control.step.ControllerStep`'s ``robot_adds_gravity``);
+- by the last gate before the wire (:func:`command_problem`) to what is sent, after
+  everything that shapes it. The limiter keeps every command inside, so the gate catches
+  faults only (a limiter on τ alone sent issue 43's 431 N m on joint 2 with 100 kg): it
+  stops the drive before such a command leaves.
 
 A payload heavier than the Panda's published rating (:data:`RATED_PAYLOAD`) is refused
 before anything is built (:func:`payload_rating_problem`).

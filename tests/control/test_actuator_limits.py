@@ -44,10 +44,27 @@ def test_task_torque_outside_its_window_is_clipped_and_counted():
 
 def test_rate_window_narrows_around_the_previous_torque():
     """The window is ±τ_max ∩ τ_prev ± ρ T, and no rate limit before a previous torque."""
-    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, np.array([9.9]), True)
+    zero = np.zeros(1)
+    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, np.array([9.9]), True, zero)
     assert lower[0] == pytest.approx(9.7) and upper[0] == 10.0
-    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, np.array([9.9]), False)
+    lower, upper = torque_window(np.array([10.0]), np.array([100.0]), 0.002, np.array([9.9]), False, zero)
     assert lower[0] == -10.0 and upper[0] == 10.0
+
+
+def test_the_torque_window_sits_on_its_centre():
+    """About a centre c (g(q), for a robot that adds g itself): c ± τ_max, narrowed by the
+    rate window as before. Joint 1: c = 30, τ_max = 12, so [18, 42], the rate window
+    40.5 ± 2 cutting the top at 42; joint 2: c = −5 (a negative g), [−17, 7] ∩ [−18, −14].
+    Catches the centre dropped ([−12, 12]: joint 1's window empty), its sign flipped
+    ([−42, −18]) or added to one end only."""
+    tau_max, rate = np.array([12.0, 12.0]), np.array([1000.0, 1000.0])
+    centre, previous = np.array([30.0, -5.0]), np.array([40.5, -16.0])
+    lower, upper = torque_window(tau_max, rate, 0.002, previous, False, centre)
+    np.testing.assert_array_equal(lower, [18.0, -17.0])
+    np.testing.assert_array_equal(upper, [42.0, 7.0])
+    lower, upper = torque_window(tau_max, rate, 0.002, previous, True, centre)
+    np.testing.assert_allclose(lower, [38.5, -17.0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(upper, [42.0, -14.0], rtol=0, atol=1e-12)
 
 
 # ---------------------------------------------------------------- properties (issue 29)

@@ -23,6 +23,8 @@ from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
 from nsdrake.cli import main
 from nsdrake.control.actuator_limits import limited_torque
+from nsdrake.control.step import ControllerStep
+from nsdrake.control.validation import ControllerConfigError
 from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError
 from nsdrake.driver.panda import command_problem
@@ -105,9 +107,6 @@ class InjectedStep:
     def reset(self):
         self.real.reset()
 
-    def shift_rate_reference(self, delta):
-        self.real.shift_rate_reference(delta)
-
     def step(self, *args):
         result = self.real.step(*args)
         if self.plan:
@@ -136,19 +135,26 @@ def payload_gravity(q, mass, com, gravity) -> np.ndarray:
 def test_no_command_beyond_the_published_limits_ever_leaves(side):
     """Hypothesis draws what shapes the command: a payload (0-100 kg, its centre of mass
     within 0.5 m of the tool), gravity (any direction, up to 3 g) and a pose, for the g(q)
-    the robot adds; the limiter's state (its previous torque, or none) and the law's torques
-    for τ (the limiter's output at the scenario's limits, as the step computes it); the robot
-    adding g or not. Each drive on a fake bus answers up to five statuses with those. Every
-    command that reached the bus is within the published limits and one cycle's rate of the
-    one before, and is τ − g (τ without the robot's g); a drive stopped by the gate stopped
-    on a command that was beyond them, with nothing more sent. Both outcomes occur. Catches
-    the gate removed or checking τ instead of what is sent (the 431 N m of issue 43), the
-    rate left unchecked, and a command within the limits refused."""
+    the robot adds; the law's torques for τ and the limiter's state (its previous torque,
+    or none); the robot adding g or not; and which limiter made τ (its output at the
+    published limits): the drive's own, on what is sent (its torque window centred on the
+    g(q) the robot adds, 0 when it adds none; its previous torque its own last output), or
+    a limiter on τ alone, from any state (a fault the gate is there for). Each drive on a
+    fake bus answers up to five statuses with those. Every command that reached the bus is
+    within the published limits and one cycle's rate of the one before, and is τ − g (τ
+    without the robot's g); a drive stopped by the gate stopped on a command that was beyond
+    them, with nothing more sent; and the drive's own limiter is never stopped, also where
+    a limiter on τ would have been (g beyond what τ_max leaves: issue 43's gate stopping a
+    3 kg payload). All three occur. Catches the gate removed or checking τ instead of what
+    is sent (the 431 N m of issue 43), the rate left unchecked, a command within the limits
+    refused, and the limiter's window not centred on g (dropped, or its sign flipped:
+    the drive's limiter is then stopped)."""
     real = side.step
-    seen = {"sent": 0, "refused": 0}
+    seen = {"sent": 0, "refused": 0, "kept by the centre": 0}
     q_lo = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
     q_hi = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
     unit = st.floats(0.0, 1.0)
+    rates = np.full(7, PUBLISHED_RATE)
 
     @settings(max_examples=100, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
     @given(
@@ -160,6 +166,7 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
         ),
         pose=st.lists(unit, min_size=7, max_size=7),
         adds_gravity=st.booleans(),
+        on_command=st.booleans(),
         ticks=st.lists(
             st.tuples(
                 st.lists(st.floats(-300.0, 300.0), min_size=7, max_size=7),  # τ_task
@@ -171,16 +178,27 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
             max_size=5,
         ),
     )
-    def drive(mass, com, g_size, g_dir, pose, adds_gravity, ticks):
+    def drive(mass, com, g_size, g_dir, pose, adds_gravity, on_command, ticks):
         gravity = g_size * np.asarray(g_dir) / np.linalg.norm(g_dir)
         g = payload_gravity(q_lo + np.asarray(pose) * (q_hi - q_lo), mass, np.asarray(com), gravity)
-        plan = []
-        for tau_task, tau0, previous, has_previous in ticks:
+        robot_g = g if adds_gravity else np.zeros(7)  # what the robot adds, and the sent τ − it
+        centre = robot_g if on_command else np.zeros(7)
+        plan, kept = [], False
+        for k, (tau_task, tau0, previous, has_previous) in enumerate(ticks):
+            tau_task, tau0 = np.asarray(tau_task), np.asarray(tau0)
+            if on_command and k:  # the drive's limiter: its own last τ (g held: no shift)
+                previous, has_previous = plan[-1][0], True
+            else:
+                previous = centre + np.asarray(previous) * PUBLISHED_TORQUE
             out = limited_torque(
-                np.asarray(tau_task), np.asarray(tau0), PUBLISHED_TORQUE, np.full(7, PUBLISHED_RATE),
-                CYCLE, np.asarray(previous) * PUBLISHED_TORQUE, has_previous,
+                tau_task, tau0, PUBLISHED_TORQUE, rates, CYCLE, previous, has_previous, centre
             )  # fmt: skip
             plan.append((out[:7].copy(), g))
+            if on_command and adds_gravity:  # would a limiter about 0 have sent beyond the limits?
+                zero = limited_torque(
+                    tau_task, tau0, PUBLISHED_TORQUE, rates, CYCLE, previous, has_previous, np.zeros(7)
+                )  # fmt: skip
+                kept = kept or bool(np.any(np.abs(zero[:7] - g) > PUBLISHED_TORQUE + ROUNDING))
         bus = FakeBus()
         side.step = step = InjectedStep(real)
         side.adds_gravity = adds_gravity
@@ -197,7 +215,7 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
                     status_bytes(side.station.q0, utime=utime, robot_utime=utime),
                 )
                 bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
-            expected = [tau - (gk if adds_gravity else 0.0) for tau, gk in plan]
+            expected = [tau - robot_g for tau, _ in plan]
             step.plan = list(plan)
             refused = None
             try:
@@ -215,6 +233,9 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
             np.testing.assert_allclose(command, expected[k], rtol=0, atol=1e-12)
             previous = command
         assert len(sent) == loop.commands
+        if on_command:  # the limiter alone keeps every command inside: the gate never stops it
+            assert refused is None, refused
+            seen["kept by the centre"] += kept
         if refused is not None:
             assert "command refused, not sent: " in refused.problem, refused
             assert beyond(expected[len(sent)], previous)  # the gate refused only what was beyond
@@ -224,7 +245,7 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
         seen["sent"] += len(sent)
 
     drive()
-    assert seen["sent"] > 0 and seen["refused"] > 0, seen
+    assert all(seen.values()), seen
 
 
 def test_the_command_keeps_the_rate_limit_while_gravity_moves(side):
@@ -257,6 +278,70 @@ def test_the_command_keeps_the_rate_limit_while_gravity_moves(side):
     assert change.max() > 0.999 * PUBLISHED_RATE * CYCLE  # the limiter was at its rate limit
 
 
+@pytest.mark.parametrize(
+    "scale", [1.0, 2.0], ids=["earth", "twice earth's gravity"]
+)  # fmt: skip
+def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(scale):
+    """panda_wipe with a declared 3 kg payload (the Panda's rating; its centre of mass
+    at (0.1, 0, 0.1) m in the tool frame) under earth's gravity, or twice it: joint 6 carries g(q) of 6-7 N m
+    (13-14 N m, beyond its 12 N m), and moving it at 2 rad/s (every status consistent) drives
+    the law to joint 6's limit. Every status is answered, nothing stops the drive, every
+    command is within the published limits and rate; and τ − g(q), g from plain Drake calls
+    (urdf/panda.urdf with the point load, at each status's q), is within ±τ_max at every
+    tick and at −12 N m exactly on joint 6 while it is at its limit: the limiter's window
+    sits on the model's g(q). Catches the window about 0 (the gate stops the drive at
+    13 ms: −13 N m on joint 6), about −g(q) (its sign flipped), or a step that is not told
+    the robot adds g (the drive's controller side)."""
+    com = np.array([0.1, 0.0, 0.1])
+    s = load_scenario("panda_wipe", duration=0.1)
+    s = dataclasses.replace(
+        s,
+        gravity=[0.0, 0.0, -9.81 * scale],
+        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=3.0, com=list(com))),
+        driver=dataclasses.replace(s.driver, first_status_timeout=0.3),
+    )
+    side = build_controller_side(s)
+    assert side.adds_gravity
+    taus, real_step = [], side.step.step
+
+    def recording_step(*args):
+        result = real_step(*args)
+        taus.append(result.tau.copy())
+        return result
+
+    side.step.step = recording_step
+    bus = FakeBus()
+    loop = ControllerLoop(side, bus, clock=bus.clock, capacity=64)
+    loop.ready()
+    taus.clear()  # the warm-up's
+    q, v, speed, ticks = np.array(side.station.q0, dtype=float), np.zeros(7), 2.0, 40
+    qs = []
+    for k in range(ticks + 1):
+        if k:
+            q[5] += 0.5 * 1e-3 * (v[5] + speed)
+            v[5] = speed
+        qs.append(q.copy())
+        utime = UTIME0 + 1000 * k
+        bus.at((k + 1) * 1e-3, "PANDA_STATUS", status_bytes(q, v=v, utime=utime, robot_utime=utime))
+        bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
+    loop.start()
+    for _ in range(ticks):
+        loop.tick()
+    sent = np.array([message.joint_torque for _, message in bus.sent])
+    assert len(sent) == ticks + 1 == len(taus)
+    previous = None
+    for command in sent:
+        assert not beyond(command, previous), command
+        previous = command
+    g = np.array([payload_gravity(qk, 3.0, com, [0.0, 0.0, -9.81 * scale]) for qk in qs])
+    assert g[:, 5].min() > 6.0 * scale  # joint 6 carries 6-7 N m: half its 12 N m left (twice: none)
+    on_command = np.array(taus) - g
+    assert np.all(np.abs(on_command) <= PUBLISHED_TORQUE + 1e-9)
+    np.testing.assert_allclose(sent, on_command, rtol=0, atol=1e-9)  # the robot adds what it subtracts
+    at_limit = np.abs(on_command[:, 5] + 12.0) <= 1e-9
+    assert at_limit.sum() >= 5, on_command[:, 5]  # joint 6 held at its limit, below g(q) by τ_max
+
+
 # --- a payload beyond the rating, a model beyond the limits -----------------------------------
 
 
@@ -287,15 +372,14 @@ def test_the_rated_payload_itself_is_taken():
     )
 
 
-# A rated 3 kg payload whose centre of mass lies 6 m off the tool: its gravity at panda_wipe's
-# start is beyond what joint 6 may be sent (the limiter clips τ, the command τ − g is not).
-HOSTILE = "arm: {payload: {mass: 3.0, com: [6.0, 0.0, 0.0]}}\n"
-
-
 def test_a_command_beyond_the_limits_stops_the_drive_before_it_is_sent(side):
-    """The hostile payload on a fake bus: the drive stops at its first status with one line
-    naming the joint and its command, and the bus carries no command. Catches the gate
-    missing (the command is sent: today's main sent all 32 of issue 43's)."""
+    """A rated 3 kg payload whose centre of mass lies 6 m off the tool (its gravity at
+    panda_wipe's start beyond what joint 6 may be sent) and a fault planted: the step not
+    told that the robot adds g, its limiter bounding τ and not the command τ − g (the
+    drive's own limiter keeps the command inside). On a fake bus the drive stops at its
+    first status with one line naming the joint and its command, and the bus carries no
+    command. Catches the gate missing (the command is sent: today's main sent all 32 of
+    issue 43's)."""
     s = load_scenario("panda_wipe", duration=0.05)
     s = dataclasses.replace(
         s,
@@ -303,6 +387,10 @@ def test_a_command_beyond_the_limits_stops_the_drive_before_it_is_sent(side):
         driver=dataclasses.replace(s.driver, first_status_timeout=0.3),
     )
     hostile = build_controller_side(s)
+    c = hostile.controller
+    hostile.step = ControllerStep(  # the fault: limits on τ alone (robot_adds_gravity left False)
+        controller_model=c.model, normal=c.normal, config=c.config, wrench_point=c.wrench_point
+    )
     bus = FakeBus()
     loop = ControllerLoop(hostile, bus, clock=bus.clock, capacity=8)
     loop.ready()
@@ -317,3 +405,19 @@ def test_a_command_beyond_the_limits_stops_the_drive_before_it_is_sent(side):
     )
     assert line.endswith("stopped commanding after 0 command(s)")
     assert beyond(hostile.command, None)
+
+
+def test_robot_adds_gravity_is_a_boolean(side):
+    """ControllerStep's robot_adds_gravity takes True or False only: 1, "yes" or None are
+    refused in one line naming it (catches a truthy value taken as True)."""
+    c = side.controller
+    for bad in (1, "yes", None):
+        with pytest.raises(ControllerConfigError) as info:
+            ControllerStep(
+                controller_model=c.model,
+                normal=c.normal,
+                config=c.config,
+                wrench_point=c.wrench_point,
+                robot_adds_gravity=bad,
+            )
+        assert str(info.value) == f"robot_adds_gravity: must be True or False, got {bad!r}"

@@ -70,5 +70,6 @@ def test_the_drive_controller_applies_the_published_limits():
         1e-3,
         np.zeros(7),
         True,
+        np.zeros(7),
     )
     np.testing.assert_allclose(out[:7], 1.0)  # from rest: one period of 1000 N m/s

@@ -412,25 +412,22 @@ def test_a_refused_status_stops_the_controller(sides, fault, words):
 def test_a_joint_beyond_the_panda_s_limits_stops_the_controller(sides):
     """Joint 6 at its published upper limit + 0.02 rad (margin 0.01): refused, reached at
     2.5 rad/s (its velocity reported: steps the motion checks allow; catches a position
-    moving past the limit). The robot adds no g here: with g added, the controller, at
-    joint 6's 12 N m as the joint is pushed away, asks for a command 0.04 N m beyond it
-    first, and the last gate stops the drive before this rule is reached
-    (tests/driver/test_command_gate.py)."""
+    moving past the limit). The robot adds g: the controller, at joint 6's 12 N m as the
+    joint is pushed away, keeps its command within the limit (its window centred on g(q)),
+    so the position rule, not the last gate, stops the drive (before the centre, the gate
+    met a command 0.04 N m beyond 12 N m first)."""
     loop, robot, bus = start_loop(sides)
-    loop.side.adds_gravity = False
-    try:
-        robot.status()
-        loop.start()
-        q, v = robot.q.copy(), np.zeros(7)
-        target = POSITION_UPPER[5] + 0.02
-        with pytest.raises(DriveFaultError) as info:
-            while True:
-                q[5] = min(q[5] + (0.0025 if v[5] else 0.00125), target)
-                v[5] = 2.5
-                robot.status(q=q, v=v)
-                loop.tick()
-    finally:
-        loop.side.adds_gravity = loop.side.scenario.driver.robot_adds_gravity
+    assert loop.side.adds_gravity
+    robot.status()
+    loop.start()
+    q, v = robot.q.copy(), np.zeros(7)
+    target = POSITION_UPPER[5] + 0.02
+    with pytest.raises(DriveFaultError) as info:
+        while True:
+            q[5] = min(q[5] + (0.0025 if v[5] else 0.00125), target)
+            v[5] = 2.5
+            robot.status(q=q, v=v)
+            loop.tick()
     assert (
         "panda_joint6 is at" in info.value.problem
         and "above the Panda's limit 3.7525 rad" in info.value.problem

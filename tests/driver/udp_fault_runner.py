@@ -33,13 +33,7 @@ AFTER = 0.4  # [s] the bad driver talks on after a refused status: the controlle
 def main() -> None:
     url, out_root, faults = sys.argv[1], Path(sys.argv[2]), sys.argv[3].split(",")
     scenario = load_scenario("panda_wipe", duration=30.0)
-    # the robot adding no g: the bad driver is no robot (it applies nothing), and with g added
-    # the controller, at joint 6's 12 N m as position_limit pushes the joint past its limit,
-    # asks for a command beyond it first, so the last gate would stop the drive before the
-    # rule under test is reached (the gate's own tests: tests/driver/test_command_gate.py)
-    driver = dataclasses.replace(
-        scenario.driver, expire_sec=BOUND * 1e-3, first_status_timeout=3.0, robot_adds_gravity=False
-    )
+    driver = dataclasses.replace(scenario.driver, expire_sec=BOUND * 1e-3, first_status_timeout=3.0)
     side = build_controller_side(dataclasses.replace(scenario, driver=driver))
     q = ",".join(repr(float(x)) for x in side.station.q0)
     bad = Path(__file__).with_name("bad_driver.py")
