@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import subprocess
@@ -246,6 +247,7 @@ def test_default_output_folder_never_overwrites(tmp_path, monkeypatch):
     ("args", "message"),
     [
         (["run", "fig4"], "unknown scenario 'fig4'"),
+        (["run", "my_arm.yaml"], "my_arm.yaml: no such scenario file (nor a shipped one"),
         (["run", "fig3", "--duration", "0"], "--duration must be > 0"),
         (["run", "fig3", "--duration", "nan"], "--duration must be > 0"),
         (["run", "fig3", "--duration", "soon"], "--duration must be a number"),
@@ -270,6 +272,82 @@ def test_bad_config_fails_before_the_output_folder_is_made(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "arm.initial_positions.joint9: unknown joint" in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_run_takes_a_standalone_scenario_file(tmp_path, monkeypatch, capsys):
+    """Issue 42: nsdrake run FILE.yaml said "unknown scenario". A complete scenario file
+    runs as itself: its own fields (duration 0.05 s here, not fig3's), its folder
+    runs/STEM, and the run's scenario.yaml says where it came from. Catches the file read
+    as an overlay of another scenario, or the whole path taken for the folder's name."""
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.reporting.run_folder import scenario_yaml
+
+    monkeypatch.chdir(tmp_path)
+    mine = Path("arms") / "my_arm.yaml"
+    mine.parent.mkdir()
+    fig3 = load_scenario("fig3")
+    mine.write_text(scenario_yaml(dataclasses.replace(fig3, duration=0.05, description="mine")))
+    assert main(["run", str(mine), "--no-replay"]) in (0, 1)
+    printed = capsys.readouterr().out
+    assert f"running {mine} (0.05 s simulated) into runs/my_arm/" in printed
+    assert len(Traces.read_csv(Path("runs/my_arm/traces.csv"))) == 26  # t = 0, 0.002, …, 0.05
+    assert json.loads(Path("runs/my_arm/metrics.json").read_text())["scenario"] == str(mine)
+
+
+def test_an_overlay_that_changes_the_arm_runs_and_says_what_it_dropped(tmp_path, capsys):
+    """Issue 42: an overlay choosing another arm on a shipped base failed on the base's
+    tables keyed by the old arm's joints (a UR5 could not be run on any base). Here the
+    Panda on self_motion (arm4's sweep direction): one line names the dropped table, in
+    the error a sweep without a direction then is, and beside the run once the overlay
+    chooses criteria. Catches a table kept (exit 2: unknown joint) and a table dropped
+    silently."""
+    from nsdrake.experiment.scenario import load_scenario
+
+    panda = load_scenario("panda_self_motion")
+    positions = ", ".join(f"{k}: {v}" for k, v in panda.arm.initial_positions.items())
+    config = tmp_path / "panda.yaml"
+    config.write_text(
+        f"arm: {{urdf: panda.urdf, initial_positions: {{{positions}}}}}\n"
+        f"plate: {{urdf: table.urdf, position: {panda.plate.position}}}\n"
+        "task: {axes: [x, y, z]}\nreport: {checks: [], compare_without_null_space_task: false}\n"
+    )
+    out = tmp_path / "run"
+    args = [
+        "run",
+        "self_motion",
+        "--config",
+        str(config),
+        "--duration",
+        "0.02",
+        "--out",
+        str(out),
+        "--no-replay",
+    ]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "sweep.direction: a sweep needs a non-zero direction (note: " in err and err.count("\n") == 1
+    assert "the base's tables keyed by the other arm's joints are dropped" in err
+    with config.open("a") as f:
+        f.write("desired_null_space: {source: criteria}\n")
+    code = main(args)
+    captured = capsys.readouterr()
+    assert code in (0, 1), captured.err
+    (note,) = [line for line in captured.out.splitlines() if line.startswith("nsdrake: note:")]
+    assert "chooses another arm (arm.urdf 'arm4.urdf' -> 'panda.urdf', positions for its 7 joints)" in note
+    assert note.endswith("dropped: desired_null_space.sweep.direction")
+    assert (out / "traces.csv").is_file()
+
+
+def test_a_checks_need_fails_before_the_run(tmp_path, capsys):
+    """Issue 42: report.checks [self_motion] without swivel_frames simulated the whole run,
+    then ended in KeyError: "no trace column 'swivel'". Now one line, exit 2, no folder."""
+    config = tmp_path / "checks.yaml"
+    config.write_text("report: {checks: [self_motion]}\n")
+    out = tmp_path / "out"
+    assert main(["run", "fig3", "--config", str(config), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "checks.yaml: report.checks[0]: self_motion measures the elbow's swivel" in err
+    assert err.count("\n") == 1 and not out.exists()
 
 
 def test_console_script_exit_status(tmp_path):
