@@ -32,9 +32,10 @@ class PayloadConfig:
 
 @dataclass
 class ArmConfig:
-    # Model file: a shipped model name (urdf/) or a path relative to the scenario file; a URDF,
-    # an SDF or Drake model directives (.dmd.yaml), parsed from the file (its meshes' relative
-    # URIs resolve from its folder) [-].
+    # Model file: a shipped model name (urdf/), a path relative to the scenario file, or
+    # package://NAME/path (NAME's folder from packages, else the package pip installed, as
+    # example-robot-data's robots); a URDF, an SDF or Drake model directives (.dmd.yaml),
+    # parsed from the file (its meshes' relative URIs resolve from its folder) [-].
     urdf: str = "arm4.urdf"
     # package:// URIs: {package name: folder}, folders relative to the scenario file; the
     # nearest package.xml above the model file and ROS_PACKAGE_PATH are searched too [-].

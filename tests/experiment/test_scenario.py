@@ -498,3 +498,41 @@ def test_every_check_that_is_accepted_also_plots(tmp_path, case):
     reading a column the case does not write (pose.png's joint-margin panels on arm4 with
     the self_motion check)."""
     _each_check(case, tmp_path, plots=True)
+
+
+def test_a_model_named_by_its_package_is_found_in_arm_packages_or_where_pip_installed_it(
+    tmp_path, monkeypatch
+):
+    """arm.urdf: package://NAME/path (issue 42: a scenario file naming a vendor's arm the
+    same on every machine): NAME's folder from arm.packages, else the package pip installed
+    through cmeel (site-packages/cmeel.prefix/share/NAME, where example-robot-data puts its
+    robots). Catches the URI read as a relative path, and the installed package not looked
+    for; an unknown package is one line."""
+    import sysconfig
+
+    share = tmp_path / "site" / "cmeel.prefix" / "share" / "my-robots"
+    (share / "urdf").mkdir(parents=True)
+    (share / "meshes").mkdir()
+    (share / "meshes" / "mark.obj").write_text(
+        "v 0 0 0\nv 0.01 0 0\nv 0 0.01 0\nv 0 0 0.01\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+    )
+    mesh = '<visual><geometry><mesh filename="package://my-robots/meshes/mark.obj"/></geometry></visual>'
+    arm = (
+        (models_dir() / "arm4.urdf").read_text().replace('<link name="link1">', f'<link name="link1">{mesh}')
+    )
+    (share / "urdf" / "arm.urdf").write_text(arm)  # its mesh named by the package too
+    uri = "package://my-robots/urdf/arm.urdf"
+    with pytest.raises(
+        ScenarioError, match="arm.urdf: model file 'package://my-robots/urdf/arm.urdf': no package"
+    ):
+        build_diagram(fig3_with(tmp_path, f"arm: {{urdf: '{uri}'}}"))
+    # given in arm.packages, relative to the overlay's folder
+    build_diagram(
+        fig3_with(
+            tmp_path, f"arm: {{urdf: '{uri}', packages: {{my-robots: site/cmeel.prefix/share/my-robots}}}}"
+        )
+    )
+    paths = sysconfig.get_paths()
+    monkeypatch.setattr(sysconfig, "get_paths", lambda: paths | {"purelib": str(tmp_path / "site")})
+    built = build_diagram(fig3_with(tmp_path, f"arm: {{urdf: '{uri}'}}"))  # where pip would have put it
+    assert built.station.arm_file == (share / "urdf" / "arm.urdf").resolve()
