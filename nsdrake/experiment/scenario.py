@@ -758,6 +758,9 @@ def _arm_and_plate_problems(s: Scenario) -> Iterator[tuple[str, str]]:
     if not s.arm.initial_positions:
         yield "arm.initial_positions", "must give a position for every joint"
     yield from _payload_problems(s.arm.payload)
+    tip = s.arm.tip_radius
+    yield from _checked("arm.tip_radius", finite_problem(tip) or non_negative_problem(tip))
+    yield from _checked("arm.tip_radius", length_problem([tip], "the tip's radius"))
     if len(s.plate.position) != 3:
         yield "plate.position", f"must be [x, y, z], got {_show(s.plate.position)}"
     for i, value in enumerate(s.plate.position):

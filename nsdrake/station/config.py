@@ -44,6 +44,10 @@ class ArmConfig:
     payload: PayloadConfig = field(default_factory=PayloadConfig)
     # Frame of the arm whose origin is the task point (the tool tip) [-].
     tool_frame: str = "tool"
+    # A sphere of this radius centred on the tool frame's origin, massless, with the plate's
+    # contact properties: a tip that touches, for a model whose file has no tool of its own
+    # (a vendor's flange or hand); 0: none [m].
+    tip_radius: float = 0.0
     # Joint positions at t = 0, keyed by joint name; every joint must be given [rad].
     initial_positions: dict[str, float] = field(default_factory=dict)
     # Joint velocities at t = 0, keyed by joint name; missing joints start at rest [rad/s].

@@ -236,6 +236,9 @@ def _add_world(
     if payload is not None:
         add_payload(plant, plant.GetFrameByName(arm.tool_frame, arm_instance), payload)
     plate_body = _the_one_body(plant, plate_instance, source)
+    if arm.tip_radius > 0:
+        tool = plant.GetFrameByName(arm.tool_frame, arm_instance)
+        _add_tip(plant, scene_graph, tool, arm.tip_radius, plate_body)
     X_WP = RigidTransform(RollPitchYaw(plate.roll, plate.pitch, plate.yaw), np.asarray(plate.position))
     sensor_joint = plant.AddJoint(WeldJoint(SENSOR_JOINT, plant.world_frame(), plate_body.body_frame(), X_WP))
     obstacle_bodies = _add_obstacles(plant, scene_graph, obstacles, plate_body)
@@ -474,6 +477,17 @@ def _add_sensing_and_actuation(builder: DiagramBuilder, station: Station) -> Non
         true_wrench=sensor.GetOutputPort("wrench"),
         actuation=actuation.get_input_port(),
     )
+
+
+def _add_tip(plant: MultibodyPlant, scene_graph, tool_frame, radius: float, plate_body) -> None:
+    """arm.tip_radius: a sphere centred on the tool frame's origin, on the tool frame's body
+    (no mass of its own), to touch with, with the plate's contact properties (the shipped
+    tools' and plates' are the same: stiffness 1e5 N/m, dissipation 5 s/m, mu 0.3)."""
+    (plate_geometry,) = plant.GetCollisionGeometriesForBody(plate_body)
+    properties = scene_graph.model_inspector().GetProximityProperties(plate_geometry)
+    body, X_BT = tool_frame.body(), tool_frame.GetFixedPoseInBodyFrame()
+    plant.RegisterCollisionGeometry(body, X_BT, Sphere(radius), "tip", ProximityProperties(properties))
+    plant.RegisterVisualGeometry(body, X_BT, Sphere(radius), "tip", np.array([0.85, 0.2, 0.15, 1.0]))
 
 
 def _add_obstacles(
