@@ -83,7 +83,7 @@ class RobotTerms:
     v: np.ndarray  # (n,) joint velocities q̇ [rad/s]
     H: np.ndarray  # (n, n) joint-space inertia [kg m²]
     H_inv: np.ndarray  # (n, n) its inverse
-    Cv: np.ndarray  # (n,) Coriolis and centrifugal torques C q̇ [N m]
+    Cv: np.ndarray  # (n,) Coriolis and centrifugal torques C q̇, plus the joints' damping D q̇ [N m]
     g: np.ndarray  # (n,) gravity torques of Eq. 5 [N m]
     x: np.ndarray  # (m_t,) task position of the tool point on the translational axes [m]
     p_WT: np.ndarray  # (3,) tool point T in the world [m]
@@ -257,7 +257,9 @@ class ArmModel:
     """Reads :class:`RobotTerms` off a finalized ``MultibodyPlant``.
 
     The plant's generalized velocities must all belong to revolute or prismatic
-    joints of the arm (the plate and obstacles are welded), and nq == nv.
+    joints of the arm (the plate and obstacles are welded), and nq == nv. A joint's
+    viscous damping D (the plant applies −D q̇) is part of the terms' C q̇, so that a law
+    that cancels C q̇ cancels it too.
 
     Args:
         plant: the finalized plant.
@@ -270,6 +272,12 @@ class ArmModel:
         if not plant.is_finalized():
             raise ValueError("ArmModel needs a finalized MultibodyPlant")
         if plant.num_positions() != plant.num_velocities():
+            floating = [b.name() for b in map(plant.get_body, plant.GetFloatingBaseBodies())]
+            if floating:
+                raise ValueError(
+                    f"the body '{floating[0]}' has a floating base (no joint to the world): weld it to the "
+                    "world (plant.WeldFrames, or ControllerModel.from_file, which welds it)"
+                )
             raise ValueError(
                 "nsdrake needs nq == nv (revolute and prismatic joints only); "
                 f"the plant has nq={plant.num_positions()}, nv={plant.num_velocities()}"
@@ -286,6 +294,10 @@ class ArmModel:
         self.joints = self._joints_by_velocity_index()
         self.joint_names = tuple(j.name() for j in self.joints)
         self.revolute = np.array([j.type_name() == "revolute" for j in self.joints])
+        # D, the joints' viscous damping as the model declares it (URDF <dynamics damping>):
+        # the plant applies −D q̇, so the terms' C q̇ carries + D q̇ and the law compensates it.
+        self.damping = np.array([j.default_damping() for j in self.joints], dtype=float)
+        self._damped = bool(np.any(self.damping))
         self.inboard = self._inboard_matrix()
         self._partials = JacobianPartials(self.revolute, self.inboard, self.rows, self.rot_rows)
         self._origin = np.zeros(3)
@@ -367,6 +379,8 @@ class ArmModel:
         plant.SetPositionsAndVelocities(context, np.concatenate([q, v]))
         H = plant.CalcMassMatrix(context)
         Cv = plant.CalcBiasTerm(context)
+        if self._damped:
+            Cv = Cv + self.damping * v
         g = -plant.CalcGravityGeneralizedForces(context)
         J_spatial = plant.CalcJacobianSpatialVelocity(
             context, JacobianWrtVariable.kV, self.tool_frame, self._origin, self._world, self._world

@@ -43,6 +43,7 @@ from nsdrake.control.dynamics import ArmModel, RobotTerms
 from nsdrake.control.model_files import (
     Payload,
     add_payload,
+    choose_joints,
     model_file_problem,
     parse_model_file,
     payload_problem,
@@ -126,6 +127,8 @@ class ControllerModel:
             self.obstacle_geometries = proximity_geometries(inspector, plant, [world])
         self._pinocchio = _pinocchio_dynamics(fast_terms, self.arm, dynamics)
         self.dynamics = "pinocchio" if self._pinocchio else "drake"
+        # What the model file's parse found (nsdrake.control.model_files.ParsedModel), or None.
+        self.parsed = None
 
     @classmethod
     def from_file(
@@ -139,6 +142,9 @@ class ControllerModel:
         obstacles: Sequence[Obstacle] = (),
         payload: Payload | None = None,
         dynamics: str = "auto",
+        joints: Sequence[str] | None = None,
+        locked: Mapping[str, float] | None = None,
+        base_pose: RigidTransform | None = None,
     ) -> ControllerModel:
         """The arm of a model file as its vendor ships it: a URDF, an SDF or Drake model
         directives (``.dmd.yaml``), parsed by Drake from the file, so relative mesh URIs
@@ -148,15 +154,29 @@ class ControllerModel:
         ``payload`` (:class:`nsdrake.control.model_files.Payload`) is welded to the tool
         frame. Otherwise as :meth:`from_urdf`: the same fast terms (Pinocchio, built from the
         plant Drake parsed: :mod:`nsdrake.control.pinocchio_tree`) and obstacle avoidance
-        against the model's collision geometry (an ``.obj`` mesh as its convex hull)."""
+        against the model's collision geometry (a mesh as its convex hull, whatever its
+        format). Without obstacles no geometry is read at all.
+
+        Every file the model includes is checked first (:mod:`nsdrake.control.model_sources`).
+        A root body that floats (a ROS URDF without a ``world`` link) is welded to the world
+        at ``base_pose`` (the origin if None), said in one line. ``joints``: the arm's joints
+        (None: every joint of the file); every other one is locked at its position in
+        ``locked`` ({name: position}, 0 if not given) and its links' mass joins its parent
+        (gripper fingers, a mobile base). A ``<mimic>`` joint must be locked. A joint's
+        ``<limit effort>`` gives its torque limit when the file has no ``<transmission>``;
+        its ``<dynamics damping>`` is compensated (:class:`nsdrake.control.dynamics.ArmModel`)."""
         problem = model_file_problem(path)
         if problem:
             raise ControllerConfigError("model_file", problem)
-        if str(path).lower().endswith(".urdf"):
-            _urdf_text(Path(path))  # the URDF rules, before Drake reads it
         where = f"model_file: {Path(path).name}"
+
+        def add(plant):
+            parsed = parse_model_file(plant, path, packages, "model_file", base_pose=base_pose)
+            parsed.locked = choose_joints(plant, joints, locked, parsed.sources.mimics)
+            return parsed
+
         return cls._parsed(
-            lambda plant: parse_model_file(plant, path, packages, "model_file"),
+            add,
             where,
             tool_frame=tool_frame,
             task_axes=task_axes,
@@ -225,9 +245,12 @@ class ControllerModel:
         if problem:
             raise ControllerConfigError("payload", problem)
         builder = DiagramBuilder()
-        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        if obstacles:
+            plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        else:  # no geometry is needed, none is read
+            plant, scene_graph = builder.AddSystem(MultibodyPlant(0.0)), None
         plant.set_name("controller_model")
-        add_models(plant)
+        parsed = add_models(plant)
         for ob in obstacles:
             plant.RegisterCollisionGeometry(
                 plant.world_body(), ob.X_WO, ob.shape, ob.name, ProximityProperties()
@@ -244,7 +267,7 @@ class ControllerModel:
         except RuntimeError as e:
             raise ControllerConfigError(where, f"Drake cannot build the plant: {_cut(e)}") from None
         diagram = builder.Build()
-        return cls(
+        model = cls(
             plant=plant,
             tool_frame=tool_frame,
             task_axes=task_axes,
@@ -253,6 +276,8 @@ class ControllerModel:
             fast_terms=True,
             dynamics=dynamics,
         )
+        model.parsed = parsed
+        return model
 
     @classmethod
     def from_plant(
@@ -496,11 +521,13 @@ class PinocchioDynamics:
         self._model.gravity.linear = np.asarray(gravity, dtype=float)
         self._data = self._model.createData()
         name = arm.tool_frame.name()
-        if not self._model.existFrame(name):
+        # The tool's frame: a body's frame, else an added one (a joint may share its name).
+        kinds = [k for k in (pin.BODY, pin.OP_FRAME) if self._model.existFrame(name, k)]
+        if not kinds:
             raise ModelMismatchError(
                 "controller_model", f"Pinocchio's model of the arm has no frame '{name}'"
             )
-        self._tool = self._model.getFrameId(name)
+        self._tool = self._model.getFrameId(name, kinds[0])
         if self._model.nq != arm.n or self._model.nv != arm.n:
             raise ModelMismatchError(
                 "controller_model",
@@ -514,6 +541,8 @@ class PinocchioDynamics:
         self._rotation = arm.m_r > 0
         self._drake_rows = np.array([3, 4, 5, 0, 1, 2])
         self._partials = arm._partials
+        # The joints' damping D in Pinocchio's order, added to nle (ArmModel's C q̇ has it too).
+        self._damping = self._to_pin(arm.damping) if np.any(arm.damping) else None
 
     @property
     def order(self) -> np.ndarray:
@@ -549,6 +578,8 @@ class PinocchioDynamics:
         if self._order is not None:
             q, v = self._to_pin(q), self._to_pin(v)
         pin.computeAllTerms(model, data, q, v)  # M, nle, g, joint Jacobians, joint poses
+        if self._damping is not None:
+            scratch.nle += self._damping * v  # in place: the stages read nle there
         if coriolis:
             pin.computeCoriolisMatrix(model, data, q, v)
         pin.updateFramePlacement(model, data, self._tool)
@@ -579,6 +610,8 @@ class PinocchioDynamics:
         R_WT = X_WT.rotation.copy() if self._rotation else None
         H, H_inv = symmetric_and_inverse(data.M)
         nle, g = data.nle.copy(), data.g.copy()
+        if self._damping is not None:
+            nle += self._damping * vp
         C = pin.computeCoriolisMatrix(model, data, qp, vp).copy() if coriolis else None
         J_spatial = J6[self._drake_rows]  # Drake's order: [angular; translational]
         if self._order is not None:

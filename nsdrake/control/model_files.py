@@ -21,19 +21,22 @@ in a simulated station (the arm carries it).
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydrake.math import RigidTransform
+from pydrake.common.eigen_geometry import AngleAxis
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import RotationalInertia, SpatialInertia
+from pydrake.multibody.tree import RotationalInertia, SpatialInertia, WeldJoint
 
+from nsdrake.control.model_sources import HulledModel, ModelSources, read_sources
 from nsdrake.control.urdf_checks import sdf_problems
 from nsdrake.control.validation import ControllerConfigError, one_line, show
 
@@ -176,29 +179,248 @@ def model_parser(plant: MultibodyPlant, path: Path, packages: Mapping[str, str |
     return parser
 
 
-def parse_model_file(plant: MultibodyPlant, path, packages=None, where: str = "model_file") -> list:
-    """Drake parses the model file ``path`` into ``plant`` (module docstring); returns its
-    model instances. Every problem is a one-line ControllerConfigError naming ``where``."""
+@dataclass
+class ParsedModel:
+    """What :func:`parse_model_file` put in the plant."""
+
+    instances: list  # the model instances the file added
+    sources: ModelSources  # every file of the model and what they declare
+    welded: list[str]  # root bodies that floated, welded to the world here
+    warnings: dict[str, list[str]]  # Drake's parser warnings, by file name (full text)
+    locked: dict[str, float] = field(default_factory=dict)  # joints locked (choose_joints) -> position
+
+
+class _DrakeWarnings(logging.Handler):
+    """Collects Drake's log records (pydrake sends spdlog's to Python's "drake" logger)
+    while a file is parsed, instead of printing each."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.records: list[str] = []
+
+    def emit(self, record):
+        self.records.append(record.getMessage())
+
+    def __enter__(self):
+        logger = logging.getLogger("drake")
+        self._propagate, logger.propagate = logger.propagate, False
+        logger.addHandler(self)
+        return self
+
+    def __exit__(self, *_):
+        logger = logging.getLogger("drake")
+        logger.removeHandler(self)
+        logger.propagate = self._propagate
+
+
+def parse_model_file(
+    plant: MultibodyPlant, path, packages=None, where: str = "model_file", *, base_pose=None, add=None
+) -> ParsedModel:
+    """Drake parses the model file ``path`` into ``plant`` (module docstring), after every file
+    it includes passed the checks of :mod:`nsdrake.control.model_sources`. With a SceneGraph,
+    collision meshes Drake takes no hull of are given as their hulls. A root body that floats
+    (no joint to the world: a ROS URDF without a ``world`` link) is welded to the world at
+    ``base_pose`` (a RigidTransform; the world's origin if None), said in one line; a joint
+    with a ``<limit effort>`` but no actuator (no ``<transmission>``) gets an actuator of that
+    effort limit. Drake's parser warnings are said in one line per file. ``add(parser, path)``
+    replaces ``parser.AddModels(path)`` (the station's belts). Every problem is a one-line
+    ControllerConfigError naming ``where``."""
     problem = model_file_problem(path)
     if problem:
         raise ControllerConfigError(where, problem)
     problem = packages_problem({} if packages is None else packages)
     if problem:
         raise ControllerConfigError("packages", problem)
+    if base_pose is not None and not isinstance(base_pose, RigidTransform):
+        raise ControllerConfigError("base_pose", f"must be a RigidTransform, got {show(base_pose)}")
     path = Path(path)
-    problem = sdf_file_problem(path)
-    if problem:
-        raise ControllerConfigError(f"{where}: {path.name}: {problem[0]}".rstrip(": "), problem[1])
-    try:
-        parser = model_parser(plant, path, packages or {})
-        return parser.AddModels(str(path))
-    except (RuntimeError, ValueError) as e:
-        text = one_line(e)
-        hint = (
-            " (give the package as packages={name: folder}, in a package.xml above the file, "
-            "or in ROS_PACKAGE_PATH)"
-            if "unknown package" in text
-            else ""
+    parser = model_parser(plant, path, packages or {})
+    sources = read_sources(path, parser.package_map(), where)
+    add = add or (lambda parser, file: parser.AddModels(str(file)))
+    hulled = plant.geometry_source_is_registered() and sources.meshes_to_hull
+    with (
+        _DrakeWarnings() as drake,
+        HulledModel(sources, parser.package_map(), where) if hulled else _Same(path) as copy,
+    ):
+        try:
+            instances = add(parser, copy.top)
+        except (RuntimeError, ValueError) as e:
+            text = copy.original_text(one_line(e))
+            hint = (
+                " (give the package as packages={name: folder}, in a package.xml above the file, "
+                "or in ROS_PACKAGE_PATH)"
+                if "unknown package" in text
+                else ""
+            )
+            text = text if len(text) <= 240 else text[:239] + "…"
+            raise ControllerConfigError(
+                f"{where}: {path.name}", f"Drake cannot parse it: {text}{hint}"
+            ) from None
+        warnings = _by_file([copy.original_text(r) for r in drake.records], sources)
+    for name, texts in warnings.items():
+        first = texts[0].split("warning: ", 1)[-1]
+        first = first if len(first) <= 160 else first[:159] + "…"
+        LOG.warning(
+            "%s: %s: Drake's parser warned %d time(s) (first: %s)",
+            where,
+            name,
+            len(texts),
+            " ".join(first.split()),
         )
-        text = text if len(text) <= 240 else text[:239] + "…"
-        raise ControllerConfigError(f"{where}: {path.name}", f"Drake cannot parse it: {text}{hint}") from None
+    welded = weld_floating_roots(plant, instances, base_pose or RigidTransform())
+    if welded:
+        LOG.warning(
+            "%s: %s: its root body %s floats (no joint to the world): welded to the world at %s "
+            "(base_pose= places it)",
+            where,
+            path.name,
+            ", ".join(f"'{b}'" for b in welded),
+            "its origin" if base_pose is None else "base_pose",
+        )
+    add_effort_actuators(plant, instances, sources.efforts)
+    return ParsedModel(instances, sources, welded, warnings)
+
+
+LOG = logging.getLogger("nsdrake")
+
+
+class _Same:
+    """The model file itself (no copy needed)."""
+
+    def __init__(self, path: Path):
+        self.top = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_):
+        return None
+
+    def original_text(self, text: str) -> str:
+        return text
+
+
+def _by_file(records: list[str], sources: ModelSources) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for record in records:
+        name = next((f.path.name for f in sources.files if str(f.path) in record), sources.files[0].path.name)
+        out.setdefault(name, []).append(record)
+    return out
+
+
+def weld_floating_roots(plant: MultibodyPlant, instances, X_WB: RigidTransform) -> list[str]:
+    """Welds to the world, at X_WB, every body of ``instances`` that is no joint's child (it
+    would float); returns their names."""
+    children = {plant.get_joint(j).child_body().index() for j in plant.GetJointIndices()}
+    world = plant.world_body().index()
+    welded = []
+    for instance in instances:
+        for index in plant.GetBodyIndices(instance):
+            if index != world and index not in children:
+                body = plant.get_body(index)
+                plant.WeldFrames(plant.world_frame(), body.body_frame(), X_WB)
+                welded.append(body.name())
+    return welded
+
+
+def add_effort_actuators(plant: MultibodyPlant, instances, efforts: Mapping[str, float]) -> list[str]:
+    """An actuator for each revolute or prismatic joint of ``instances`` that has none, with the
+    effort limit its file declares (``<limit effort>``; Drake makes actuators only from a
+    ``<transmission>``); a joint without one gets none. Returns the joints given one."""
+    actuated = {plant.get_joint_actuator(a).joint().index() for a in plant.GetJointActuatorIndices()}
+    added = []
+    for instance in instances:
+        for index in plant.GetJointIndices(instance):
+            joint = plant.get_joint(index)
+            if index in actuated or joint.num_velocities() != 1 or joint.name() not in efforts:
+                continue
+            plant.AddJointActuator(joint.name(), joint, efforts[joint.name()])
+            added.append(joint.name())
+    return added
+
+
+def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where: str = "joints") -> dict:
+    """Keeps ``joints`` (names; None: every joint) as the arm's joints and welds every other
+    revolute or prismatic joint at its position in ``locked`` ({name: position} [rad or m];
+    0 if not given, a mimic joint at its leader's image), so that its child's mass joins its
+    parent's; in the not yet finalized ``plant``. A ``<mimic>`` joint (``mimics``: the
+    follower's name → :class:`nsdrake.control.model_sources.Mimic`) among the arm's joints, or
+    following one of them, is refused: the controller's joints are independent. Returns the
+    locked positions. Every problem is a one-line ControllerConfigError."""
+    movable = [plant.get_joint(j) for j in plant.GetJointIndices() if plant.get_joint(j).num_velocities()]
+    names = [j.name() for j in movable]
+    locked = {} if locked is None else locked
+    if joints is not None and (isinstance(joints, str) or not isinstance(joints, Sequence)):
+        raise ControllerConfigError(where, f"must be a list of joint names, got {show(joints)}")
+    chosen = list(names if joints is None else joints)
+    for name in chosen:
+        if name not in names or chosen.count(name) > 1:
+            why = "named twice" if name in names else "unknown joint"
+            raise ControllerConfigError(
+                f"{where}: {show(name)}", f"{why}; the file's joints are {', '.join(names)}"
+            )
+    if not isinstance(locked, Mapping):
+        raise ControllerConfigError("locked", f"must be a {{joint: position}} mapping, got {show(locked)}")
+    for name, value in locked.items():
+        if name not in names or name in chosen:
+            why = "is one of the arm's joints" if name in chosen else "unknown joint"
+            raise ControllerConfigError(
+                f"locked: {show(name)}", f"{why}; locked joints are those not in joints"
+            )
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise ControllerConfigError(
+                f"locked: {name}", f"must be a finite number [rad or m], got {show(value)}"
+            )
+    for mimic in mimics.values():
+        if mimic.joint in names and (mimic.joint in chosen or mimic.leader in chosen):
+            raise ControllerConfigError(
+                f"{where}: {mimic.joint}",
+                f"mimics '{mimic.leader}' (<mimic>): the arm's joints must be independent; leave both out "
+                "of joints=[...] (they are locked)",
+            )
+    positions = {}
+    locked_indices = {j.index() for j in movable if j.name() not in chosen}
+    present = [m for m in mimics.values() if m.joint in names]
+    if locked_indices and present and plant.num_constraints() == len(present):
+        for constraint in plant.GetConstraintIds():  # the <mimic>s' couplers, all between locked joints
+            plant.RemoveConstraint(constraint)
+    for joint in movable:
+        if joint.name() in chosen:
+            continue
+        q = locked.get(joint.name())
+        mimic = mimics.get(joint.name())
+        if q is None and mimic is not None:
+            leader = locked.get(mimic.leader, 0.0)
+            q = mimic.multiplier * leader + mimic.offset
+        q = 0.0 if q is None else float(q)
+        lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
+        if not lower - 1e-12 <= q <= upper + 1e-12:
+            raise ControllerConfigError(
+                f"locked: {joint.name()}",
+                f"{q:g} is outside the joint's limits [{lower:g}, {upper:g}]; state it",
+            )
+        positions[joint.name()] = q
+        _weld(plant, joint, q, where)  # the joint object is gone after this
+    return positions
+
+
+def _weld(plant: MultibodyPlant, joint, q: float, where: str) -> None:
+    """Replaces the revolute or prismatic ``joint`` by a weld at position ``q``."""
+    kind = joint.type_name()
+    if kind == "revolute":
+        X_FM = RigidTransform(RotationMatrix(AngleAxis(q, np.asarray(joint.revolute_axis()))), np.zeros(3))
+    elif kind == "prismatic":
+        X_FM = RigidTransform(q * np.asarray(joint.translation_axis()))
+    else:
+        raise ControllerConfigError(
+            f"{where}: {joint.name()}", f"a {kind} joint cannot be locked here (revolute and prismatic can)"
+        )
+    F, M, name = joint.frame_on_parent(), joint.frame_on_child(), joint.name()
+    for a in list(plant.GetJointActuatorIndices()):
+        if plant.get_joint_actuator(a).joint().index() == joint.index():
+            plant.RemoveJointActuator(plant.get_joint_actuator(a))
+    try:
+        plant.RemoveJoint(joint)
+    except RuntimeError as e:
+        raise ControllerConfigError(f"{where}: {name}", f"Drake cannot lock it: {one_line(e)}") from None
+    plant.AddJoint(WeldJoint(name, F, M, X_FM))

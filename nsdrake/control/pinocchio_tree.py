@@ -57,7 +57,7 @@ def pinocchio_model(plant: MultibodyPlant, frames=()):
             model.addBodyFrame(child.name(), joint_id, X_JC, frame_of[joint_id])
             queue.append(child.index())
     for frame in frames:
-        if not model.existFrame(frame.name()):
+        if not model.existFrame(frame.name(), pin.BODY) and not model.existFrame(frame.name(), pin.OP_FRAME):
             joint_id, X_JB = where[frame.body().index()]
             X_JT = X_JB * _se3(pin, frame.GetFixedPoseInBodyFrame())
             model.addFrame(

@@ -3,7 +3,12 @@ for the controller's model (:meth:`nsdrake.ControllerModel.from_urdf`) and the s
 station's model files (:mod:`nsdrake.station.model_checks`).
 
 Physically valid links: a mass > 0, an inertia that is positive definite and meets the
-triangle inequality, geometry sizes > 0 (Drake would simulate a negative mass, warn and
+triangle inequality, geometry sizes > 0. A link that cannot move on its own -- the root
+(welded to the world, by the file or by nsdrake), or a frame link on a fixed joint (ROS's
+``tool0``, ``panda_link8``) -- merges into its parent or the world, so it may have no mass
+and a degenerate inertia (mass ≥ 0, principal moments ≥ −MERGED_INERTIA_ROUNDING, no
+triangle inequality); a negative mass, or a clearly negative moment, is refused wherever
+it is. (Drake would simulate a negative mass, warn and
 "repair" an impossible inertia, fail on a bad size with a raw parser line; Pinocchio and
 Drake disagree on a massless link, which a model check would then blame on the
 libraries). A tree of joints: every joint names a parent and a child link, no link is
@@ -53,10 +58,13 @@ def parse_urdf(text: str) -> ET.Element:
 def urdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
     """(where, problem) for every link that is physically invalid and every joint that
     breaks the tree (module docstring); ``where`` names the link or joint."""
+    fixed = _links_that_cannot_move(
+        root.findall("joint"), [link.get("name") for link in root.iter("link")], "urdf"
+    )
     for link in root.iter("link"):
         where = f"link '{link.get('name')}'"
         try:
-            problem = _link_problem(link)
+            problem = _link_problem(link, link.get("name") in fixed)
         except _NotANumberError as e:
             problem = str(e)
         if problem:
@@ -64,10 +72,23 @@ def urdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
     yield from _tree_problems(root)
 
 
-def _link_problem(link) -> str | None:
+def _links_that_cannot_move(joints, links, kind: str) -> set:
+    """Links that are the child of a fixed joint, or of no joint (the roots)."""
+    children, fixed = set(), set()
+    for joint in joints:
+        child = joint.find("child")
+        name = (child.get("link") if kind == "urdf" else child.text) if child is not None else None
+        name = (name or "").strip()
+        children.add(name)
+        if joint.get("type") == "fixed":
+            fixed.add(name)
+    return fixed | {link for link in links if link not in children}
+
+
+def _link_problem(link, cannot_move: bool = False) -> str | None:
     inertial = link.find("inertial")
     if inertial is not None:
-        problem = _inertial_problem(inertial)
+        problem = _inertial_problem(inertial, cannot_move)
         if problem:
             return problem
     for element in (*link.findall("collision"), *link.findall("visual")):
@@ -80,14 +101,19 @@ def _link_problem(link) -> str | None:
     return None
 
 
-def _inertial_problem(inertial) -> str | None:
+def _inertial_problem(inertial, cannot_move: bool = False) -> str | None:
     mass = inertial.find("mass")
     inertia = inertial.find("inertia")
     get = None
     if inertia is not None:
         get = {k: _numbers(inertia.get(k, "0") or "0")[0] for k in INERTIA_ENTRIES}
-    return _mass_and_inertia_problem(None if mass is None else mass.get("value", "0"), get)
+    return _mass_and_inertia_problem(None if mass is None else mass.get("value", "0"), get, cannot_move)
 
+
+# A link that cannot move adds its inertia into its parent's (or the world's): a principal
+# moment down to −1e-6 kg m² (a 10 g body a centimetre across) is a vendor's rounding
+# (TIAGo's antennas: −3.5e-8), not a body; a triangle inequality broken there breaks nothing.
+MERGED_INERTIA_ROUNDING = 1e-6  # [kg m²]
 
 INERTIA_ENTRIES = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
 
@@ -98,7 +124,9 @@ _SDF_DEFAULTS = {"ixx": "1", "iyy": "1", "izz": "1", "ixy": "0", "ixz": "0", "iy
 def sdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
     """(where, problem) for every SDF <link> whose <inertial> has a mass ≤ 0 or an impossible
     inertia (Drake's SDF parser only warns, and simulates a "repaired" 1 kg body instead)."""
-    for link in root.iter("link"):
+    links = list(root.iter("link"))
+    fixed = _links_that_cannot_move(list(root.iter("joint")), [link.get("name") for link in links], "sdf")
+    for link in links:
         inertial = link.find("inertial")
         if inertial is None:
             continue
@@ -107,7 +135,9 @@ def sdf_problems(root: ET.Element) -> Iterator[tuple[str, str]]:
         try:
             if inertia is not None:
                 get = {k: _numbers(_text(inertia.find(k)) or _SDF_DEFAULTS[k])[0] for k in INERTIA_ENTRIES}
-            problem = _mass_and_inertia_problem(None if mass is None else _text(mass), get)
+            problem = _mass_and_inertia_problem(
+                None if mass is None else _text(mass), get, link.get("name") in fixed
+            )
         except _NotANumberError as e:
             problem = str(e)
         if problem:
@@ -118,15 +148,18 @@ def _text(element) -> str:
     return "" if element is None or element.text is None else element.text.strip()
 
 
-def _mass_and_inertia_problem(mass_text: str | None, get: dict | None) -> str | None:
+def _mass_and_inertia_problem(
+    mass_text: str | None, get: dict | None, cannot_move: bool = False
+) -> str | None:
     """A mass (its text; None: not given) that is not one number > 0, or an inertia
     ({ixx: …}; None: not given) that is not positive definite or breaks the triangle
-    inequality."""
+    inequality; for a link that ``cannot_move`` (module docstring), mass 0 and a positive
+    semi-definite inertia are allowed."""
     if mass_text is not None:
         values = _numbers(mass_text or "0")
         if len(values) != 1:
             return f"mass '{mass_text}' must be one number"
-        if not values[0] > 0 or not math.isfinite(values[0]):
+        if not math.isfinite(values[0]) or values[0] < 0 or (values[0] == 0 and not cannot_move):
             return f"mass {values[0]:g} kg must be > 0"
     if get is None:
         return None
@@ -140,6 +173,10 @@ def _mass_and_inertia_problem(mass_text: str | None, get: dict | None) -> str | 
     if not np.all(np.isfinite(I)):
         return f"inertia must be finite, got {I[np.triu_indices(3)].tolist()}"
     moments = np.linalg.eigvalsh(I)
+    if cannot_move:  # it merges into its parent: only a clearly negative moment is impossible
+        if moments[0] < -MERGED_INERTIA_ROUNDING:
+            return f"inertia has a negative principal moment: {np.round(moments, 9).tolist()}"
+        return None
     if moments[0] <= 0:
         return f"inertia must be positive definite, its principal moments are {np.round(moments, 9).tolist()}"
     if moments[0] + moments[1] < moments[2] * (1 - 1e-9):

@@ -119,7 +119,10 @@ def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
             Path(station.arm_file).read_text(), 1.0 + scenario.realism.model_error.mass_error
         )
         return ControllerModel.from_urdf(text, **common)
-    return ControllerModel.from_file(station.arm_file, packages=station.packages, **common)
+    arm = scenario.arm
+    return ControllerModel.from_file(
+        station.arm_file, packages=station.packages, joints=arm.joints or None, locked=arm.locked, **common
+    )
 
 
 def controller_structure(scenario: Scenario, auto: str = "systems") -> str:

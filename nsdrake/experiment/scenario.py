@@ -232,6 +232,7 @@ def shipped_scenarios() -> list[str]:
 # replaces it whole, as it replaces a list (merging two vectors gives one nobody wrote:
 # a sweep direction {joint1: 1} on a base's {joint2: 1, joint3: -1} is not e1).
 JOINT_TABLES = (
+    "arm.locked",  # keyed by the joints that are not the arm's (arm.joints)
     "arm.initial_positions",
     "arm.initial_velocities",
     "desired_null_space.joint_speed_limits",
@@ -246,7 +247,7 @@ JOINT_TABLES = (
 # for another set of joints (every joint must have one) chooses another arm: the base's
 # joint tables it does not give name the other arm's joints and are dropped, each said
 # (Scenario.notes). Another file of the same joints (a model edited) keeps them.
-ARM_FIELDS = ("arm.urdf",)
+ARM_FIELDS = ("arm.urdf", "arm.joints")
 
 
 def value_at(tree, path: str):
@@ -910,19 +911,10 @@ def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:
     """Checks the fields keyed by joint name against the arm's joints."""
     src = s.source or "scenario"
     valid = ", ".join(joint_names)
-    tables = {
-        "arm.initial_positions": s.arm.initial_positions,
-        "arm.initial_velocities": s.arm.initial_velocities,
-        "desired_null_space.joint_speed_limits": s.desired_null_space.joint_speed_limits,
-        "desired_null_space.sweep.direction": s.desired_null_space.sweep.direction,
-        "desired_null_space.posture.q_d": s.desired_null_space.posture.q_d,
-        "desired_null_space.posture.weight": s.desired_null_space.posture.weight,
-        "desired_null_space.posture.offset": s.desired_null_space.posture.offset,
-        "actuator_limits.torque": s.actuator_limits.torque,
-        "actuator_limits.torque_rate": s.actuator_limits.torque_rate,
-    }
-    for where, table in tables.items():
-        for name in table:
+    for where in JOINT_TABLES:
+        if where == "arm.locked":  # the joints that are not the arm's (checked where they are locked)
+            continue
+        for name in value_at(s, where):
             if name not in joint_names:
                 _fail(src, f"{where}.{_name(name)}", f"unknown joint; the arm's joints are {valid}")
     missing = [j for j in joint_names if j not in s.arm.initial_positions]

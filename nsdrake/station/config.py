@@ -48,6 +48,11 @@ class ArmConfig:
     # contact properties: a tip that touches, for a model whose file has no tool of its own
     # (a vendor's flange or hand); 0: none [m].
     tip_radius: float = 0.0
+    # The arm's joints, by name; empty: every joint of the model file. The others (gripper
+    # fingers, a mobile base) are locked at their position in ``locked`` [-].
+    joints: list[str] = field(default_factory=list)
+    # Positions of the joints not in ``joints``, keyed by joint name; 0 where not given [rad or m].
+    locked: dict[str, float] = field(default_factory=dict)
     # Joint positions at t = 0, keyed by joint name; every joint must be given [rad].
     initial_positions: dict[str, float] = field(default_factory=dict)
     # Joint velocities at t = 0, keyed by joint name; missing joints start at rest [rad/s].

@@ -45,13 +45,14 @@ from nsdrake.control.model import Obstacle
 from nsdrake.control.model_files import (
     Payload,
     add_payload,
+    choose_joints,
     model_file_problem,
-    model_parser,
     packages_problem,
+    parse_model_file,
     payload_problem,
     sdf_file_problem,
 )
-from nsdrake.control.validation import arm_problem
+from nsdrake.control.validation import ControllerConfigError, arm_problem
 from nsdrake.station.config import ArmConfig, ContactConfig, ObstacleConfig, PlateConfig, StationError
 from nsdrake.station.contact_monitor import ContactMonitor
 from nsdrake.station.elastic import ElasticMap, add_elastic_arm, rigid_arm_plant
@@ -231,7 +232,7 @@ def _add_world(
     packages = package_folders(arm, base_dir, source)
     arm_file = _model_file(source, "arm.urdf", arm.urdf, base_dir, packages)
     plate_file = _model_file(source, "plate.urdf", plate.urdf, base_dir)
-    arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, packages, arm.tool_frame, source)
+    arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, packages, arm, source)
     payload = station_payload(arm, source)
     if payload is not None:
         add_payload(plant, plant.GetFrameByName(arm.tool_frame, arm_instance), payload)
@@ -324,27 +325,29 @@ def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> 
     )
 
 
-def _parse(
-    plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, packages, tool_frame: str, src: str
-):
+def _parse(plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, packages, arm: ArmConfig, src: str):
     """(the arm's model instance, the plate's): the arm's is the one that holds the tool frame
-    (a model directives file may add several)."""
+    (a model directives file may add several). The arm's files are read as the controller's
+    model reads them (:func:`nsdrake.control.model_files.parse_model_file`: every included
+    file checked, meshes Drake takes no hull of given as hulls, a floating root welded, an
+    actuator per ``<limit effort>``), and the joints not in ``arm.joints`` locked."""
     if belt is not None and arm_file.suffix.lower() != ".urdf":
         raise StationError(
             f"{src}: realism.belt: belts split the joints of a URDF; {arm_file.name} is not one"
         )
+    add = None if belt is None else (lambda parser, file: add_elastic_arm(plant, parser, file, belt))
     try:
-        parser = model_parser(plant, arm_file, packages)
-        if belt is not None:
-            instances = add_elastic_arm(plant, parser, arm_file, belt)
-        else:
-            instances = parser.AddModels(str(arm_file))
+        parsed = parse_model_file(plant, arm_file, packages, "arm.urdf", add=add)
+        choose_joints(plant, arm.joints or None, arm.locked, parsed.sources.mimics, "arm.joints")
+    except ControllerConfigError as e:
+        raise StationError(f"{src}: {e}") from None
+    try:
         (plate,) = Parser(plant).AddModels(str(plate_file))
     except Exception as e:
         raise StationError(f"{src}: cannot parse a model: {' '.join(str(e).split())}") from None
-    holding = [i for i in instances if plant.HasFrameNamed(tool_frame, i)]
+    holding = [i for i in parsed.instances if plant.HasFrameNamed(arm.tool_frame, i)]
     if len(holding) != 1:
-        raise StationError(f"{src}: arm.tool_frame: no frame '{tool_frame}' in {arm_file.name}")
+        raise StationError(f"{src}: arm.tool_frame: no frame '{arm.tool_frame}' in {arm_file.name}")
     return holding[0], plate
 
 

@@ -19,6 +19,7 @@ from nsdrake.control.model_files import Payload
 from tests.vendor_arm import Q0, fin_vertices, mesh_free_urdf, write_vendor_arm
 
 POSE = ("x", "y", "z", "rx", "ry", "rz")
+FAR = [Obstacle("far", Sphere(0.1), RigidTransform([5.0, 0.0, 0.0]))]  # makes the model read its geometry
 TERMS = ("H", "g", "Cv", "C", "J_spatial")
 
 
@@ -72,13 +73,16 @@ def test_a_model_file_gives_the_mesh_free_arms_terms_and_torques(arm, reference,
     package:// model welded by the directives) load through one constructor, on the fast
     path (Pinocchio), with the mesh-free text's H, g, C q̇, C, J and τ to 1e-9. A mesh URI
     resolved wrongly fails the load; a joint placed or an inertia moved wrongly in the SDF or
-    in the Pinocchio tree built from the plant fails the comparison."""
+    in the Pinocchio tree built from the plant fails the comparison. Without obstacles the
+    model reads no geometry; with one, the link meshes are its geometry."""
     model = ControllerModel.from_file(getattr(arm, kind), tool_frame="tool", task_axes=POSE)
     assert model.dynamics == "pinocchio"
     assert model.joint_names == reference.joint_names
     assert worst_difference(model, reference) < 1e-9
     tau, expected = torques(model), torques(reference)
     assert np.max(np.abs(tau - expected)) < 1e-9 * max(1.0, float(np.max(np.abs(expected))))
+    assert model.scene_graph is None and model.link_geometries == []  # no obstacle: no geometry read
+    model = ControllerModel.from_file(getattr(arm, kind), tool_frame="tool", task_axes=POSE, obstacles=FAR)
     names = {model.scene_graph.model_inspector().GetName(g).split("::")[-1] for g in model.link_geometries}
     assert names == {"upper", "fin", "wrist"}
 
@@ -106,15 +110,17 @@ def test_packages_resolve_from_package_xml_ros_package_path_and_the_argument(arm
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     path = package / "urdf" / "arm7.urdf"
     with pytest.raises(ControllerConfigError) as e:
-        ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE)
+        ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, obstacles=FAR)
     message = str(e.value)
     assert "\n" not in message and message.startswith("model_file: arm7.urdf: Drake cannot parse it")
     assert "'myarm'" in message and "packages={name: folder}" in message
-    model = ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, packages={"myarm": package})
+    model = ControllerModel.from_file(
+        path, tool_frame="tool", task_axes=POSE, packages={"myarm": package}, obstacles=FAR
+    )
     assert len(model.link_geometries) == 3
     # ROS_PACKAGE_PATH: a folder with the package.xml below it (the original package).
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(arm.package.parent))
-    model = ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE)
+    model = ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, obstacles=FAR)
     assert len(model.link_geometries) == 3
 
 
@@ -218,7 +224,7 @@ def test_a_payload_is_the_arm_carrying_that_link(arm, source):
 def test_from_urdf_keeps_reading_paths_and_text(arm, reference, tmp_path):
     """from_urdf still takes a path (a .urdf goes through from_file, meshes and packages
     resolved; a URDF under another name, e.g. .xml, is read as text, as before) and text."""
-    by_path = ControllerModel.from_urdf(arm.urdf, tool_frame="tool", task_axes=POSE)
+    by_path = ControllerModel.from_urdf(arm.urdf, tool_frame="tool", task_axes=POSE, obstacles=FAR)
     assert len(by_path.link_geometries) == 3
     other = tmp_path / "arm7.xml"
     other.write_text(mesh_free_urdf())
