@@ -314,6 +314,9 @@ def _run(args) -> int:
 def _compare(args) -> int:
     family = load_family(args.family)
     check_variants(family, args.config, args.duration)  # every input error before any folder or simulation
+    if args.config is not None:  # what the overlay did to the family's scenario (a table dropped)
+        for note in load_scenario(family.scenario, config=args.config, validated=False).notes:
+            print(f"nsdrake: note: {note}")
     with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
         print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
         progress = Progress(args.family, 1.0)

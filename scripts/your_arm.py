@@ -116,11 +116,18 @@ LOAD_HEADER = (
 def press_row(arm: Arm, out: Path) -> tuple[str, bool]:
     """Runs ``nsdrake run docs/examples/SCENARIO.yaml`` into out/SCENARIO; its table row and
     whether every bound was met."""
-    from nsdrake.experiment.traces import Traces
 
     folder = out / arm.scenario
     command = [sys.executable, "-m", "nsdrake", "run", f"docs/examples/{arm.scenario}.yaml"]
     done = subprocess.run([*command, "--out", str(folder), "--overwrite", "--no-replay"], cwd=ROOT)
+    row, met = row_of(arm, folder)
+    return row, done.returncode == 0 and met
+
+
+def row_of(arm: Arm, folder: Path) -> tuple[str, bool]:
+    """The press's row from a run's folder, and whether every bound was met."""
+    from nsdrake.experiment.traces import Traces
+
     body = json.loads((folder / "metrics.json").read_text())
     m = {name: entry["value"] for name, entry in body["metrics"].items()}
     bounded = [e for e in body["metrics"].values() if e.get("passed") is not None]
@@ -129,22 +136,33 @@ def press_row(arm: Arm, out: Path) -> tuple[str, bool]:
     window = traces["t"] >= m["window_start"]
     q = traces.block("q")[window]
     motion = float(np.max(q.max(axis=0) - q.min(axis=0)))
-    position = m.get("position_error_rms", m.get("position_error_max"))
-    which = "RMS" if "position_error_rms" in m else "max"
-    orientation = f"{m['orientation_error_max']:.2g}" if "orientation_error_max" in m else "–"
+    orientation = _figure(m, "orientation_error_max")
     swivel = f"{m['swivel_range']:.3g}" if "swivel_range" in m else "–"
     row = (
         f"| {arm.name} | `nsdrake run docs/examples/{arm.scenario}.yaml` | {m['first_contact_time']:.3g} "
-        f"| {m['force_error_rms']:.2g} | {m['force_error_max']:.2g} | {position * 1e6:.2g} ({which}) "
+        f"| {m['force_error_rms']:.2g} | {_figure(m, 'force_error_max')} "
+        f"| {_micro(m, 'position_error_rms')} | {_micro(m, 'position_error_max')} "
         f"| {orientation} | {motion:.3g} | {swivel} | {m['joint_speed_ratio_max']:.2f} "
         f"| {met} of {len(bounded)} |"
     )
-    return row, done.returncode == 0 and met == len(bounded)
+    return row, met == len(bounded)
+
+
+def _micro(metrics: dict, name: str) -> str:
+    """A length the run's check computes, in µm (:func:`_figure`)."""
+    return _figure(metrics, name, 1e6)
+
+
+def _figure(metrics: dict, name: str, scale: float = 1.0) -> str:
+    """A figure the run's check computes (times ``scale``), to two digits, or – (the check
+    has none such)."""
+    return f"{metrics[name] * scale:.2g}" if name in metrics else "–"
 
 
 PRESS_HEADER = (
     "| arm | command | first contact [s] | force error RMS [N] | force error max [N] "
-    "| position error [µm] | orientation error max [°] | null-space motion: largest joint travel [rad] "
+    "| position error RMS [µm] | position error max [µm] | orientation error max [°] "
+    "| null-space motion: largest joint travel [rad] "
     "| elbow swivel [rad] | largest joint speed / limit | bounds met |"
 )
 
