@@ -97,7 +97,7 @@ def load_row(arm: Arm, folder: Path) -> str:
         f"| {arm.name} | `{arm.file}` | {len(in_file)} | {model.n} | "
         f"{', '.join(f'`{b}`' for b in parsed.welded) or 'none'} | {locked} | {warnings} | "
         f"{_range(limits)} | {_range(damping)} | "
-        f"{abs(g_loaded[shoulder] - g[shoulder]):.3g} (`{model.joint_names[shoulder]}`) |"
+        f"{abs(g_loaded[shoulder] - g[shoulder]):.3g} | `{model.joint_names[shoulder]}` |"
     )
 
 
@@ -109,7 +109,7 @@ def _range(values) -> str:
 LOAD_HEADER = (
     "| arm | file | joints in the file | the arm's joints | root welded to the world | joints locked "
     "| Drake's parser warnings | effort limits [N m] | damping [N m s/rad] "
-    f"| {PAYLOAD_MASS:g} kg payload declared: the largest gravity torque it adds [N m] |"
+    f"| {PAYLOAD_MASS:g} kg payload declared: the largest gravity torque it adds [N m] | on joint |"
 )
 
 
