@@ -225,14 +225,7 @@ def parse_model_file(
     effort limit. Drake's parser warnings are said in one line per file. ``add(parser, path)``
     replaces ``parser.AddModels(path)`` (the station's belts). Every problem is a one-line
     ControllerConfigError naming ``where``."""
-    problem = model_file_problem(path)
-    if problem:
-        raise ControllerConfigError(where, problem)
-    problem = packages_problem({} if packages is None else packages)
-    if problem:
-        raise ControllerConfigError("packages", problem)
-    if base_pose is not None and not isinstance(base_pose, RigidTransform):
-        raise ControllerConfigError("base_pose", f"must be a RigidTransform, got {show(base_pose)}")
+    _check_arguments(path, packages, base_pose, where)
     path = Path(path)
     parser = model_parser(plant, path, packages or {})
     sources = read_sources(path, parser.package_map(), where)
@@ -257,16 +250,7 @@ def parse_model_file(
                 f"{where}: {path.name}", f"Drake cannot parse it: {text}{hint}"
             ) from None
         warnings = _by_file([copy.original_text(r) for r in drake.records], sources)
-    for name, texts in warnings.items():
-        first = texts[0].split("warning: ", 1)[-1]
-        first = first if len(first) <= 160 else first[:159] + "…"
-        LOG.warning(
-            "%s: %s: Drake's parser warned %d time(s) (first: %s)",
-            where,
-            name,
-            len(texts),
-            " ".join(first.split()),
-        )
+    _say_warnings(warnings, where)
     welded = weld_floating_roots(plant, instances, base_pose or RigidTransform())
     if welded:
         LOG.warning(
@@ -282,6 +266,25 @@ def parse_model_file(
 
 
 LOG = logging.getLogger("nsdrake")
+
+
+def _check_arguments(path, packages, base_pose, where: str) -> None:
+    problem = model_file_problem(path)
+    if problem:
+        raise ControllerConfigError(where, problem)
+    problem = packages_problem({} if packages is None else packages)
+    if problem:
+        raise ControllerConfigError("packages", problem)
+    if base_pose is not None and not isinstance(base_pose, RigidTransform):
+        raise ControllerConfigError("base_pose", f"must be a RigidTransform, got {show(base_pose)}")
+
+
+def _say_warnings(warnings: dict[str, list[str]], where: str) -> None:
+    """One line per file: how many warnings Drake's parser gave, and the first."""
+    for name, texts in warnings.items():
+        first = " ".join(texts[0].split("warning: ", 1)[-1].split())
+        first = first if len(first) <= 160 else first[:159] + "…"
+        LOG.warning("%s: %s: Drake's parser warned %d time(s) (first: %s)", where, name, len(texts), first)
 
 
 class _Same:
@@ -350,27 +353,7 @@ def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where:
     movable = [plant.get_joint(j) for j in plant.GetJointIndices() if plant.get_joint(j).num_velocities()]
     names = [j.name() for j in movable]
     locked = {} if locked is None else locked
-    if joints is not None and (isinstance(joints, str) or not isinstance(joints, Sequence)):
-        raise ControllerConfigError(where, f"must be a list of joint names, got {show(joints)}")
-    chosen = list(names if joints is None else joints)
-    for name in chosen:
-        if name not in names or chosen.count(name) > 1:
-            why = "named twice" if name in names else "unknown joint"
-            raise ControllerConfigError(
-                f"{where}: {show(name)}", f"{why}; the file's joints are {', '.join(names)}"
-            )
-    if not isinstance(locked, Mapping):
-        raise ControllerConfigError("locked", f"must be a {{joint: position}} mapping, got {show(locked)}")
-    for name, value in locked.items():
-        if name not in names or name in chosen:
-            why = "is one of the arm's joints" if name in chosen else "unknown joint"
-            raise ControllerConfigError(
-                f"locked: {show(name)}", f"{why}; locked joints are those not in joints"
-            )
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise ControllerConfigError(
-                f"locked: {name}", f"must be a finite number [rad or m], got {show(value)}"
-            )
+    chosen = _chosen(names, joints, locked, where)
     for mimic in mimics.values():
         if mimic.joint in names and (mimic.joint in chosen or mimic.leader in chosen):
             raise ControllerConfigError(
@@ -402,6 +385,33 @@ def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where:
         positions[joint.name()] = q
         _weld(plant, joint, q, where)  # the joint object is gone after this
     return positions
+
+
+def _chosen(names: list[str], joints, locked, where: str) -> list[str]:
+    """The arm's joints: ``joints`` (None: ``names``, every joint) checked against ``names``,
+    and ``locked`` checked to name only other joints, with numbers."""
+    if joints is not None and (isinstance(joints, str) or not isinstance(joints, Sequence)):
+        raise ControllerConfigError(where, f"must be a list of joint names, got {show(joints)}")
+    chosen = list(names if joints is None else joints)
+    for name in chosen:
+        if name not in names or chosen.count(name) > 1:
+            why = "named twice" if name in names else "unknown joint"
+            raise ControllerConfigError(
+                f"{where}: {show(name)}", f"{why}; the file's joints are {', '.join(names)}"
+            )
+    if not isinstance(locked, Mapping):
+        raise ControllerConfigError("locked", f"must be a {{joint: position}} mapping, got {show(locked)}")
+    for name, value in locked.items():
+        if name not in names or name in chosen:
+            why = "is one of the arm's joints" if name in chosen else "unknown joint"
+            raise ControllerConfigError(
+                f"locked: {show(name)}", f"{why}; locked joints are those not in joints"
+            )
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise ControllerConfigError(
+                f"locked: {name}", f"must be a finite number [rad or m], got {show(value)}"
+            )
+    return chosen
 
 
 def _weld(plant: MultibodyPlant, joint, q: float, where: str) -> None:

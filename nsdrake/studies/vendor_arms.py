@@ -19,13 +19,12 @@ plant integrates it implicitly, −D q̇ at the step's end, which adds T D to ea
 inertia over a step: on the xArm7's wrist (T D / H_jj ≈ 14: the file declares damping whose
 time constant is 0.07 ms, and no rotor inertia) that is the whole remaining error.
 
-``python -m nsdrake.studies.vendor_arms OUT.md`` writes the table (``docs/results/vendor_arms/``).
+``python bench/bench_vendor_arms.py`` writes the table (``docs/results/vendor_arms/table.md``).
 """
 
 from __future__ import annotations
 
 import math
-import sys
 import sysconfig
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,6 +74,7 @@ PANDA = _numbered("panda_joint", 7)
 TALOS = _numbered("arm_left_", 7, "_joint")
 BAXTER = tuple(f"left_{j}" for j in ("s0", "s1", "e0", "e1", "w0", "w1", "w2"))
 TIAGO = _numbered("arm_", 7, "_joint")
+Z1 = _numbered("joint", 6)
 SO = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
 ARMS = (
     VendorArm("Panda", "panda_description/urdf/panda.urdf", "panda_hand_tcp", PANDA),
@@ -99,7 +99,7 @@ ARMS = (
         "j2s6s200_end_effector",
         _numbered("j2s6s200_joint_", 6),
     ),
-    VendorArm("Z1", "z1_description/urdf/z1.urdf", "gripperStator", _numbered("joint", 6)),
+    VendorArm("Z1", "z1_description/urdf/z1.urdf", "gripperStator", Z1, (("jointGripper", -0.8),)),
     VendorArm("SO-100", "so_arm_description/urdf/so100.urdf", "gripper", SO),
     VendorArm("SO-101", "so_arm_description/urdf/so101.urdf", "gripper_frame_link", SO),
     VendorArm("TALOS left arm", "talos_data/robots/talos_left_arm.urdf", "wrist_left_ft_tool_link", TALOS),
@@ -109,8 +109,8 @@ ARMS = (
         "Z1 on B1",
         "b1_description/urdf/b1-z1.urdf",
         "gripperStator",
-        _numbered("joint", 6),
-        tuple((f"{leg}_calf_joint", -1.5) for leg in ("FR", "FL", "RR", "RL")),
+        Z1,
+        (("jointGripper", -0.8), *((f"{leg}_calf_joint", -1.5) for leg in ("FR", "FL", "RR", "RL"))),
     ),
 )  # fmt: skip
 
@@ -323,20 +323,3 @@ def row(arm: VendorArm) -> str:
 def table() -> str:
     """The markdown table of every arm's hold (module docstring)."""
     return "\n".join([HEADER, "|" + "---|" * 10, *(row(arm) for arm in ARMS)]) + "\n"
-
-
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if robots_folder() is None:
-        print(f"vendor_arms: {PACKAGE} is not installed: {INSTALL}", file=sys.stderr)
-        return 2
-    text = table()
-    if argv:
-        Path(argv[0]).write_text(text)
-    else:
-        print(text, end="")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
