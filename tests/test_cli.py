@@ -431,6 +431,28 @@ def _vendor_package():
         pytest.skip("example-robot-data is not installed: pip install 'nsdrake[arms]' (.ci/run installs it)")
 
 
+@pytest.mark.parametrize(("example", "joints"), [("ur5_press", 6), ("panda_press", 7)], ids=["UR5", "Panda"])
+def test_a_vendors_arm_example_loads_and_builds(example, joints):
+    """The fast twin of the press below: each example scenario file validates and builds
+    against the package's file as shipped (every check before a run), with the arm's
+    joints (the Panda's fingers locked) and the tip on the tool frame's body. Catches an
+    example that would fail only after `nsdrake run` started."""
+    _vendor_package()
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.experiment.scenario_station import add_scenario_station
+    from nsdrake.reporting.run_folder import check_scenario
+
+    scenario = load_scenario(ROOT / "docs" / "examples" / f"{example}.yaml")
+    check_scenario(scenario)
+    from pydrake.systems.framework import DiagramBuilder
+
+    station = add_scenario_station(DiagramBuilder(), scenario, sensing=False)
+    assert station.arm_model.n == joints
+    inspector = station.scene_graph.model_inspector()
+    names = [inspector.GetName(g) for g in station.plant.GetCollisionGeometriesForBody(station.tool_body)]
+    assert any(name.endswith("tip") for name in names)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("example", "moved"),
