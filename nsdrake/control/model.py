@@ -47,6 +47,7 @@ from nsdrake.control.model_files import (
     model_file_problem,
     parse_model_file,
     payload_problem,
+    say_once,
 )
 from nsdrake.control.pinocchio_tree import pinocchio_model
 from nsdrake.control.urdf_checks import parse_urdf, urdf_problems
@@ -171,7 +172,7 @@ class ControllerModel:
         where = f"model_file: {Path(path).name}"
 
         def add(plant):
-            parsed = parse_model_file(plant, path, packages, "model_file", base_pose=base_pose)
+            parsed = parse_model_file(plant, path, packages, "model_file", base_pose=base_pose, visuals=False)
             parsed.locked = choose_joints(plant, joints, locked, parsed.sources.mimics)
             return parsed
 
@@ -277,6 +278,13 @@ class ControllerModel:
             dynamics=dynamics,
         )
         model.parsed = parsed
+        limits = [plant.get_joint_actuator(a).effort_limit() for a in plant.GetJointActuatorIndices()]
+        if not any(np.isfinite(limits)):
+            say_once(
+                f"{where}: no joint has a torque limit (no <transmission> effort, no <limit effort>): "
+                "nothing bounds the commands but actuator_limits.torque",
+                parsed.sources.files[0].path if parsed is not None else None,
+            )
         return model
 
     @classmethod

@@ -214,7 +214,14 @@ class _DrakeWarnings(logging.Handler):
 
 
 def parse_model_file(
-    plant: MultibodyPlant, path, packages=None, where: str = "model_file", *, base_pose=None, add=None
+    plant: MultibodyPlant,
+    path,
+    packages=None,
+    where: str = "model_file",
+    *,
+    base_pose=None,
+    add=None,
+    visuals: bool = True,
 ) -> ParsedModel:
     """Drake parses the model file ``path`` into ``plant`` (module docstring), after every file
     it includes passed the checks of :mod:`nsdrake.control.model_sources`. With a SceneGraph,
@@ -223,7 +230,8 @@ def parse_model_file(
     ``base_pose`` (a RigidTransform; the world's origin if None), said in one line; a joint
     with a ``<limit effort>`` but no actuator (no ``<transmission>``) gets an actuator of that
     effort limit. Drake's parser warnings are said in one line per file. ``add(parser, path)``
-    replaces ``parser.AddModels(path)`` (the station's belts). Every problem is a one-line
+    replaces ``parser.AddModels(path)`` (the station's belts); without ``visuals``, a copy
+    made for hulls leaves the visual elements out. Every problem is a one-line
     ControllerConfigError naming ``where``."""
     _check_arguments(path, packages, base_pose, where)
     path = Path(path)
@@ -233,7 +241,7 @@ def parse_model_file(
     hulled = plant.geometry_source_is_registered() and sources.meshes_to_hull
     with (
         _DrakeWarnings() as drake,
-        HulledModel(sources, parser.package_map(), where) if hulled else _Same(path) as copy,
+        HulledModel(sources, parser.package_map(), where, visuals) if hulled else _Same(path) as copy,
     ):
         try:
             instances = add(parser, copy.top)
@@ -250,16 +258,14 @@ def parse_model_file(
                 f"{where}: {path.name}", f"Drake cannot parse it: {text}{hint}"
             ) from None
         warnings = _by_file([copy.original_text(r) for r in drake.records], sources)
-    _say_warnings(warnings, where)
+    _say_warnings(warnings, where, path)
     welded = weld_floating_roots(plant, instances, base_pose or RigidTransform())
     if welded:
-        LOG.warning(
-            "%s: %s: its root body %s floats (no joint to the world): welded to the world at %s "
-            "(base_pose= places it)",
-            where,
-            path.name,
-            ", ".join(f"'{b}'" for b in welded),
-            "its origin" if base_pose is None else "base_pose",
+        bodies, at = ", ".join(f"'{b}'" for b in welded), "its origin" if base_pose is None else "base_pose"
+        say_once(
+            f"{where}: {path.name}: its root body {bodies} floats (no joint to the world): welded to the "
+            f"world at {at} (base_pose= places it)",
+            path.resolve(),
         )
     add_effort_actuators(plant, instances, sources.efforts)
     return ParsedModel(instances, sources, welded, warnings)
@@ -279,12 +285,26 @@ def _check_arguments(path, packages, base_pose, where: str) -> None:
         raise ControllerConfigError("base_pose", f"must be a RigidTransform, got {show(base_pose)}")
 
 
-def _say_warnings(warnings: dict[str, list[str]], where: str) -> None:
+def _say_warnings(warnings: dict[str, list[str]], where: str, path: Path) -> None:
     """One line per file: how many warnings Drake's parser gave, and the first."""
     for name, texts in warnings.items():
         first = " ".join(texts[0].split("warning: ", 1)[-1].split())
         first = first if len(first) <= 160 else first[:159] + "…"
-        LOG.warning("%s: %s: Drake's parser warned %d time(s) (first: %s)", where, name, len(texts), first)
+        line = f"{where}: {name}: Drake's parser warned {len(texts)} time(s) (first: {first})"
+        say_once(line, path.resolve())
+
+
+_SAID: set = set()
+
+
+def say_once(line: str, about=None) -> None:
+    """``line`` on nsdrake's logger, once per process for the same ``about`` (a file's path;
+    None: the line itself): a run parses the same file for the simulated station and for
+    the controller's model."""
+    key = (about, line)
+    if key not in _SAID:
+        _SAID.add(key)
+        LOG.warning("%s", line)
 
 
 class _Same:

@@ -251,15 +251,17 @@ def convex_hull_obj(mesh: Path, where: str) -> Path:
 class HulledModel:
     """A copy of the model's tree (URDF, SDF, directives) in a temporary folder, each
     collision mesh Drake takes no hull of replaced by its hull's OBJ and every other URI
-    made absolute; :attr:`top` is the copy of the top file. A context manager: the copies
+    made absolute (without ``visuals``, the visual elements left out: a controller's model
+    draws nothing, and Drake refuses some vendors' visuals, the Jaco's material defined
+    twice in two colours); :attr:`top` is the copy of the top file. A context manager: the copies
     are removed on exit (the hulls stay in the cache)."""
 
-    def __init__(self, sources: ModelSources, package_map, where: str):
+    def __init__(self, sources: ModelSources, package_map, where: str, visuals: bool = True):
         self.folder = Path(tempfile.mkdtemp(prefix="nsdrake-model-"))
         self.originals: dict[Path, Path] = {}
         copies = {f.path: self.folder / f"{i}_{f.path.name}" for i, f in enumerate(sources.files)}
         for f in sources.files:
-            text = _rewritten(f, copies, package_map, where)
+            text = _rewritten(f, copies, package_map, where, visuals)
             copies[f.path].write_text(text)
             self.originals[copies[f.path]] = f.path
         self.top = copies[sources.files[0].path]
@@ -277,7 +279,7 @@ class HulledModel:
         return text
 
 
-def _rewritten(f: SourceFile, copies: dict, package_map, where: str) -> str:
+def _rewritten(f: SourceFile, copies: dict, package_map, where: str, visuals: bool = True) -> str:
     if f.kind == "directives":
         data = yaml.safe_load(f.path.read_text())
         for item in data.get("directives", []):
@@ -290,6 +292,10 @@ def _rewritten(f: SourceFile, copies: dict, package_map, where: str) -> str:
         return yaml.safe_dump(data, sort_keys=False)
     tree = ET.parse(f.path)
     root = tree.getroot()
+    if not visuals:
+        for parent in list(root.iter()):
+            for child in [c for c in parent if c.tag == "visual"]:
+                parent.remove(child)
     if f.kind == "urdf":
         for role in ("collision", "visual"):
             for element in root.iter(role):

@@ -101,3 +101,42 @@ def test_a_payload_is_welded_to_the_simulated_tool(tmp_path):
     )  # fmt: skip
     expected = -J.T @ (0.6 * bare.gravity)
     np.testing.assert_allclose(g[1] - g[0], expected, atol=1e-9)
+
+
+def test_arm_joints_in_the_scenario_lock_the_others_in_the_station_and_the_controller(tmp_path):
+    """arm.joints chooses the arm's joints and arm.locked holds j6 at 0.7 rad in the simulated
+    plant and in the controller's model alike: both give Drake's own gravity torques of the
+    whole file with j6 at 0.7 (a station that ignored arm.joints would have 7 joints; one
+    that welded j6 elsewhere, other torques)."""
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    arm = write_vendor_arm(tmp_path)
+    keep = [0, 1, 2, 3, 4, 6]
+    joints = ", ".join(f"j{k + 1}: {Q0[k]}" for k in keep)
+    path = tmp_path / "scenario.yaml"
+    text = SCENARIO % (
+        "myarm/urdf/arm7.urdf",
+        joints,
+        "  joints: [j1, j2, j3, j4, j5, j7]\n  locked: {j6: 0.7}",
+    )
+    path.write_text(text.replace("[x, y, z, rx, ry, rz]", "[x, y, z]"))
+    s = load_scenario_file(path)
+    station = add_scenario_station(DiagramBuilder(), s)
+    model = controller_model(s, station)
+    assert station.arm_model.joint_names == model.joint_names == ("j1", "j2", "j3", "j4", "j5", "j7")
+    plant = MultibodyPlant(0.0)
+    parser = Parser(plant)
+    parser.package_map().Add("myarm", str(arm.package))
+    parser.AddModels(str(arm.urdf))
+    plant.Finalize()
+    context = plant.CreateDefaultContext()
+    q = Q0.copy()
+    q[5] = 0.7
+    plant.SetPositions(context, q)
+    g = -plant.CalcGravityGeneralizedForces(context)[keep]
+    station_context = station.plant.CreateDefaultContext()
+    station.plant.SetPositions(station_context, station.arm, q[keep])
+    np.testing.assert_allclose(-station.plant.CalcGravityGeneralizedForces(station_context), g, atol=1e-9)
+    terms = model.terms(model.create_scratch(), q[keep], np.zeros(6), False)
+    np.testing.assert_allclose(terms.g, g, atol=1e-9)
