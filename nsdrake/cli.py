@@ -1,6 +1,6 @@
 """The ``nsdrake`` command line.
 
-    nsdrake run SCENARIO [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--overwrite]
+    nsdrake run SCENARIO|FILE.yaml [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--overwrite]
                           [--meshcat] [--no-replay]
     nsdrake compare FAMILY [--config FILE.yaml] [--out DIR] [--duration SECONDS] [--jobs N] [--overwrite]
                            [--variant-timeout SECONDS]
@@ -35,7 +35,7 @@ from nsdrake.experiment.output import (
     prepare_output_folder,
     release_unused,
 )
-from nsdrake.experiment.scenario import ScenarioError, load_scenario, shipped_scenarios
+from nsdrake.experiment.scenario import ScenarioError, load_scenario, scenario_label, shipped_scenarios
 from nsdrake.reporting.metrics import metric_line
 from nsdrake.reporting.progress import Progress
 from nsdrake.reporting.run_folder import check_scenario, run_to_folder
@@ -72,10 +72,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog="nsdrake", description="Null-space velocity control (Nemec & Zlajpah 2000) on Drake."
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    run = sub.add_parser("run", help="run a shipped scenario and write traces, metrics and plots")
-    run.add_argument("scenario", help=f"a shipped scenario: {', '.join(shipped_scenarios())}")
+    run = sub.add_parser("run", help="run a scenario and write traces, metrics and plots")
+    run.add_argument(
+        "scenario", help=f"a shipped scenario ({', '.join(shipped_scenarios())}) or a scenario file's path"
+    )
     run.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
-    run.add_argument("--out", type=Path, help="output folder (default: runs/SCENARIO, never overwritten)")
+    run.add_argument(
+        "--out", type=Path, help="output folder (default: runs/SCENARIO, the file's stem, never overwritten)"
+    )
     run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
     run.add_argument(
         "--overwrite",
@@ -131,7 +135,7 @@ def _add_drive_parsers(sub) -> None:
     drive = sub.add_parser(
         "drive", help="run a scenario's controller behind a Franka Panda's LCM driver (or the simulated one)"
     )
-    drive.add_argument("scenario", help="a shipped scenario of a 7-joint Panda (panda_wipe)")
+    drive.add_argument("scenario", help="a 7-joint Panda's scenario: shipped (panda_wipe) or a file's path")
     bus = drive.add_mutually_exclusive_group(required=True)
     bus.add_argument("--lcm", metavar="URL", help="the LCM URL the robot's driver talks on")
     bus.add_argument(
@@ -156,7 +160,7 @@ def _add_drive_parsers(sub) -> None:
     )
     _add_realtime_options(drive, "the loop thread", " (overrides driver.realtime)")
     sim = sub.add_parser("sim-driver", help="run the simulated driver alone on an LCM bus, at real time")
-    sim.add_argument("scenario", help="a shipped scenario of a 7-joint Panda (panda_wipe)")
+    sim.add_argument("scenario", help="a 7-joint Panda's scenario: shipped (panda_wipe) or a file's path")
     sim.add_argument("--lcm", metavar="URL", required=True, help="the LCM URL the controller talks on")
     sim.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
     sim.add_argument("--duration", type=_duration, help="time to serve after the first command [s]")
@@ -253,10 +257,20 @@ def _seconds(text: str) -> float:
     return value
 
 
-def _run(args) -> int:
+def _load(args):
+    """The scenario the command line names (a shipped one or a file, --config, --duration),
+    validated; what the loader did that changes it (a table dropped) printed, one line each."""
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
-    check_scenario(scenario)  # model files, joint names: fail before anything is written
-    with _claimed(args.out, args.scenario, args.overwrite, computes=False) as out:
+    for note in scenario.notes:
+        print(f"nsdrake: note: {note}")
+    return scenario
+
+
+def _run(args) -> int:
+    scenario = _load(args)
+    check_scenario(scenario)  # model files, joint names, checks' needs: fail before anything is written
+    label = scenario_label(args.scenario)
+    with _claimed(args.out, label, args.overwrite, computes=False) as out:
         try:
             meshcat = _live_meshcat() if args.meshcat else None
         except RuntimeError as e:  # e.g. no free port in Meshcat's range
@@ -264,7 +278,7 @@ def _run(args) -> int:
             return 2
         print(f"nsdrake: running {args.scenario} ({scenario.duration:g} s simulated) into {out}/")
         runs = 2 if scenario.report.compare_without_null_space_task else 1
-        progress = Progress(args.scenario, 1.0, simulated=runs * scenario.duration)
+        progress = Progress(label, 1.0, simulated=runs * scenario.duration)
         answer = ctrl_c.current()
 
         def report(done: float) -> None:  # each hundredth: a Ctrl-C kept through a compile stops it here
@@ -299,6 +313,9 @@ def _run(args) -> int:
 def _compare(args) -> int:
     family = load_family(args.family)
     check_variants(family, args.config, args.duration)  # every input error before any folder or simulation
+    if args.config is not None:  # what the overlay did to the family's scenario (a table dropped)
+        for note in load_scenario(family.scenario, config=args.config, validated=False).notes:
+            print(f"nsdrake: note: {note}")
     with _claimed(args.out, f"compare-{args.family}", args.overwrite) as out:
         print(f"nsdrake: running {len(family.variants)} variants of {args.family} into {out}/")
         progress = Progress(args.family, 1.0)
@@ -365,7 +382,7 @@ def _drive(args) -> int:
         raise ScenarioError(
             "--realtime-rate: paces the simulated driver only; the robot's driver keeps its own time"
         )
-    scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
+    scenario = _load(args)
     realtime = _realtime(args, scenario.driver.realtime)
     with realtime_process(realtime):  # before the bus (nsdrake/driver/realtime.py)
         return _drive_locked(args, scenario, realtime)
@@ -381,11 +398,12 @@ def _drive_locked(args, scenario, realtime) -> int:
     drive = prepare(
         scenario, lcm, realtime_rate=args.realtime_rate, robot_adds_gravity=scenario.driver.robot_adds_gravity
     )  # every input error before the folder
-    with _claimed(args.out, f"drive-{args.scenario}", args.overwrite) as out:
+    label = scenario_label(args.scenario)
+    with _claimed(args.out, f"drive-{label}", args.overwrite) as out:
         where = "the simulated driver over memq://" if lcm is None else f"the driver at {args.lcm}"
         with ctrl_c_requests() as stop:  # from here on Ctrl-C stops the drive, which keeps its folder
             print(f"nsdrake: driving {args.scenario} ({scenario.duration:g} s) against {where} into {out}/")
-            progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
+            progress = Progress(label, 1.0, simulated=scenario.duration)
             try:
                 run = drive.run(progress=progress, stop=stop, realtime=realtime)
             finally:
@@ -413,7 +431,7 @@ def _sim_driver(args) -> int:
     from nsdrake.driver.realtime import realtime_process
     from nsdrake.driver.serve import option_problems
 
-    scenario = check_drive_scenario(load_scenario(args.scenario, config=args.config, duration=args.duration))
+    scenario = check_drive_scenario(_load(args))
     for option, problem in option_problems(scenario, args.expire_sec, args.low_pass_freq):
         raise ScenarioError(f"{option}: {problem}")
     realtime = _realtime(args, None)  # the flags only: the scenario's driver.realtime is the controller's
@@ -432,7 +450,7 @@ def _serve(args, scenario, realtime) -> int:
 
     lcm = _lcm(args.lcm)
     print(f"nsdrake: simulated driver for {args.scenario} on {args.lcm}; serving (Ctrl-C ends)", flush=True)
-    progress = Progress(args.scenario, 1.0, simulated=scenario.duration)
+    progress = Progress(scenario_label(args.scenario), 1.0, simulated=scenario.duration)
     with ctrl_c_requests() as stop:
         try:
             served = serve_simulated_driver(

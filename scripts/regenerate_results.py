@@ -3,8 +3,9 @@
     python scripts/regenerate_results.py --family NAME|all [--runs DIR]
 
 Each folder docs/results/FAMILY/ holds ``command``, the one line that made its table
-(``nsdrake compare FAMILY [options]``, or ``python bench/bench_FAMILY.py [options]`` for a
-benchmark's table: this machine's figures, which another machine will not reproduce), and
+(``nsdrake compare FAMILY [options]``, ``python bench/bench_FAMILY.py [options]`` for a
+benchmark's table: this machine's figures, which another machine will not reproduce, or
+``python scripts/FAMILY.py [options]`` for a page's own figures), and
 ``table.md``, the table that command wrote, unedited; the docs pages copy that table's rows
 (a test checks the copy, tests/test_results_tables.py). This script re-runs the command of
 the family named (or of every folder, with ``all``) with ``--out RUNS/FAMILY`` (and
@@ -61,9 +62,12 @@ def read_command(family: str) -> list[str]:
         raise SystemExit(f"{path}: must not name --out (this script chooses where the run goes)")
     if words[:3] == ["nsdrake", "compare", family]:
         return ["-m", "nsdrake", *words[1:]]
-    if words[:2] == ["python", f"bench/bench_{family}.py"]:
+    if words[:2] in (["python", f"bench/bench_{family}.py"], ["python", f"scripts/{family}.py"]):
         return words[1:]
-    forms = f"'nsdrake compare {family} [options]' or 'python bench/bench_{family}.py [options]'"
+    forms = (
+        f"'nsdrake compare {family} [options]', 'python bench/bench_{family}.py [options]' "
+        f"or 'python scripts/{family}.py [options]'"
+    )
     raise SystemExit(f"{path}: must read {forms}")
 
 

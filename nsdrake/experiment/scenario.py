@@ -10,8 +10,10 @@ the result; every problem is a :class:`ScenarioError` whose one-line message
 names the file and the field.
 """
 
+import copy
 import dataclasses
 import math
+import os
 import re
 import typing
 from collections.abc import Iterator
@@ -212,6 +214,9 @@ class Scenario:
     source: str = field(default="", metadata={"yaml": False})
     # Folder that relative model paths are resolved against (set by the loader; not a YAML field).
     base_dir: str = field(default="", metadata={"yaml": False})
+    # What the loader did that the user should hear of, one line each: the tables of another
+    # arm's joints an overlay dropped (set by the loader; not a YAML field).
+    notes: list[str] = field(default_factory=list, metadata={"yaml": False})
 
     def generalized_inverse(self) -> GeneralizedInverse:
         return GeneralizedInverse(PseudoInverseKind(self.null_space.pseudo_inverse), self.null_space.damping)
@@ -220,6 +225,88 @@ class Scenario:
 def shipped_scenarios() -> list[str]:
     """Names of the scenarios that ship with nsdrake."""
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+
+
+# The fields keyed by joint name. Each is one vector over the arm's joints, written as a
+# mapping so that a reader sees which joint each number is for; an overlay that gives one
+# replaces it whole, as it replaces a list (merging two vectors gives one nobody wrote:
+# a sweep direction {joint1: 1} on a base's {joint2: 1, joint3: -1} is not e1).
+JOINT_TABLES = (
+    "arm.locked",  # keyed by the joints that are not the arm's (arm.joints)
+    "arm.initial_positions",
+    "arm.initial_velocities",
+    "desired_null_space.joint_speed_limits",
+    "desired_null_space.sweep.direction",
+    "desired_null_space.posture.q_d",
+    "desired_null_space.posture.weight",
+    "desired_null_space.posture.offset",
+    "actuator_limits.torque",
+    "actuator_limits.torque_rate",
+)
+# The fields that choose the arm. An overlay that changes one and gives arm.initial_positions
+# for another set of joints (every joint must have one) chooses another arm: the base's
+# joint tables it does not give name the other arm's joints and are dropped, each said
+# (Scenario.notes). Another file of the same joints (a model edited) keeps them.
+ARM_FIELDS = ("arm.urdf", "arm.joints")
+
+
+def value_at(tree, path: str):
+    """The value at the dotted ``path`` of ``tree`` (nested mappings or dataclasses), or
+    _ABSENT."""
+    node = tree
+    for part in path.split("."):
+        if isinstance(node, dict):
+            if part not in node:
+                return _ABSENT
+            node = node[part]
+        elif dataclasses.is_dataclass(node):
+            node = getattr(node, part)
+        else:
+            return _ABSENT
+    return node
+
+
+_ABSENT = object()
+
+
+def _set(scenario: "Scenario", path: str, value) -> None:
+    *parents, leaf = path.split(".")
+    node = scenario
+    for part in parents:
+        node = getattr(node, part)
+    setattr(node, leaf, value)
+
+
+def overlay(base: "Scenario", data, origin: str) -> "Scenario":
+    """``base`` with the fields of ``data`` (parsed YAML: a file, a compare variant's
+    overrides, a sweep run's values) set. A section the data gives merges field by field;
+    a list and a table keyed by joint name (JOINT_TABLES) the data gives replace the
+    base's whole. Data that chooses another arm (ARM_FIELDS) with positions for other
+    joints also drops the base's joint tables it does not give, each named in the
+    result's ``notes`` (from ``origin``, the overlay's name). ``base`` is not changed.
+    Raises what ``yaml_load_typed`` raises (the caller names the file)."""
+    base = copy.deepcopy(base)
+    changed = [
+        p for p in ARM_FIELDS if value_at(data, p) is not _ABSENT and value_at(data, p) != value_at(base, p)
+    ]
+    joints = value_at(data, "arm.initial_positions")
+    other_arm = bool(changed) and isinstance(joints, dict) and set(joints) != set(base.arm.initial_positions)
+    dropped = []
+    for path in JOINT_TABLES:
+        given = value_at(data, path) is not _ABSENT
+        if given or other_arm:
+            if not given and value_at(base, path):
+                dropped.append(path)
+            _set(base, path, {})
+    scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(data), defaults=base)
+    if dropped:
+        was = ", ".join(f"{p} {_show(value_at(base, p))} -> {_show(value_at(data, p))}" for p in changed)
+        was += f", positions for its {len(joints)} joints"
+        scenario.notes = scenario.notes + [
+            f"{origin} chooses another arm ({was}): the base's tables keyed by the other arm's joints "
+            f"are dropped: {', '.join(dropped)}"
+        ]
+    return scenario
 
 
 def _one_line(text: str) -> str:
@@ -443,42 +530,107 @@ def read_yaml(path: Path, kind: str = "scenario") -> tuple[str, object]:
     return normalised_yaml(data), data
 
 
-def _read(path: Path, defaults: Scenario | None) -> Scenario:
+def _read(path: Path, base: Scenario | None) -> Scenario:
+    """The scenario file ``path``: on its own (defaults for what it leaves out), or
+    overlaid on ``base`` (:func:`overlay`)."""
     text, data = read_yaml(path)
     problem = check_shape(data, Scenario, "")
     if problem:
         raise ScenarioError(f"{path}: {problem}")
     try:
-        return yaml_load_typed(schema=Scenario, data=text, defaults=defaults or Scenario())
+        if base is None:
+            return yaml_load_typed(schema=Scenario, data=text, defaults=Scenario())
+        return overlay(base, data, str(path))
     except Exception as e:  # anything the shape check missed
         raise ScenarioError(f"{path}: {_cut(e)}") from None
 
 
+def find_scenario(name_or_path: str | Path) -> Path:
+    """The file of the scenario ``name_or_path``: the name of a shipped scenario (nsdrake
+    list), else the path of a scenario file. A shipped scenario's bare name means the
+    shipped one even beside a file of that name (``./fig3`` names the file). Raises
+    ScenarioError saying what was tried."""
+    text = str(name_or_path)
+    known = shipped_scenarios()
+    if text in known:
+        return SCENARIO_DIR / f"{text}.yaml"
+    path = Path(text).expanduser()
+    shipped = f"the shipped scenarios are {', '.join(known)}"
+    if path.is_file():
+        return path
+    if path.is_dir():
+        raise ScenarioError(
+            f"{_name(text)}: a folder, not a scenario file (nor a shipped scenario: {shipped})"
+        )
+    if os.sep in text or "/" in text or path.suffix in (".yaml", ".yml"):
+        raise ScenarioError(f"{_name(text)}: no such scenario file (nor a shipped one: {shipped})")
+    raise ScenarioError(
+        f"unknown scenario '{_name(text)}'; {shipped}; and there is no file '{_name(text)}' "
+        "(a scenario file of yours is given by its path, e.g. my_arm.yaml)"
+    )
+
+
+def scenario_label(name_or_path: str | Path) -> str:
+    """A scenario's short name for folders and progress lines: a shipped one's name, a
+    file's stem."""
+    text = str(name_or_path)
+    return text if text in shipped_scenarios() else Path(text).stem
+
+
 def load_scenario(
-    name: str, config: str | Path | None = None, duration: float | None = None, *, validated: bool = True
+    name: str | Path,
+    config: str | Path | None = None,
+    duration: float | None = None,
+    *,
+    validated: bool = True,
 ) -> Scenario:
-    """The shipped scenario ``name``, with the YAML file ``config`` overlaid, validated
-    (unless ``validated`` is False: a base that more overrides follow, validated after them,
-    as a compare variant's).
+    """The scenario ``name`` (a shipped scenario's name or a scenario file's path:
+    :func:`find_scenario`), with the YAML file ``config`` overlaid (:func:`overlay`),
+    validated (unless ``validated`` is False: a base that more overrides follow, validated
+    after them, as a compare variant's).
 
     ``duration`` (command line) overrides the files. Raises ScenarioError.
     """
-    known = shipped_scenarios()
-    if name not in known:
-        raise ScenarioError(f"unknown scenario '{_name(name)}'; the shipped scenarios are {', '.join(known)}")
-    path = SCENARIO_DIR / f"{name}.yaml"
+    path = find_scenario(name)
     scenario = _read(path, None)
-    scenario.source, scenario.base_dir = str(path), str(path.parent)
+    scenario.source, scenario.base_dir = str(path), str(path.resolve().parent)
+    if str(name) in shipped_scenarios() and Path(str(name)).is_file():
+        scenario.notes.append(
+            f"'{name}' is the shipped scenario; the file '{name}' in this folder is run as ./{name}"
+        )
     if config is not None:
         config = Path(config)
-        scenario = _read(config, scenario)
-        scenario.source, scenario.base_dir = f"{path.name} + {config}", str(config.resolve().parent)
+        scenario = _read(config, anchored(scenario))
+        head = path.name if path.parent == SCENARIO_DIR else str(path)
+        scenario.source, scenario.base_dir = f"{head} + {config}", str(config.resolve().parent)
     if duration is not None:
         scenario = dataclasses.replace(scenario, duration=duration)
         check_positive(scenario.source, "--duration", duration)
     if validated:
-        validate(scenario)
+        try:
+            validate(scenario)
+        except ScenarioError as e:  # a table the overlay dropped may be why: say so on the same line
+            if not scenario.notes:
+                raise
+            raise ScenarioError(f"{e} (note: {'; '.join(scenario.notes)})") from None
     return scenario
+
+
+def anchored(scenario: Scenario) -> Scenario:
+    """``scenario`` with its model paths that are relative to its own folder (base_dir)
+    made absolute, so that an overlay read from another folder, which becomes the base
+    folder, leaves them pointing at the same files (shipped model names stay names)."""
+    if not scenario.base_dir:
+        return scenario
+    folder = Path(scenario.base_dir)
+    s = copy.deepcopy(scenario)
+    for model in (s.arm, s.plate):
+        if not Path(model.urdf).expanduser().is_absolute() and (folder / model.urdf).is_file():
+            model.urdf = str((folder / model.urdf).resolve())
+    s.arm.packages = {
+        name: str((folder / Path(where).expanduser()).resolve()) for name, where in s.arm.packages.items()
+    }
+    return s
 
 
 def load_scenario_file(path: str | Path) -> Scenario:
@@ -607,6 +759,9 @@ def _arm_and_plate_problems(s: Scenario) -> Iterator[tuple[str, str]]:
     if not s.arm.initial_positions:
         yield "arm.initial_positions", "must give a position for every joint"
     yield from _payload_problems(s.arm.payload)
+    tip = s.arm.tip_radius
+    yield from _checked("arm.tip_radius", finite_problem(tip) or non_negative_problem(tip))
+    yield from _checked("arm.tip_radius", length_problem([tip], "the tip's radius"))
     if len(s.plate.position) != 3:
         yield "plate.position", f"must be [x, y, z], got {_show(s.plate.position)}"
     for i, value in enumerate(s.plate.position):
@@ -646,6 +801,32 @@ def _task_and_report_problems(s: Scenario) -> Iterator[tuple[str, str]]:
             yield f"report.required_modes[{i}]", f"must be a mode 0-4, got {_show(m)}"
     if s.report.swivel_frames and len(s.report.swivel_frames) != 3:
         yield "report.swivel_frames", f"must name three frames or none, got {_show(s.report.swivel_frames)}"
+    yield from check_needs(s)
+
+
+def check_needs(s: Scenario) -> Iterator[tuple[str, str]]:
+    """What a check of report.checks needs from the scenario's other fields, refused before
+    the run rather than after it (the check's figures read trace columns that only these
+    settings write); what needs the arm (joint limits) is checked with the station
+    (:func:`nsdrake.experiment.scenario_station.check_needs_model`)."""
+    checks = s.report.checks
+    if "self_motion" in checks and not s.report.swivel_frames:
+        yield (
+            f"report.checks[{checks.index('self_motion')}]",
+            "self_motion measures the elbow's swivel: give report.swivel_frames, the shoulder's, "
+            "elbow's and wrist's frames (the Panda's: panda_link2, panda_link4, panda_link7)",
+        )
+    if s.report.required_modes and "priority" not in checks:
+        yield (
+            "report.required_modes",
+            f"only the priority check reads them, and report.checks is {_show(checks)}: add priority",
+        )
+    if 4 in s.report.required_modes and s.desired_null_space.selector.q_lim <= 0:
+        yield (
+            f"report.required_modes[{s.report.required_modes.index(4)}]",
+            "mode 4 (joint-limit avoidance) never comes with desired_null_space.selector.q_lim 0 "
+            "(the branch is off); give q_lim > 0",
+        )
     for name in ("camera_position", "camera_target"):
         value = getattr(s.report, name)
         if value and (len(value) != 3 or not all(math.isfinite(v) for v in value)):
@@ -730,19 +911,10 @@ def check_against_plant(s: Scenario, joint_names: tuple[str, ...]) -> None:
     """Checks the fields keyed by joint name against the arm's joints."""
     src = s.source or "scenario"
     valid = ", ".join(joint_names)
-    tables = {
-        "arm.initial_positions": s.arm.initial_positions,
-        "arm.initial_velocities": s.arm.initial_velocities,
-        "desired_null_space.joint_speed_limits": s.desired_null_space.joint_speed_limits,
-        "desired_null_space.sweep.direction": s.desired_null_space.sweep.direction,
-        "desired_null_space.posture.q_d": s.desired_null_space.posture.q_d,
-        "desired_null_space.posture.weight": s.desired_null_space.posture.weight,
-        "desired_null_space.posture.offset": s.desired_null_space.posture.offset,
-        "actuator_limits.torque": s.actuator_limits.torque,
-        "actuator_limits.torque_rate": s.actuator_limits.torque_rate,
-    }
-    for where, table in tables.items():
-        for name in table:
+    for where in JOINT_TABLES:
+        if where == "arm.locked":  # the joints that are not the arm's (checked where they are locked)
+            continue
+        for name in value_at(s, where):
             if name not in joint_names:
                 _fail(src, f"{where}.{_name(name)}", f"unknown joint; the arm's joints are {valid}")
     missing = [j for j in joint_names if j not in s.arm.initial_positions]

@@ -12,7 +12,7 @@ from pydrake.systems.framework import DiagramBuilder
 from nsdrake.experiment.scenario import Scenario, ScenarioError, check_against_plant
 from nsdrake.realism.config import substeps
 from nsdrake.station.config import StationError
-from nsdrake.station.plant import Station, add_station
+from nsdrake.station.plant import Station, add_station, has_joint_limits
 
 GRAVITY = 9.81  # [m/s²]
 
@@ -57,4 +57,29 @@ def add_scenario_station(builder: DiagramBuilder, scenario: Scenario, *, sensing
             raise ScenarioError(f"{src}: report.swivel_frames: no frame '{name}' in {station.arm_file.name}")
     if scenario.reference.path == "circle" and np.linalg.norm(station.tangent) < 0.99:
         raise ScenarioError(f"{src}: plate: the plate's x axis leaves the task axes {scenario.task.axes}")
+    for where, problem in check_needs_model(scenario, station):
+        raise ScenarioError(f"{src}: {where}: {problem}")
     return station
+
+
+def check_needs_model(scenario: Scenario, station: Station):
+    """(field, problem) for what a check of report.checks needs from the arm: the pose
+    check's joint margins and obstacle distances are traced only for an arm with joint
+    position limits (nsdrake/experiment/simulate.py, collect_traces), as is the mode-4
+    branch a required mode 4 needs. (What needs the scenario alone:
+    :func:`nsdrake.experiment.scenario.check_needs`.)"""
+    if has_joint_limits(station):
+        return
+    model = station.arm_file.name
+    report = scenario.report
+    if "pose" in report.checks:
+        yield (
+            f"report.checks[{report.checks.index('pose')}]",
+            f"pose reports each joint's margin to its position limits, and {model} has no joint "
+            "position limits; use fig3 for the force and position figures",
+        )
+    if 4 in report.required_modes:
+        yield (
+            f"report.required_modes[{report.required_modes.index(4)}]",
+            f"mode 4 (joint-limit avoidance) needs joint position limits, and {model} has none",
+        )

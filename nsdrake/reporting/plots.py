@@ -229,15 +229,19 @@ _MARGIN_LABELS = {"q": "position margin [rad]", "v": "speed margin [rad/s]", "ta
 
 
 def _margin_axis(ax, traces: Traces, kind: str) -> None:
-    """Each joint's ``<kind>_margin`` column (kind q, v or tau) against zero, the limit."""
+    """Each joint's ``<kind>_margin`` column (kind q, v or tau) against zero, the limit;
+    an arm without joint position limits has no margin columns (the panel says so)."""
+    ax.set_ylabel(_MARGIN_LABELS[kind])
+    ax.set_xlabel("time [s]")
+    if f"{kind}_margin1" not in traces:
+        ax.text(0.5, 0.5, "the arm has no joint limits", ha="center", va="center", transform=ax.transAxes)
+        return
     block = traces.block(f"{kind}_margin")
     for i in range(block.shape[1]):
         ax.plot(traces["t"], block[:, i], lw=0.9, label=f"joint {i + 1}")
     ax.axhline(0.0, color="k", lw=0.8)
-    ax.set_ylabel(_MARGIN_LABELS[kind])
     if kind == "q":
         ax.legend(loc="best", fontsize=7, ncol=4)
-    ax.set_xlabel("time [s]")
 
 
 def _swivel_and_mode_axis(ax, traces: Traces, baseline: Traces | None) -> None:

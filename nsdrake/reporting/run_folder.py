@@ -333,12 +333,14 @@ def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Trace
     station's plate directions and arm model)."""
     selector = scenario.desired_null_space.selector
     threshold = scenario.reference.contact_threshold
+    arm = station.arm_model
+    translational = arm.task_axes[: arm.m_t]  # the traces' position columns; tangent is on these rows
     metrics: list[Metric] = []
     if "fig3" in scenario.report.checks:
         metrics += fig3_metrics(
             traces,
             tangent=station.tangent,
-            task_axes=station.arm_model.task_axes,
+            task_axes=translational,
             contact_threshold=threshold,
             p_tau_without_null_space_task=float(baseline["p_tau"][-1]) if baseline is not None else None,
             d_lim=selector.d_lim,
@@ -351,8 +353,6 @@ def compute_metrics(scenario: Scenario, station, traces: Traces, baseline: Trace
             contact_threshold=threshold,
             required_modes=tuple(scenario.report.required_modes),
         )
-    arm = station.arm_model
-    translational = arm.task_axes[: arm.m_t]
     if "pose" in scenario.report.checks:
         metrics += pose_metrics(
             traces,

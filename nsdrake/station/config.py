@@ -32,9 +32,10 @@ class PayloadConfig:
 
 @dataclass
 class ArmConfig:
-    # Model file: a shipped model name (urdf/) or a path relative to the scenario file; a URDF,
-    # an SDF or Drake model directives (.dmd.yaml), parsed from the file (its meshes' relative
-    # URIs resolve from its folder) [-].
+    # Model file: a shipped model name (urdf/), a path relative to the scenario file, or
+    # package://NAME/path (NAME's folder from packages, else the package pip installed, as
+    # example-robot-data's robots); a URDF, an SDF or Drake model directives (.dmd.yaml),
+    # parsed from the file (its meshes' relative URIs resolve from its folder) [-].
     urdf: str = "arm4.urdf"
     # package:// URIs: {package name: folder}, folders relative to the scenario file; the
     # nearest package.xml above the model file and ROS_PACKAGE_PATH are searched too [-].
@@ -43,6 +44,10 @@ class ArmConfig:
     payload: PayloadConfig = field(default_factory=PayloadConfig)
     # Frame of the arm whose origin is the task point (the tool tip) [-].
     tool_frame: str = "tool"
+    # A sphere of this radius centred on the tool frame's origin, massless, with the plate's
+    # contact properties: a tip that touches, for a model whose file has no tool of its own
+    # (a vendor's flange or hand); 0: none [m].
+    tip_radius: float = 0.0
     # The arm's joints, by name; empty: every joint of the model file. The others (gripper
     # fingers, a mobile base) are locked at their position in ``locked`` [-].
     joints: list[str] = field(default_factory=list)

@@ -96,7 +96,11 @@ class ForceSensor(LeafSystem):
         if problem is not None:
             raise StationError(f"ForceSensor: {problem}")
         super().__init__()
-        self._index = int(sensor_joint.index())
+        # The plant's reaction forces are listed by the joints' order among the joints it
+        # has (their ordinals), not by JointIndex: a joint removed before (a vendor's finger,
+        # locked by a weld: nsdrake/control/model_files.py, choose_joints) leaves a gap in
+        # the indices and none in the list.
+        self._index = list(plant.GetJointIndices()).index(sensor_joint.index())
         context = plant.CreateDefaultContext()
         self._R_WJc = sensor_joint.frame_on_child().CalcPoseInWorld(context).rotation().matrix()
         self.p_WSo, self._tare = sensor_tare(plant, sensor_joint)

@@ -58,7 +58,7 @@ from nsdrake.station.contact_monitor import ContactMonitor
 from nsdrake.station.elastic import ElasticMap, add_elastic_arm, rigid_arm_plant
 from nsdrake.station.force_sensor import ForceSensor
 from nsdrake.station.model_checks import check_model_file
-from nsdrake.station.models import resolve_model
+from nsdrake.station.models import installed_package, package_of, resolve_model
 
 SENSOR_JOINT = "force_sensor"
 
@@ -136,9 +136,9 @@ def surface_directions(R_WP: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, 
     return normal, (tangent / size if size > 1e-9 else np.zeros_like(tangent))
 
 
-def _model_file(src: str, where: str, name: str, base_dir: Path | None) -> Path:
+def _model_file(src: str, where: str, name: str, base_dir: Path | None, packages=None) -> Path:
     try:
-        path = resolve_model(name, base_dir)
+        path = resolve_model(name, base_dir, packages)
     except FileNotFoundError as e:
         raise StationError(f"{src}: {where}: {e}") from None
     problem = model_file_problem(path)
@@ -229,14 +229,17 @@ def _add_world(
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
     scene_graph.set_name("scene_graph")
-    arm_file = _model_file(source, "arm.urdf", arm.urdf, base_dir)
-    plate_file = _model_file(source, "plate.urdf", plate.urdf, base_dir)
     packages = package_folders(arm, base_dir, source)
+    arm_file = _model_file(source, "arm.urdf", arm.urdf, base_dir, packages)
+    plate_file = _model_file(source, "plate.urdf", plate.urdf, base_dir)
     arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, packages, arm, source)
     payload = station_payload(arm, source)
     if payload is not None:
         add_payload(plant, plant.GetFrameByName(arm.tool_frame, arm_instance), payload)
     plate_body = _the_one_body(plant, plate_instance, source)
+    if arm.tip_radius > 0:
+        tool = plant.GetFrameByName(arm.tool_frame, arm_instance)
+        _add_tip(plant, scene_graph, tool, arm.tip_radius, plate_body)
     X_WP = RigidTransform(RollPitchYaw(plate.roll, plate.pitch, plate.yaw), np.asarray(plate.position))
     sensor_joint = plant.AddJoint(WeldJoint(SENSOR_JOINT, plant.world_frame(), plate_body.body_frame(), X_WP))
     obstacle_bodies = _add_obstacles(plant, scene_graph, obstacles, plate_body)
@@ -260,10 +263,15 @@ def _add_world(
 
 
 def package_folders(arm: ArmConfig, base_dir: Path | None, source: str) -> dict[str, Path]:
-    """``arm.packages`` with each folder resolved against ``base_dir`` (the scenario's folder)."""
+    """``arm.packages`` with each folder resolved against ``base_dir`` (the scenario's folder),
+    and the package of an ``arm.urdf`` given as ``package://NAME/...`` that pip installed
+    (:func:`nsdrake.station.models.installed_package`) unless ``arm.packages`` names it."""
     folders = {
         name: (base_dir or Path.cwd()) / Path(folder).expanduser() for name, folder in arm.packages.items()
     }
+    package = package_of(arm.urdf)
+    if package is not None and package not in folders and installed_package(package) is not None:
+        folders[package] = installed_package(package)
     problem = packages_problem(folders)
     if problem:
         raise StationError(f"{source}: arm.packages: {problem}")
@@ -472,6 +480,17 @@ def _add_sensing_and_actuation(builder: DiagramBuilder, station: Station) -> Non
         true_wrench=sensor.GetOutputPort("wrench"),
         actuation=actuation.get_input_port(),
     )
+
+
+def _add_tip(plant: MultibodyPlant, scene_graph, tool_frame, radius: float, plate_body) -> None:
+    """arm.tip_radius: a sphere centred on the tool frame's origin, on the tool frame's body
+    (no mass of its own), to touch with, with the plate's contact properties (the shipped
+    tools' and plates' are the same: stiffness 1e5 N/m, dissipation 5 s/m, mu 0.3)."""
+    (plate_geometry,) = plant.GetCollisionGeometriesForBody(plate_body)
+    properties = scene_graph.model_inspector().GetProximityProperties(plate_geometry)
+    body, X_BT = tool_frame.body(), tool_frame.GetFixedPoseInBodyFrame()
+    plant.RegisterCollisionGeometry(body, X_BT, Sphere(radius), "tip", ProximityProperties(properties))
+    plant.RegisterVisualGeometry(body, X_BT, Sphere(radius), "tip", np.array([0.85, 0.2, 0.15, 1.0]))
 
 
 def _add_obstacles(

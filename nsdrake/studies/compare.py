@@ -45,7 +45,7 @@ from nsdrake.experiment.scenario import (
     _show,
     check_shape,
     load_scenario,
-    normalised_yaml,
+    overlay,
     read_yaml,
 )
 from nsdrake.experiment.traces import Traces
@@ -154,8 +154,6 @@ def _variant(path: Path, i: int, v) -> Variant:
 def variant_scenario(family: Family, index: int, config: Path | None, duration: float | None) -> Scenario:
     """The base scenario (the variant's own, else the family's), then ``config``, then the
     variant's overrides; validated."""
-    from pydrake.common.yaml import yaml_load_typed
-
     from nsdrake.experiment.scenario import validate
 
     variant = family.variants[index]
@@ -165,7 +163,7 @@ def variant_scenario(family: Family, index: int, config: Path | None, duration: 
         variant.scenario or family.scenario, config=config, duration=duration, validated=False
     )
     try:
-        scenario = yaml_load_typed(schema=Scenario, data=normalised_yaml(variant.overrides), defaults=base)
+        scenario = overlay(base, variant.overrides, f"{family.source} [{variant.name}]")
     except Exception as e:
         raise ScenarioError(f"{family.source}: variants[{index}].overrides: {_cut(e)}") from None
     scenario.source = f"{family.source} [{variant.name}]"

@@ -34,9 +34,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from nsdrake.experiment.scenario import (
+    JOINT_TABLES,
     Scenario,
     ScenarioError,
     _kind,
@@ -45,9 +45,11 @@ from nsdrake.experiment.scenario import (
     _show,
     check_shape,
     load_scenario,
+    overlay,
     read_yaml,
     shipped_scenarios,
     validate,
+    value_at,
 )
 from nsdrake.reporting.metrics import D_MIN_AFTER, FIRST_CONTACT_METRICS
 from nsdrake.reporting.run_folder import scenario_yaml
@@ -384,8 +386,19 @@ def expand(spec: SweepSpec) -> list[dict]:
     return out
 
 
-def _nested(values: dict) -> dict:
+def _nested(values: dict, base: Scenario) -> dict:
+    """The runs' values as nested mappings for :func:`overlay`. An axis into a table keyed
+    by joint name (arm.initial_positions.joint2) sets that one entry: the table is given
+    whole, the base's with the entry set (an overlay replaces a joint table it gives); an
+    axis that is a whole table (sweep.direction: [{joint1: 1}, …]) replaces it."""
     tree: dict = {}
+    for table in JOINT_TABLES:
+        if any(path.startswith(table + ".") for path in values):
+            node = tree
+            *parents, leaf = table.split(".")
+            for p in parents:
+                node = node.setdefault(p, {})
+            node[leaf] = dict(value_at(base, table))
     for path, value in values.items():
         node = tree
         *parents, leaf = path.split(".")
@@ -417,8 +430,6 @@ def _label(values: dict) -> str:
 def plan_runs(spec: SweepSpec, *, check_models: bool = True) -> list[Run]:
     """Every run's scenario, validated (and checked against the model: the diagram is
     built once per run, about 0.05 s); the first problem is a one-line ScenarioError."""
-    from pydrake.common.yaml import yaml_load_typed
-
     from nsdrake.reporting.run_folder import check_scenario
 
     base = load_scenario(spec.base, config=spec.config, duration=spec.duration)
@@ -426,7 +437,7 @@ def plan_runs(spec: SweepSpec, *, check_models: bool = True) -> list[Run]:
     for index, values in enumerate(expand(spec)):
         source = f"{spec.source} (run {index}: {_label(values)})"
         try:
-            scenario = yaml_load_typed(schema=Scenario, data=yaml.safe_dump(_nested(values)), defaults=base)
+            scenario = overlay(base, _nested(values, base), source)
         except Exception as e:
             raise SweepError(f"{source}: {_one_line(e)}") from None
         scenario.source, scenario.base_dir = source, base.base_dir

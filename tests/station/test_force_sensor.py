@@ -28,10 +28,21 @@ def contact_wrench_on_plate(built, context):
     return np.concatenate([M, f])
 
 
-def test_sensor_reads_the_contact_wrench(tmp_path):
+# fig3 as shipped; and with joint 4 locked (arm.joints, issue 42): the plant then lists one
+# joint fewer than its joint indices count (a removed joint's gap), which the sensor's
+# reading of the plant's reaction forces must not trip over (it read JointIndex: an
+# IndexError, or another joint's reaction).
+LOCKED = (
+    "arm: {joints: [joint1, joint2, joint3], locked: {joint4: 0.614}, "
+    "initial_positions: {joint1: 0.401, joint2: 0.972, joint3: 1.012}}"
+)
+
+
+@pytest.mark.parametrize("overlay", ["", LOCKED], ids=["fig3", "joint 4 locked"])
+def test_sensor_reads_the_contact_wrench(tmp_path, overlay):
     """While pressing and sliding, the tared sensor equals the contact wrench on the plate,
     to rounding (both are the same step's solver output: tolerance 1e-9 N)."""
-    built, context = simulate_to(fig3_with(tmp_path), 2.0)
+    built, context = simulate_to(fig3_with(tmp_path, overlay), 2.0)
     sensor = built.system("force_sensor")
     wrench = sensor.GetOutputPort("wrench").Eval(sensor.GetMyContextFromRoot(context))
     expected = contact_wrench_on_plate(built, context)
