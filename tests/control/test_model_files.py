@@ -136,6 +136,95 @@ def test_bad_model_file_arguments_are_refused_in_one_line(arm, arguments, where)
     assert "\n" not in str(e.value) and str(e.value).startswith(where)
 
 
+# The physical rules a model file passes before Drake reads it, each broken once in the
+# mesh-free arm: (what is changed, the line's words). Drake itself would take some of these
+# (a triangle-inequality inertia, a negative-size box) or say something else.
+URDF_RULES = {
+    "mass": (('<mass value="3.0"/>', '<mass value="-3.0"/>'), "link 'link1': mass -3 kg must be > 0"),
+    "inertia": (
+        ('iyy="0.03" iyz="0" izz="0.008"', 'iyy="0.03" iyz="0" izz="0.07"'),
+        "link 'link2': inertia breaks the triangle inequality",
+    ),
+    "geometry": (
+        (
+            '<link name="tool">\n',
+            '<link name="tool">\n    <collision><geometry><box size="0.1 0 0.1"/></geometry></collision>\n',
+        ),
+        "link 'tool': collision box size 0 must be > 0",
+    ),
+    "tree": (
+        (
+            "</robot>",
+            '  <joint name="loop" type="fixed"><parent link="link7"/><child link="link3"/></joint>\n</robot>',
+        ),
+        "link 'link3': child of two joints ('j3' and 'loop'): a kinematic loop",
+    ),
+}
+URDF_SPELLINGS = (".urdf", ".URDF", ".Urdf")  # what model_file_problem accepts: any case
+
+
+@pytest.mark.parametrize("rule", list(URDF_RULES))
+@pytest.mark.parametrize("suffix", URDF_SPELLINGS)
+def test_every_spelling_of_urdf_goes_through_every_urdf_rule(tmp_path, suffix, rule):
+    """A URDF file that breaks one rule, named arm7 with each spelling the file check
+    accepts (.urdf, .URDF, .Urdf): ControllerModel.from_file, from_urdf (a path) and the
+    simulated station (a scenario's arm.urdf) each refuse it in the rule's one line, naming
+    the file, before Drake reads it (issue 46, mistake 8). Catches the rules run only for a
+    lower-case .urdf (an upper-case file accepted by the file check and then skipping them:
+    Drake takes a triangle-inequality inertia, a zero-size box and a loop silently or
+    fails with its own words)."""
+    from nsdrake.experiment.scenario import ScenarioError
+
+    (old, replacement), words = URDF_RULES[rule]
+    text = mesh_free_urdf()
+    assert old in text
+    path = tmp_path / f"arm7{suffix}"
+    path.write_text(text.replace(old, replacement, 1))
+    for load in (ControllerModel.from_file, ControllerModel.from_urdf):
+        with pytest.raises(ControllerConfigError) as e:
+            load(path, tool_frame="tool", task_axes=POSE)
+        assert str(e.value).startswith(f"controller_model: arm7{suffix}: {words}"), str(e.value)
+    with pytest.raises(ScenarioError) as e:
+        station_with_arm(tmp_path, path.name)
+    assert f"arm7{suffix}: {words}" in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("suffix", (".sdf", ".SDF"))
+def test_every_spelling_of_sdf_goes_through_the_sdf_rules(arm, tmp_path, suffix):
+    """The vendor arm's SDF with link 1's mass negative, named with each spelling: refused
+    by from_file and by the station in one line naming the file and the link (Drake's SDF
+    parser only warns, and simulates a "repaired" 1 kg body). Catches the SDF rules run for
+    a lower-case .sdf only."""
+    from nsdrake.experiment.scenario import ScenarioError
+
+    path = arm.sdf.with_name(f"bad{suffix}")
+    path.write_text(arm.sdf.read_text().replace("<mass>3.0</mass>", "<mass>-3.0</mass>", 1))
+    with pytest.raises(ControllerConfigError) as e:
+        ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE)
+    assert str(e.value) == f"model_file: bad{suffix}: link 'link1': mass -3 kg must be > 0"
+    with pytest.raises(ScenarioError) as e:
+        station_with_arm(tmp_path, str(path))
+    assert f"bad{suffix}: link 'link1': mass -3 kg must be > 0" in str(e.value), str(e.value)
+
+
+def station_with_arm(folder, model: str):
+    """The simulated station of a scenario whose arm is the file ``model`` (relative to
+    ``folder``, where the scenario file is written)."""
+    from pydrake.systems.framework import DiagramBuilder
+
+    from nsdrake.experiment.scenario import load_scenario_file
+    from nsdrake.experiment.scenario_station import add_scenario_station
+
+    joints = ", ".join(f"j{k + 1}: {q}" for k, q in enumerate(Q0))
+    scenario = folder / "scenario.yaml"
+    scenario.write_text(
+        f"arm: {{urdf: {model}, initial_positions: {{{joints}}}}}\nplate: {{position: [1.5, 1.5, -1.0]}}\n"
+        "task: {axes: [x, y, z, rx, ry, rz]}\nreference: {approach_speed: 0.0}\n"
+        "report: {compare_without_null_space_task: false, checks: []}\n"
+    )
+    return add_scenario_station(DiagramBuilder(), load_scenario_file(scenario))
+
+
 def test_a_mesh_on_a_link_is_seen_by_the_obstacle_criterion_as_its_convex_hull(arm):
     """A ball in front of the mouth of link 5's U-shaped mesh: the criterion's d_min is the
     distance to the U's convex hull (SciPy's hull of the OBJ's vertices, the link's pose from
