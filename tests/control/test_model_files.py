@@ -7,6 +7,8 @@ The models are written here (tests/vendor_arm.py), never downloaded."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from pydrake.geometry import Sphere
@@ -95,6 +97,59 @@ def test_the_pinocchio_tree_from_drakes_plant_equals_pinocchios_own_urdf_reader(
         for name in TERMS:
             x, y = getattr(a, name), getattr(b, name)
             assert np.max(np.abs(x - y)) < 1e-9 * max(1.0, float(np.max(np.abs(y)))), name
+
+
+GRIPPER_URDF = """<?xml version="1.0"?>
+<robot name="gripper">
+  <link name="palm">
+    <inertial><origin xyz="0.01 0.02 0.04"/><mass value="0.7"/>
+      <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.003" iyz="0" izz="0.0015"/></inertial>
+  </link>
+</robot>
+"""
+OFFSET_DIRECTIVES = """directives:
+- add_model:
+    name: arm7
+    file: package://myarm/urdf/arm7_free.urdf
+- add_weld:
+    parent: world
+    child: arm7::base
+    X_PC:
+      translation: [0.1, -0.2, 0.3]
+      rotation: !Rpy { deg: [10.0, -20.0, 30.0] }
+- add_model:
+    name: gripper
+    file: package://myarm/urdf/gripper.urdf
+- add_weld:
+    parent: arm7::link7
+    child: gripper::palm
+    X_PC:
+      translation: [0.03, 0.0, 0.12]
+      rotation: !Rpy { deg: [0.0, 90.0, 45.0] }
+"""
+
+
+def test_welds_with_an_offset_give_pinocchio_drakes_terms(arm):
+    """Model directives that weld the arm's base to the world and a gripper to link 7, each
+    with an offset (a translation and a rotation: the weld joint's own pose X_FM, which a
+    URDF's fixed joint never has; Drake keeps a URDF's in the parent frame): the Pinocchio
+    tree built from Drake's plant gives Drake's own H, g, C q̇, C and J (ControllerModel
+    with dynamics "drake": the plant's calls) to 1e-9, and the offsets act (the terms differ
+    from the identity welds' by far more). Catches a weld's own pose dropped in the
+    Pinocchio tree (every other weld in the tests is the identity), issue 46's mistake 7."""
+    (arm.package / "urdf" / "gripper.urdf").write_text(GRIPPER_URDF)
+    path = arm.package / "offset_welds.dmd.yaml"
+    path.write_text(OFFSET_DIRECTIVES)
+    fast = ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, dynamics="pinocchio")
+    plant_calls = ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, dynamics="drake")
+    assert (fast.dynamics, plant_calls.dynamics) == ("pinocchio", "drake")
+    assert worst_difference(fast, plant_calls) < 1e-9
+    identity = path.with_name("identity_welds.dmd.yaml")
+    identity.write_text(
+        re.sub(r"    X_PC:\n(      .*\n)+", "", OFFSET_DIRECTIVES)
+    )  # the same welds, no offset
+    plain = ControllerModel.from_file(identity, tool_frame="tool", task_axes=POSE, dynamics="drake")
+    assert worst_difference(plain, plant_calls) > 1e-2
 
 
 def test_packages_resolve_from_package_xml_ros_package_path_and_the_argument(arm, tmp_path, monkeypatch):
