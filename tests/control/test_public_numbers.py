@@ -294,10 +294,14 @@ def test_task_rows_are_indices_in_both_references(kind, rows):
 
 
 def test_task_rows_as_integers_of_any_kind_are_taken_and_read_the_right_force():
-    """Python ints, numpy int64 and uint8 arrays are taken; the plain reference then sees
-    contact from a force along its normal (y: row 1), and not from the same force on x.
-    Fails if the rows were swapped or converted wrongly."""
-    for rows in ([0, 1], np.array([0, 1]), np.array([0, 1], dtype=np.uint8), (np.int64(0), np.int64(1))):
+    """Python ints, numpy int64 scalars and arrays of every integer dtype (int8 … int64,
+    uint8 … uint64) are taken; the plain reference then sees contact from a force along
+    its normal (y: row 1), and not from the same force on x; arrays of every float dtype
+    are refused (an index is counted, not measured). Fails if the rows were swapped or
+    converted wrongly, or an integer family refused (issue 46: every dtype family at the
+    index rule, as at the number rule)."""
+    integer_dtypes = [d for d in REAL_DTYPES if np.dtype(d).kind in "iu"]  # every width, signed and not
+    for rows in ([0, 1], (np.int64(0), np.int64(1)), *(np.array([0, 1], dtype=d) for d in integer_dtypes)):
         plain = PlainSurfaceReference(reference=SlideAndPress(**SLIDE), task_rows=rows, **SURFACE)
         plain.tick(0.0, np.zeros(6))
         plain.tick(T, np.r_[0.0, 0.0, 0.0, 5.0, 0.0, 0.0])  # 5 N along x: not the normal
@@ -305,6 +309,13 @@ def test_task_rows_as_integers_of_any_kind_are_taken_and_read_the_right_force():
         plain.tick(2 * T, np.r_[0.0, 0.0, 0.0, 0.0, 5.0, 0.0])  # 5 N along y, the normal
         plain.tick(3 * T, np.r_[0.0, 0.0, 0.0, 0.0, 5.0, 0.0])
         assert plain.in_contact
+    for dtype in (d for d in REAL_DTYPES if np.dtype(d).kind == "f"):
+        rows = np.array([0, 1], dtype=dtype)
+
+        def make(rows=rows):
+            return PlainSurfaceReference(reference=SlideAndPress(**SLIDE), task_rows=rows, **SURFACE)
+
+        assert "as indices" in refused_naming(TaskReferenceError, "task_rows", make)
 
 
 @pytest.mark.parametrize("name, size", [("t", None), ("wrench", 6)])

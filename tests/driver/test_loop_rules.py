@@ -216,6 +216,52 @@ def test_the_sensor_s_silence_bound_is_driver_expire_sec_at_any_control_period(s
     assert loop.commands == 1 + before
 
 
+class RecordingBus(FakeBus):
+    """A FakeBus that keeps every wait the loop asked of it (its timeouts [ms])."""
+
+    def __init__(self):
+        super().__init__()
+        self.waits: list[int] = []
+
+    def handle(self, timeout_ms: int) -> int:
+        self.waits.append(timeout_ms)
+        return super().handle(timeout_ms)
+
+
+@pytest.mark.parametrize("when", ["early", "exact", "late"])
+def test_the_first_status_is_awaited_exactly_first_status_timeout(side, when):
+    """The first status arrives half the first wait (0.3 s here) in, exactly at its end,
+    or 1 µs after it, on a clock that only the loop's waits advance: early and exact are
+    answered when they arrive; late ends the wait at the timeout (to 1 µs), nothing sent,
+    in one line naming the channel and the timeout. And what the loop asked of the bus:
+    waits of 1 to 100 ms, never one that ends past the timeout (issue 46: fake clocks late,
+    early and exact). Catches the timeout taken in other units, a wait that sleeps past it,
+    or a status exactly at it refused."""
+    bus = RecordingBus()
+    side.reset()
+    loop = ControllerLoop(side, bus, clock=bus.clock)
+    loop.ready()
+    robot, timeout = Robot(bus, loop), loop.config.first_status_timeout
+    began = bus.now  # start() reads the clock here (ready() has drained the bus: 1 µs)
+    arrival = began + {"early": 0.5 * timeout, "exact": timeout, "late": timeout + 1e-6}[when]
+    robot.status(arrival)
+    waits_from = len(bus.waits)
+    if when == "late":
+        with pytest.raises(DriveFaultError) as info:
+            loop.start()
+        assert str(info.value) == (
+            f"before the first command: no lcmt_panda_status on PANDA_STATUS within {timeout:g} s; nothing "
+            "was sent; stopped commanding after 0 command(s)"
+        )
+        assert timeout <= bus.now - began < timeout + 1e-6 and not bus.sent
+    else:
+        loop.start()
+        assert bus.now == arrival and len(bus.sent) == 1 and bus.sent[0][1].utime == robot.utime
+    asked = [w for w in bus.waits[waits_from:] if w]
+    assert asked and all(1 <= w <= 100 for w in asked), asked
+    assert sum(asked) * 1e-3 <= timeout + 1e-9, asked  # no wait asked past the timeout
+
+
 # --- a jump, over the periods since the status answered last --------------------------
 
 

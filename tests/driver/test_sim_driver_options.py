@@ -146,6 +146,26 @@ def test_with_the_low_pass_off_the_command_is_applied_as_sent(scenario):
     np.testing.assert_array_equal(controller.commanded()[:, JOINT], np.full(10, 0.4))
 
 
+@pytest.mark.parametrize("cutoff", [999.0, 1000.0, 4000.0])
+def test_the_filter_is_off_from_1000_hz_on_and_on_just_below(scenario, cutoff):
+    """low_pass_freq 1000 Hz is libfranka's kMaxCutoffFrequency, the value that means "no
+    filter" (and any above it); the value beside it, 999 Hz, filters: its first period
+    commands g = T / (T + 1/(2π 999)) = 0.863 of a 0.4 N m step, then SciPy's
+    backward-difference filter, where 1000 and 4000 Hz command the step at once (issue 46:
+    the value beside each sentinel). Catches the filter switched off below 1000 Hz, or
+    left on at it."""
+    T = scenario.control_period
+    _, controller = serve(scenario, 5, step(0.4), low_pass_freq=cutoff, rate_limit=False)
+    got = controller.commanded()[:, JOINT]
+    if cutoff >= 1000.0:
+        np.testing.assert_array_equal(got, np.full(5, 0.4))
+        return
+    filter_d = cont2discrete(([1.0], [1.0 / (2.0 * math.pi * cutoff), 1.0]), T, method="backward_diff")
+    _, expected = dlsim(filter_d, np.full(5, 0.4), t=np.arange(5) * T)
+    np.testing.assert_allclose(got, expected[:, 0], rtol=0, atol=1e-12)
+    assert got[0] < 0.9 * 0.4
+
+
 def test_the_torque_rate_limit_is_1000_n_m_per_second(scenario):
     """Filter off, rate limit on: a 5.5 N m step then a step back to 0 at the 20th status.
     Each period the commanded torque moves by at most 1000 N m/s × T (1 N m at 1 kHz), and
