@@ -7,6 +7,8 @@ The models are written here (tests/vendor_arm.py), never downloaded."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from pydrake.geometry import Sphere
@@ -101,6 +103,59 @@ def test_the_pinocchio_tree_from_drakes_plant_equals_pinocchios_own_urdf_reader(
             assert np.max(np.abs(x - y)) < 1e-9 * max(1.0, float(np.max(np.abs(y)))), name
 
 
+GRIPPER_URDF = """<?xml version="1.0"?>
+<robot name="gripper">
+  <link name="palm">
+    <inertial><origin xyz="0.01 0.02 0.04"/><mass value="0.7"/>
+      <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.003" iyz="0" izz="0.0015"/></inertial>
+  </link>
+</robot>
+"""
+OFFSET_DIRECTIVES = """directives:
+- add_model:
+    name: arm7
+    file: package://myarm/urdf/arm7_free.urdf
+- add_weld:
+    parent: world
+    child: arm7::base
+    X_PC:
+      translation: [0.1, -0.2, 0.3]
+      rotation: !Rpy { deg: [10.0, -20.0, 30.0] }
+- add_model:
+    name: gripper
+    file: package://myarm/urdf/gripper.urdf
+- add_weld:
+    parent: arm7::link7
+    child: gripper::palm
+    X_PC:
+      translation: [0.03, 0.0, 0.12]
+      rotation: !Rpy { deg: [0.0, 90.0, 45.0] }
+"""
+
+
+def test_welds_with_an_offset_give_pinocchio_drakes_terms(arm):
+    """Model directives that weld the arm's base to the world and a gripper to link 7, each
+    with an offset (a translation and a rotation: the weld joint's own pose X_FM, which a
+    URDF's fixed joint never has; Drake keeps a URDF's in the parent frame): the Pinocchio
+    tree built from Drake's plant gives Drake's own H, g, C q̇, C and J (ControllerModel
+    with dynamics "drake": the plant's calls) to 1e-9, and the offsets act (the terms differ
+    from the identity welds' by far more). Catches a weld's own pose dropped in the
+    Pinocchio tree (every other weld in the tests is the identity), issue 46's mistake 7."""
+    (arm.package / "urdf" / "gripper.urdf").write_text(GRIPPER_URDF)
+    path = arm.package / "offset_welds.dmd.yaml"
+    path.write_text(OFFSET_DIRECTIVES)
+    fast = ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, dynamics="pinocchio")
+    plant_calls = ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, dynamics="drake")
+    assert (fast.dynamics, plant_calls.dynamics) == ("pinocchio", "drake")
+    assert worst_difference(fast, plant_calls) < 1e-9
+    identity = path.with_name("identity_welds.dmd.yaml")
+    identity.write_text(
+        re.sub(r"    X_PC:\n(      .*\n)+", "", OFFSET_DIRECTIVES)
+    )  # the same welds, no offset
+    plain = ControllerModel.from_file(identity, tool_frame="tool", task_axes=POSE, dynamics="drake")
+    assert worst_difference(plain, plant_calls) > 1e-2
+
+
 def test_packages_resolve_from_package_xml_ros_package_path_and_the_argument(arm, tmp_path, monkeypatch):
     """Without its package.xml the URDF's package://myarm/... is unknown: one line naming the
     file, the package and where packages come from. Then it loads from ROS_PACKAGE_PATH and
@@ -153,6 +208,95 @@ def test_bad_model_file_arguments_are_refused_in_one_line(arm, arguments, where)
     with pytest.raises(ControllerConfigError) as e:
         ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE, **arguments)
     assert "\n" not in str(e.value) and str(e.value).startswith(where)
+
+
+# The physical rules a model file passes before Drake reads it, each broken once in the
+# mesh-free arm: (what is changed, the line's words). Drake itself would take some of these
+# (a triangle-inequality inertia, a negative-size box) or say something else.
+URDF_RULES = {
+    "mass": (('<mass value="3.0"/>', '<mass value="-3.0"/>'), "link 'link1': mass -3 kg must be > 0"),
+    "inertia": (
+        ('iyy="0.03" iyz="0" izz="0.008"', 'iyy="0.03" iyz="0" izz="0.07"'),
+        "link 'link2': inertia breaks the triangle inequality",
+    ),
+    "geometry": (
+        (
+            '<link name="tool">\n',
+            '<link name="tool">\n    <collision><geometry><box size="0.1 0 0.1"/></geometry></collision>\n',
+        ),
+        "link 'tool': collision box size 0 must be > 0",
+    ),
+    "tree": (
+        (
+            "</robot>",
+            '  <joint name="loop" type="fixed"><parent link="link7"/><child link="link3"/></joint>\n</robot>',
+        ),
+        "link 'link3': child of two joints ('j3' and 'loop'): a kinematic loop",
+    ),
+}
+URDF_SPELLINGS = (".urdf", ".URDF", ".Urdf")  # what model_file_problem accepts: any case
+
+
+@pytest.mark.parametrize("rule", list(URDF_RULES))
+@pytest.mark.parametrize("suffix", URDF_SPELLINGS)
+def test_every_spelling_of_urdf_goes_through_every_urdf_rule(tmp_path, suffix, rule):
+    """A URDF file that breaks one rule, named arm7 with each spelling the file check
+    accepts (.urdf, .URDF, .Urdf): ControllerModel.from_file, from_urdf (a path) and the
+    simulated station (a scenario's arm.urdf) each refuse it in the rule's one line, naming
+    the file, before Drake reads it (issue 46, mistake 8). Catches the rules run only for a
+    lower-case .urdf (an upper-case file accepted by the file check and then skipping them:
+    Drake takes a triangle-inequality inertia, a zero-size box and a loop silently or
+    fails with its own words)."""
+    from nsdrake.experiment.scenario import ScenarioError
+
+    (old, replacement), words = URDF_RULES[rule]
+    text = mesh_free_urdf()
+    assert old in text
+    path = tmp_path / f"arm7{suffix}"
+    path.write_text(text.replace(old, replacement, 1))
+    for load in (ControllerModel.from_file, ControllerModel.from_urdf):
+        with pytest.raises(ControllerConfigError) as e:
+            load(path, tool_frame="tool", task_axes=POSE)
+        assert str(e.value).startswith(f"controller_model: arm7{suffix}: {words}"), str(e.value)
+    with pytest.raises(ScenarioError) as e:
+        station_with_arm(tmp_path, path.name)
+    assert f"arm7{suffix}: {words}" in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("suffix", (".sdf", ".SDF"))
+def test_every_spelling_of_sdf_goes_through_the_sdf_rules(arm, tmp_path, suffix):
+    """The vendor arm's SDF with link 1's mass negative, named with each spelling: refused
+    by from_file and by the station in one line naming the file and the link (Drake's SDF
+    parser only warns, and simulates a "repaired" 1 kg body). Catches the SDF rules run for
+    a lower-case .sdf only."""
+    from nsdrake.experiment.scenario import ScenarioError
+
+    path = arm.sdf.with_name(f"bad{suffix}")
+    path.write_text(arm.sdf.read_text().replace("<mass>3.0</mass>", "<mass>-3.0</mass>", 1))
+    with pytest.raises(ControllerConfigError) as e:
+        ControllerModel.from_file(path, tool_frame="tool", task_axes=POSE)
+    assert str(e.value) == f"model_file: bad{suffix}: link 'link1': mass -3 kg must be > 0"
+    with pytest.raises(ScenarioError) as e:
+        station_with_arm(tmp_path, str(path))
+    assert f"bad{suffix}: link 'link1': mass -3 kg must be > 0" in str(e.value), str(e.value)
+
+
+def station_with_arm(folder, model: str):
+    """The simulated station of a scenario whose arm is the file ``model`` (relative to
+    ``folder``, where the scenario file is written)."""
+    from pydrake.systems.framework import DiagramBuilder
+
+    from nsdrake.experiment.scenario import load_scenario_file
+    from nsdrake.experiment.scenario_station import add_scenario_station
+
+    joints = ", ".join(f"j{k + 1}: {q}" for k, q in enumerate(Q0))
+    scenario = folder / "scenario.yaml"
+    scenario.write_text(
+        f"arm: {{urdf: {model}, initial_positions: {{{joints}}}}}\nplate: {{position: [1.5, 1.5, -1.0]}}\n"
+        "task: {axes: [x, y, z, rx, ry, rz]}\nreference: {approach_speed: 0.0}\n"
+        "report: {compare_without_null_space_task: false, checks: []}\n"
+    )
+    return add_scenario_station(DiagramBuilder(), load_scenario_file(scenario))
 
 
 def test_a_mesh_on_a_link_is_seen_by_the_obstacle_criterion_as_its_convex_hull(arm):

@@ -203,10 +203,11 @@ def test_quaternions_round_trip():
 # ---------------------------------------------------------------- the controller's τ
 
 
-def panda_controller(axes, **criteria):
+def panda_controller(axes, rotate_gradient: bool = True, **criteria):
     """The controller on urdf/panda.urdf for ``axes``, pushing along world −z, with the
     joint-torque and manipulability criteria on (gains overridable)."""
     config = ControllerConfig()
+    config.desired_null_space.rotate_gradient = rotate_gradient
     crit = config.desired_null_space.criteria
     crit.joint_torque.gain = criteria.get("joint_torque", -0.002)
     crit.manipulability.gain = criteria.get("manipulability", 0.5)
@@ -290,8 +291,9 @@ def expected_pose_torque(arm, config, inputs, qdot_ns_d, previous):
     return tau + H @ N @ a
 
 
+@pytest.mark.parametrize("rotate_gradient", [True, False], ids=["rotate_gradient", "no rotate_gradient"])
 @pytest.mark.parametrize("axes", [PANDA_POSE_AXES, ("x", "y", "z")], ids=["pose6", "position3"])
-def test_panda_generalized_force_matches_an_independent_rebuild(axes):
+def test_panda_generalized_force_matches_an_independent_rebuild(axes, rotate_gradient):
     """τ of the whole controller for the Panda's full pose task (m = 6, one redundant
     joint) and its position task (m = 3, four), at fixed inputs near the table-wiping
     start and a stored previous q̇_dⁿ, against Eqs. 6–8 and 21 rebuilt from Drake's plant
@@ -300,12 +302,15 @@ def test_panda_generalized_force_matches_an_independent_rebuild(axes):
     Pinocchio, so agreement to 1e-10 is two independent computations agreeing. Catches a
     wrong or missing orientation term (sign, frame, ω_d or ω̇_d feed-forward), rows of
     Λ or J̇ q̇ mixed up, the measured moment left out of J_Tᵀ W_T, a force term acting on
-    rotational rows, and any null-space term the fig3 rebuild catches."""
-    controller, config = panda_controller(axes)
+    rotational rows, and any null-space term the fig3 rebuild catches. Crossed with the
+    selector's rotate_gradient flag (a null-space setting, which must not change the task's
+    kind: issue 46, mistake 10, the pose task chosen from the flag, lost its rotational
+    torque with the flag off); two states with the flag off, four with it on."""
+    controller, config = panda_controller(axes, rotate_gradient)
     assert controller.model.dynamics == "pinocchio"
     arm = panda_arm(axes)
     rng = np.random.default_rng(9)
-    for _ in range(4):
+    for _ in range(4 if rotate_gradient else 2):
         context = controller.CreateDefaultContext()
         q, v = PANDA_Q0 + 0.1 * rng.standard_normal(7), 0.05 * rng.standard_normal(7)
         inputs = fixed_pose_inputs(controller, context, q, v, rng)

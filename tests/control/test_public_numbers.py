@@ -294,10 +294,14 @@ def test_task_rows_are_indices_in_both_references(kind, rows):
 
 
 def test_task_rows_as_integers_of_any_kind_are_taken_and_read_the_right_force():
-    """Python ints, numpy int64 and uint8 arrays are taken; the plain reference then sees
-    contact from a force along its normal (y: row 1), and not from the same force on x.
-    Fails if the rows were swapped or converted wrongly."""
-    for rows in ([0, 1], np.array([0, 1]), np.array([0, 1], dtype=np.uint8), (np.int64(0), np.int64(1))):
+    """Python ints, numpy int64 scalars and arrays of every integer dtype (int8 … int64,
+    uint8 … uint64) are taken; the plain reference then sees contact from a force along
+    its normal (y: row 1), and not from the same force on x; arrays of every float dtype
+    are refused (an index is counted, not measured). Fails if the rows were swapped or
+    converted wrongly, or an integer family refused (issue 46: every dtype family at the
+    index rule, as at the number rule)."""
+    integer_dtypes = [d for d in REAL_DTYPES if np.dtype(d).kind in "iu"]  # every width, signed and not
+    for rows in ([0, 1], (np.int64(0), np.int64(1)), *(np.array([0, 1], dtype=d) for d in integer_dtypes)):
         plain = PlainSurfaceReference(reference=SlideAndPress(**SLIDE), task_rows=rows, **SURFACE)
         plain.tick(0.0, np.zeros(6))
         plain.tick(T, np.r_[0.0, 0.0, 0.0, 5.0, 0.0, 0.0])  # 5 N along x: not the normal
@@ -305,6 +309,13 @@ def test_task_rows_as_integers_of_any_kind_are_taken_and_read_the_right_force():
         plain.tick(2 * T, np.r_[0.0, 0.0, 0.0, 0.0, 5.0, 0.0])  # 5 N along y, the normal
         plain.tick(3 * T, np.r_[0.0, 0.0, 0.0, 0.0, 5.0, 0.0])
         assert plain.in_contact
+    for dtype in (d for d in REAL_DTYPES if np.dtype(d).kind == "f"):
+        rows = np.array([0, 1], dtype=dtype)
+
+        def make(rows=rows):
+            return PlainSurfaceReference(reference=SlideAndPress(**SLIDE), task_rows=rows, **SURFACE)
+
+        assert "as indices" in refused_naming(TaskReferenceError, "task_rows", make)
 
 
 @pytest.mark.parametrize("name, size", [("t", None), ("wrench", 6)])
@@ -361,6 +372,51 @@ def test_integers_give_the_floats_result_without_a_new_compile(q, v, f_d, t):
         tau = step.step(t, as_ints(q), as_ints(v), *(as_ints(a) for a in args.values()), f_d).tau
         np.testing.assert_array_equal(tau, expected)
     assert compiled_signatures() == before
+
+
+# every numpy dtype of real numbers, by family: signed and unsigned integers of each width,
+# floats of each width (issue 46, mistake 6: one dtype family was untested)
+REAL_DTYPES = [
+    np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64,
+    np.float16, np.float32, np.float64, np.longdouble,
+]  # fmt: skip
+NOT_REAL_DTYPES = [
+    np.bool_, np.complex64, np.complex128, object, "U4", "S4", "datetime64[s]", "timedelta64[s]",
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("dtype", REAL_DTYPES, ids=lambda d: np.dtype(d).name)
+def test_every_real_dtype_is_taken_and_gives_the_float64_result(dtype):
+    """q, q̇ and every reference and wrench as arrays of ``dtype``, t and f_d as its scalars,
+    of numbers each dtype holds exactly (non-negative whole numbers below 256, so uint8 and
+    float16 too): τ is the float64 call's to the last bit, and numba compiles nothing new.
+    Catches a dtype family refused by the number rule (unsigned integers: their kind "u"
+    left out), or one that reaches a kernel (a new signature)."""
+    q, v = [0, 1, 1, 0], [0, 1, 0, 2]
+    args = dict(wrench=[0, 0, 0, 0, 3, 0], x_d=[1, 0], xdot_d=[0, 0], xddot_d=[0, 0])
+    step = PLANAR_STEP
+    step.reset()
+    expected = step.step(
+        1.0, np.array(q, float), np.array(v, float), *(np.array(a, float) for a in args.values()), 4.0
+    ).tau.copy()
+    before = compiled_signatures()
+    step.reset()
+    typed = (np.array(a, dtype=dtype) for a in args.values())
+    tau = step.step(np.dtype(dtype).type(1), np.array(q, dtype=dtype), np.array(v, dtype=dtype), *typed,
+                    np.dtype(dtype).type(4)).tau  # fmt: skip
+    np.testing.assert_array_equal(tau, expected)
+    assert compiled_signatures() == before
+
+
+@pytest.mark.parametrize("dtype", NOT_REAL_DTYPES, ids=lambda d: np.dtype(d).name)
+def test_every_dtype_that_is_not_real_numbers_is_refused(dtype):
+    """The other dtype families (booleans, complex, objects, text, bytes, dates, time spans)
+    as q: refused in one line naming q, whatever the values. Catches a number rule that
+    takes any numpy array whose values convert (a timedelta64 array converts to float)."""
+    value = np.zeros(4, dtype=np.int64).astype(dtype)
+    step = PLANAR_STEP
+    step.reset()
+    refused_naming(ControllerInputError, "q", lambda: step.step(*planar_call(q=value)))
 
 
 def test_an_integer_time_on_the_pose_task_compiles_nothing_new():

@@ -149,6 +149,24 @@ def test_actuator_limits_three_ways(tmp_path):
     assert np.any((s > 0.0) & (s < 1.0)) and np.max(clipped) >= 1  # both limits bind
 
 
+def test_a_blended_mode_switch_three_ways(tmp_path):
+    """priority_demo's first 0.15 s with the manipulability band moved onto its start
+    (w_lim 0.0765, w_band 0.0005; w is 0.0762 at the start and rises): mode 3, then the
+    switch to mode 2 at 0.05 s, blended over 0.05 s (blend_time), the three ways agreeing
+    at every tick through the switch and the blend. The fast twin of
+    test_priority_demo_every_branch_three_ways (6 s, slow). Catches the selector's switch
+    committed at the tick's own time instead of the previous tick's (equivalent in the
+    Drake systems, whose discrete update runs at t_previous, but the blend one period late
+    in ControllerStep: issue 46, mistake 9), and any stage of the blend run differently."""
+    path = tmp_path / "early_switch.yaml"
+    path.write_text("desired_null_space:\n  selector: {w_lim: 0.0765, w_band: 0.0005, blend_time: 0.05}\n")
+    named = assert_three_ways_agree(load_scenario("priority_demo", config=path, duration=0.15))
+    mode, t = named["mode"][0], named["t"]
+    switches = [(t[k + 1], mode[k], mode[k + 1]) for k in np.flatnonzero(np.diff(mode))]
+    assert mode[0] == 3.0 and [(m0, m1) for _, m0, m1 in switches] == [(3.0, 2.0)]
+    assert 0.02 < switches[0][0] < 0.15 - 0.05  # the whole blend inside the run
+
+
 @pytest.mark.slow
 def test_fig3_whole_run_three_ways():
     """fig3 through contact, pressing and sliding (5 s)."""

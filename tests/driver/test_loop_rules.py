@@ -160,6 +160,108 @@ def test_silence_just_past_the_bound_stops_the_controller(side):
     assert info.value.problem.startswith("no lcmt_panda_status on PANDA_STATUS")
 
 
+SECOND_PERIOD = 2e-3  # [s] a control period other than panda_wipe's 1 ms (issue 46)
+
+
+def at_period(side, period: float):
+    """``side`` with its scenario's control period ``period`` [s]: the loop's timing rules
+    read the period from the scenario (as test_wire_faults.py's expire_sec test does)."""
+    return dataclasses.replace(side, scenario=dataclasses.replace(side.scenario, control_period=period))
+
+
+@pytest.mark.parametrize("period", [1e-3, SECOND_PERIOD], ids=["1 ms", "2 ms"])
+def test_the_silence_bound_is_driver_expire_sec_at_any_control_period(side, period):
+    """At 1 ms and at 2 ms (issue 46, mistake 2): a status that arrives driver.expire_sec
+    after the last, its clock expire_sec / period periods on, is answered; then, with no
+    status, silence is declared within 10 µs after expire_sec, a figure read from the
+    configuration (not from the loop's own bound). Catches the bound computed as its
+    periods × 1 ms (at 2 ms, half the driver's expiry: the status at 50 ms refused as
+    silence at 25 ms), or its periods taken as seconds."""
+    loop, robot, bus = started(at_period(side, period))
+    expire = loop.config.expire_sec
+    assert loop.period == period and expire == 0.05
+    periods = round(expire / period)
+    robot.status(expire, periods)
+    loop.tick()
+    assert loop.commands == 2 and loop.periods == periods
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    waited = bus.now - robot.arrival
+    assert expire < waited <= expire + 1e-5, waited
+    assert info.value.problem.startswith("no lcmt_panda_status on PANDA_STATUS for 50.0 ms")
+
+
+@pytest.mark.parametrize("period", [1e-3, SECOND_PERIOD], ids=["1 ms", "2 ms"])
+def test_the_sensor_s_silence_bound_is_driver_expire_sec_at_any_control_period(side, period):
+    """The force-torque messages stop with the first status; statuses go on every period.
+    At 1 ms and at 2 ms every status that arrives less than driver.expire_sec after the
+    sensor's last message is answered, and the first one past it (expire_sec + half a
+    period) stops the controller naming the sensor. Catches the sensor's bound in periods
+    × 1 ms (at 2 ms refused after 25 ms, at the 13th status)."""
+    loop, robot, bus = started(at_period(side, period))
+    expire = loop.config.expire_sec
+    robot.force_torque = False
+    before = round(expire / period) - 1  # statuses at 1 … before periods: all within expire_sec
+    for _ in range(before):
+        robot.status(period)
+        loop.tick()
+    assert loop.commands == 1 + before
+    robot.status(expire + 0.5 * period - before * period, 1)
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    silent_ms = (expire + 0.5 * period) * 1e3  # 50.5 ms at 1 ms, 51.0 ms at 2 ms
+    assert info.value.problem.startswith(
+        f"no lcmt_force_torque on PANDA_FORCE_TORQUE for {silent_ms:.1f} ms"
+    ), info.value.problem
+    assert loop.commands == 1 + before
+
+
+class RecordingBus(FakeBus):
+    """A FakeBus that keeps every wait the loop asked of it (its timeouts [ms])."""
+
+    def __init__(self):
+        super().__init__()
+        self.waits: list[int] = []
+
+    def handle(self, timeout_ms: int) -> int:
+        self.waits.append(timeout_ms)
+        return super().handle(timeout_ms)
+
+
+@pytest.mark.parametrize("when", ["early", "exact", "late"])
+def test_the_first_status_is_awaited_exactly_first_status_timeout(side, when):
+    """The first status arrives half the first wait (0.3 s here) in, exactly at its end,
+    or 1 µs after it, on a clock that only the loop's waits advance: early and exact are
+    answered when they arrive; late ends the wait at the timeout (to 1 µs), nothing sent,
+    in one line naming the channel and the timeout. And what the loop asked of the bus:
+    waits of 1 to 100 ms, never one that ends past the timeout (issue 46: fake clocks late,
+    early and exact). Catches the timeout taken in other units, a wait that sleeps past it,
+    or a status exactly at it refused."""
+    bus = RecordingBus()
+    side.reset()
+    loop = ControllerLoop(side, bus, clock=bus.clock)
+    loop.ready()
+    robot, timeout = Robot(bus, loop), loop.config.first_status_timeout
+    began = bus.now  # start() reads the clock here (ready() has drained the bus: 1 µs)
+    arrival = began + {"early": 0.5 * timeout, "exact": timeout, "late": timeout + 1e-6}[when]
+    robot.status(arrival)
+    waits_from = len(bus.waits)
+    if when == "late":
+        with pytest.raises(DriveFaultError) as info:
+            loop.start()
+        assert str(info.value) == (
+            f"before the first command: no lcmt_panda_status on PANDA_STATUS within {timeout:g} s; nothing "
+            "was sent; stopped commanding after 0 command(s)"
+        )
+        assert timeout <= bus.now - began < timeout + 1e-6 and not bus.sent
+    else:
+        loop.start()
+        assert bus.now == arrival and len(bus.sent) == 1 and bus.sent[0][1].utime == robot.utime
+    asked = [w for w in bus.waits[waits_from:] if w]
+    assert asked and all(1 <= w <= 100 for w in asked), asked
+    assert sum(asked) * 1e-3 <= timeout + 1e-9, asked  # no wait asked past the timeout
+
+
 # --- a jump, over the periods since the status answered last --------------------------
 
 
@@ -197,6 +299,34 @@ def test_a_joint_may_move_max_joint_step_per_period_since_the_answered_status(si
     with pytest.raises(DriveFaultError) as info:
         two_periods(jump)
     assert "panda_joint7 moved" in info.value.problem and "in 2 period(s)" in info.value.problem
+
+
+@pytest.mark.parametrize("sign", [1, -1], ids=["forward", "backward"])
+def test_a_jump_is_refused_whichever_way_the_joint_moves(side, sign):
+    """Joint 7 moves sign × 0.95 max_joint_step in a period, its reported velocity saying
+    so: taken; then sign × 1.05 steps in the next, its velocity reported to match (the
+    position/velocity rule sees nothing): refused, naming the joint, one period and the
+    setting, forward and backward alike (issue 46, mistake 1). Catches the signed step
+    compared with the allowance (a joint that moves backward any distance is answered)."""
+    loop, robot, bus = make_loop(side)
+    T, step = loop.period, loop.config.max_joint_step
+    robot.v[6] = sign * 0.95 * step / T
+    robot.status(T)
+    loop.start()
+    robot.q[6] += sign * 0.95 * step
+    robot.status(T)
+    loop.tick()
+    assert loop.commands == 2
+    robot.q[6] += sign * 1.05 * step
+    robot.v[6] = sign * 1.15 * step / T  # the trapezoid of 0.95 and 1.15 steps a period: 1.05
+    robot.status(T)
+    with pytest.raises(DriveFaultError) as info:
+        loop.tick()
+    assert info.value.problem == (
+        f"status refused: panda_joint7 moved {1.05 * step:.4g} rad in 1 period(s), more than the "
+        f"{step:.4g} rad of driver.max_joint_step {step:g} rad per period"
+    )
+    assert loop.commands == 2
 
 
 # --- which end of the queue: the newest, at the start too -------------------------------

@@ -73,3 +73,26 @@ def test_the_drive_controller_applies_the_published_limits():
         np.zeros(7),
     )
     np.testing.assert_allclose(out[:7], 1.0)  # from rest: one period of 1000 N m/s
+
+
+@pytest.mark.parametrize("period", [1e-3, 2e-3], ids=["1 ms", "2 ms"])
+def test_the_drive_s_panda_bounds_follow_the_control_period(period):
+    """driver.start_tolerance at most what the slowest joints (Franka's published 2.175
+    rad/s, joints 1-4) move in two control periods, and driver.max_joint_step at most one
+    period of that speed with the 5% margin plus two readings' noise (1e-4 rad each), both
+    figures written here from the published numbers: at 1 ms and at 2 ms, a value at the
+    bound is taken and one 0.1% above it refused, naming the field and the bound (issue 46:
+    unit-bearing figures at a second period, each boundary from both sides). Catches a
+    bound computed for 1 ms whatever the period, or compared the wrong way at the bound."""
+    from nsdrake.driver.panda import panda_driver_problems
+    from nsdrake.experiment.driver_config import DriverConfig
+
+    slowest = 2.175  # [rad/s] Franka's published velocity limit of joints 1-4
+    bounds = {"start_tolerance": 2 * slowest * period, "max_joint_step": slowest * 1.05 * period + 2e-4}
+    for field, bound in bounds.items():
+        fields = lambda value, field=field: {  # noqa: E731
+            f: p for f, p in panda_driver_problems(DriverConfig(**{field: value}), period)
+        }
+        assert field not in fields(bound), (field, period)  # at the bound: taken
+        problem = fields(bound * 1.001).get(field)
+        assert problem is not None and problem.startswith(f"must be at most {bound:.4g} rad"), problem

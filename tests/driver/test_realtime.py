@@ -83,6 +83,50 @@ def test_the_thread_runs_at_the_settings_asked_and_gets_its_own_back():
     assert (applied.policy, applied.priority, applied.cores) == ("SCHED_FIFO", PRIORITY, (CORE,))
 
 
+CORES = sorted(os.sched_getaffinity(0))  # every core this process may run on, core 0 first when allowed
+
+
+@needs_realtime
+@pytest.mark.parametrize("core", [*CORES, -1], ids=[*(f"core {c}" for c in CORES), "not pinned (-1)"])
+def test_each_core_is_pinned_and_only_minus_one_is_not(core):
+    """Every core this process may run on, core 0 among them, pins the thread to that core
+    alone (read back from the OS); -1, the one value that means "not pinned", leaves the
+    thread on the cores it had (issue 46, mistake 3: the value beside the sentinel).
+    Catches a core taken as a truth value (core 0 silently unpinned: `--realtime-core 0`
+    runs on every core) or -1 pinned to some core. Memory not locked: not what is tested."""
+    settings = RealtimeSettings(priority=PRIORITY, core=core, lock_memory=False)
+
+    def body():
+        before = os_settings()
+        with realtime_mode(settings) as applied:
+            inside = os_settings()
+        return before, inside, os_settings(), applied
+
+    before, inside, after, applied = in_a_thread(body)
+    cores = before[2] if core == -1 else {core}
+    assert inside == (os.SCHED_FIFO, PRIORITY, cores) and applied.cores == tuple(sorted(cores))
+    assert after == before
+
+
+@pytest.mark.parametrize("core", [0, CORES[-1], -1])
+def test_a_core_flag_of_zero_is_a_core_not_an_absent_flag(core):
+    """`--realtime-core 0` and driver.realtime.core 0 choose core 0, named after where they
+    came from, like any other core; without --realtime the flag 0 is refused as any flag
+    is (it would be ignored). Catches a flag read as a truth value (0 dropped for the
+    scenario's -1, or let through without --realtime)."""
+    from nsdrake.driver.realtime import RealtimeError
+    from nsdrake.experiment.driver_config import RealtimeConfig
+
+    flag = realtime_settings(RealtimeConfig(), flag=True, core=core)
+    assert (flag.core, flag.name("core")) == (core, "--realtime-core")
+    scenario = realtime_settings(RealtimeConfig(enabled=True, core=core))
+    assert (scenario.core, scenario.name("core")) == (core, "driver.realtime.core")
+    over = realtime_settings(RealtimeConfig(enabled=True, core=5), core=core)
+    assert (over.core, over.name("core")) == (core, "--realtime-core")
+    with pytest.raises(RealtimeError, match="--realtime-core: applies with --realtime"):
+        realtime_settings(RealtimeConfig(), core=core)
+
+
 @needs_realtime
 def test_the_settings_are_restored_when_the_block_raises():
     """A fault inside the loop (an exception through the block) still restores the thread.
@@ -352,16 +396,21 @@ def a_bus_thread():
 
 
 @needs_realtime
-def test_threads_the_bus_started_follow_the_loop_s_mode(monkeypatch):
+@pytest.mark.parametrize("core", sorted({CORES[0], CORE}), ids=lambda c: f"core {c}")
+def test_threads_the_bus_started_follow_the_loop_s_mode(monkeypatch, core):
     """Inside realtime_process (entered before the bus is made), the threads started since
     (LCM's receive thread) get the loop's priority and core with it, and theirs back after;
-    a thread that was there before (numpy's BLAS worker) keeps its own. Catches the bus's
-    thread left an ordinary one (statuses delivered in bursts behind the machine's other
-    work) and every thread of the process made real-time."""
+    a thread that was there before (numpy's BLAS worker) keeps its own. On the first core
+    this process may run on (core 0) and on the last. Catches the bus's thread left an
+    ordinary one (statuses delivered in bursts behind the machine's other work), every
+    thread of the process made real-time, and core 0 taken for "not pinned"."""
     from nsdrake.driver import realtime
 
+    # memory not locked: mlockall of the whole process costs seconds and is not what is
+    # tested here (test_memory_locked_before_the_bus_is_not_locked_again_by_the_loop is)
+    settings = RealtimeSettings(priority=PRIORITY, core=core, lock_memory=False)
     before_tid, before_thread, before_done = a_bus_thread()
-    with realtime.realtime_process(SETTINGS):
+    with realtime.realtime_process(settings):
         bus_tid, bus_thread, bus_done = a_bus_thread()
         hidden = {before_thread, bus_thread}
         enumerate_ = threading.enumerate
@@ -369,7 +418,7 @@ def test_threads_the_bus_started_follow_the_loop_s_mode(monkeypatch):
         own = os_settings(bus_tid), os_settings(before_tid)
 
         def body():
-            with realtime_mode(SETTINGS) as applied:
+            with realtime_mode(settings) as applied:
                 return applied, os_settings(bus_tid), os_settings(before_tid)
 
         applied, bus_inside, before_inside = in_a_thread(body)
@@ -377,5 +426,5 @@ def test_threads_the_bus_started_follow_the_loop_s_mode(monkeypatch):
     for done, thread in ((bus_done, bus_thread), (before_done, before_thread)):
         done.set()
         thread.join()
-    assert bus_inside == (os.SCHED_FIFO, PRIORITY, {CORE}) and applied.other_threads == 1
+    assert bus_inside == (os.SCHED_FIFO, PRIORITY, {core}) and applied.other_threads == 1
     assert before_inside == own[1] and bus_after == own[0]

@@ -146,6 +146,26 @@ def test_with_the_low_pass_off_the_command_is_applied_as_sent(scenario):
     np.testing.assert_array_equal(controller.commanded()[:, JOINT], np.full(10, 0.4))
 
 
+@pytest.mark.parametrize("cutoff", [999.0, 1000.0, 4000.0])
+def test_the_filter_is_off_from_1000_hz_on_and_on_just_below(scenario, cutoff):
+    """low_pass_freq 1000 Hz is libfranka's kMaxCutoffFrequency, the value that means "no
+    filter" (and any above it); the value beside it, 999 Hz, filters: its first period
+    commands g = T / (T + 1/(2π 999)) = 0.863 of a 0.4 N m step, then SciPy's
+    backward-difference filter, where 1000 and 4000 Hz command the step at once (issue 46:
+    the value beside each sentinel). Catches the filter switched off below 1000 Hz, or
+    left on at it."""
+    T = scenario.control_period
+    _, controller = serve(scenario, 5, step(0.4), low_pass_freq=cutoff, rate_limit=False)
+    got = controller.commanded()[:, JOINT]
+    if cutoff >= 1000.0:
+        np.testing.assert_array_equal(got, np.full(5, 0.4))
+        return
+    filter_d = cont2discrete(([1.0], [1.0 / (2.0 * math.pi * cutoff), 1.0]), T, method="backward_diff")
+    _, expected = dlsim(filter_d, np.full(5, 0.4), t=np.arange(5) * T)
+    np.testing.assert_allclose(got, expected[:, 0], rtol=0, atol=1e-12)
+    assert got[0] < 0.9 * 0.4
+
+
 def test_the_torque_rate_limit_is_1000_n_m_per_second(scenario):
     """Filter off, rate limit on: a 5.5 N m step then a step back to 0 at the 20th status.
     Each period the commanded torque moves by at most 1000 N m/s × T (1 N m at 1 kHz), and
@@ -239,3 +259,127 @@ def test_the_collector_is_left_as_it_was_found(scenario):
     frozen, enabled = gc.get_freeze_count(), gc.isenabled()
     serve(scenario, 5, step(0.0), low_pass_freq=1000.0)
     assert (gc.get_freeze_count(), gc.isenabled()) == (frozen, enabled)
+
+
+# ---------------------------------------------------------- the driver's own clock (issue 46)
+
+
+class WaitedClock:
+    """The driver's clock [s], on which time passes only as the driver waits (its bus's
+    wait and ``time.sleep``, each advancing it by what was asked) and as its own work
+    costs: ``work_ends(what, k)`` gives the time [s] at which the status's publish
+    ("status") or the plant's step ("step") of period k ends (None: at once). So the
+    clock is early (the driver must wait for each deadline), exact (work that ends on a
+    deadline) or late (work that overruns one), as the test chooses. Records when each
+    status went out and each plant step began, on this clock."""
+
+    def __init__(self, work_ends=lambda what, k: None):
+        self.now, self.work_ends = 0.0, work_ends
+        self.statuses: list[float] = []
+        self.steps: list[float] = []
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += max(seconds, 0.0)
+
+    def work(self, what: str, k: int) -> None:
+        end = self.work_ends(what, k)
+        if end is not None:
+            self.now = max(self.now, end)
+
+    def utime(self) -> int:
+        return UTIME0 + round(self.now * 1e6)
+
+
+class WaitingBus:
+    """``memq://`` as the driver's bus, its waits on :class:`WaitedClock`: a wait that
+    delivers nothing lasts its whole timeout; a status published costs its work."""
+
+    def __init__(self, clock: WaitedClock):
+        self.inner, self.clock = DrakeLcm("memq://"), clock
+
+    def Subscribe(self, channel, handler):  # noqa: N802 (DrakeLcm's names)
+        return self.inner.Subscribe(channel, handler)
+
+    def Publish(self, channel, data):  # noqa: N802
+        if channel == "PANDA_STATUS":
+            k = len(self.clock.statuses)
+            self.clock.statuses.append(self.clock.now)
+            self.clock.work("status", k)
+        self.inner.Publish(channel, data)
+
+    def HandleSubscriptions(self, timeout_millis):  # noqa: N802
+        handled = self.inner.HandleSubscriptions(0)
+        if not handled:
+            self.clock.now += timeout_millis * 1e-3
+        return handled
+
+
+def serve_on(scenario, clock: WaitedClock, periods: int, monkeypatch):
+    """serve_simulated_driver for ``periods`` periods after the first command on
+    ``clock`` (a scripted controller answering every status with zero torque); each
+    plant step recorded and costed on the clock. The driver's result."""
+    import types
+
+    import nsdrake.driver.serve as serve_module
+    from nsdrake.driver.simulated_driver import SimulatedDriver
+
+    advance = SimulatedDriver.advance
+
+    def recorded_advance(driver):
+        k = len(clock.steps)
+        clock.steps.append(clock.now)
+        advance(driver)
+        clock.work("step", k)
+
+    monkeypatch.setattr(SimulatedDriver, "advance", recorded_advance)
+    monkeypatch.setattr(serve_module, "time", types.SimpleNamespace(sleep=clock.sleep))
+    bus = WaitingBus(clock)
+    ScriptedController(bus.inner, lambda k: np.zeros(7))
+    return serve_simulated_driver(
+        scenario, bus, duration=periods * scenario.control_period, clock=clock, wall_utime=clock.utime
+    )
+
+
+LATE_STATUS, LATE_STEP = 3, 6  # the periods whose status's work, and whose step, run late
+
+
+@pytest.mark.parametrize("timing", ["early", "exact", "late"])
+def test_the_driver_steps_mid_period_and_counts_the_periods_it_started_late(scenario, timing, monkeypatch):
+    """The simulated driver on a clock that only its waits and its work advance (not one
+    that hands it its own deadlines). Early (its work costs nothing): status k goes out at
+    k T and the plant steps at (k + PHYSICS_AT) T, each after a wait; exact (the status's
+    work ends at (k + PHYSICS_AT) T, the step's at (k + 1) T): the same times without a
+    wait, and no period counted late (a deadline met exactly is met); late (status 3's
+    work ends 0.8 T into its period, past the middle; step 6 ends 0.8 T into period 7):
+    step 3 begins at 3.8 T, status 7 goes out at 7.8 T and status 8 at 8 T again (deadlines
+    from the start, no drift), step 7 at once after status 7 (its middle is past), and
+    ``behind`` counts one period, period 7's start, not the middles that steps 3 and 7
+    missed. Catches the plant stepped at once after the status instead
+    of mid-period, the mid-period wait counted in ``behind``, a deadline met exactly
+    counted late, and deadlines that drift after a late period."""
+    T, periods = scenario.control_period, 12
+
+    def work_ends(what, k):
+        if timing == "exact":
+            return (k + PHYSICS_AT) * T if what == "status" else (k + 1) * T
+        if timing == "late" and what == "status" and k == LATE_STATUS:
+            return (k + 0.8) * T
+        if timing == "late" and what == "step" and k == LATE_STEP:
+            return (k + 1.8) * T
+        return None
+
+    clock = WaitedClock(work_ends)
+    result = serve_on(scenario, clock, periods, monkeypatch)
+    n = len(clock.steps)
+    assert n >= periods and len(clock.statuses) == n
+    status_at = np.arange(n) * T
+    step_at = (np.arange(n) + PHYSICS_AT) * T
+    if timing == "late":
+        step_at[LATE_STATUS] = (LATE_STATUS + 0.8) * T
+        status_at[LATE_STEP + 1] = step_at[LATE_STEP + 1] = (LATE_STEP + 1.8) * T  # its middle passed too
+    np.testing.assert_allclose(clock.statuses, status_at, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(clock.steps, step_at, rtol=0, atol=1e-12)
+    assert result.behind == (1 if timing == "late" else 0), result.line()

@@ -19,7 +19,7 @@ from fake_bus import FakeBus, force_torque_bytes, status_bytes
 from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.faults import clock_problem, elapsed_periods, jump_problem, start_problem
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
-from nsdrake.driver.panda import POSITION_UPPER, VELOCITY_LIMIT, limit_problem
+from nsdrake.driver.panda import POSITION_LOWER, POSITION_UPPER, VELOCITY_LIMIT, limit_problem
 from nsdrake.driver.run import Drive, _timing, write_drive_folder
 from nsdrake.driver.timing import GcPauses, timing_line
 from nsdrake.experiment.scenario import load_scenario
@@ -495,6 +495,40 @@ def test_limit_checks_at_their_margins():
     assert limit_problem(q, v, NAMES) is None
     v[6] = -VELOCITY_LIMIT[6] * 1.051
     assert "panda_joint7 moves at -2.743 rad/s" in limit_problem(q, v, NAMES)
+
+
+@pytest.mark.parametrize("sign", [1, -1], ids=["upward", "downward"])
+def test_the_start_tolerance_and_the_limits_hold_on_both_sides(sign):
+    """Every joint, one at a time, moved upward then downward: start_problem takes a first
+    status exactly start_tolerance from the start pose and refuses one 1e-6 further (naming
+    the joint); limit_problem takes a position 0.0099 rad beyond the Panda's published
+    limit on that side and refuses one 0.0101 rad beyond it ("above" or "below"), and
+    likewise a velocity of ±1.049 and ±1.051 times the published limit (issue 46: both
+    signs of every symmetric rule, each boundary from both sides; "exactly" to 1e-9
+    relative, as q0 + tolerance − q0 rounds). Catches a signed
+    distance from the start pose (a joint off by any amount the other way taken), and a
+    limit checked on one side only."""
+    tolerance, zeros = 0.004, np.zeros(7)
+    q0 = np.array([0.0, 0.0, 0.0, -1.5, 0.0, 1.5, 0.0])  # inside every joint's limits
+    side = "above" if sign > 0 else "below"
+    for j in range(7):
+        q = q0.copy()
+        q[j] += sign * tolerance * (1 - 1e-9)  # (q0 + tolerance − q0 is not the tolerance to the bit)
+        assert start_problem(q, q0, tolerance, NAMES) is None, j
+        q[j] += sign * 1e-6
+        assert start_problem(q, q0, tolerance, NAMES).startswith(f"{NAMES[j]} is at "), j
+        limit = (POSITION_UPPER if sign > 0 else POSITION_LOWER)[j]
+        q = q0.copy()
+        q[j] = limit + sign * 0.0099
+        assert limit_problem(q, zeros, NAMES) is None, j
+        q[j] = limit + sign * 0.0101
+        words = f"{NAMES[j]} is at {q[j]:.4f} rad, {side} the Panda's limit"
+        assert limit_problem(q, zeros, NAMES).startswith(words), j
+        v = zeros.copy()
+        v[j] = sign * 1.049 * VELOCITY_LIMIT[j]
+        assert limit_problem(q0, v, NAMES) is None, j
+        v[j] = sign * 1.051 * VELOCITY_LIMIT[j]
+        assert limit_problem(q0, v, NAMES).startswith(f"{NAMES[j]} moves at {v[j]:.4g} rad/s"), j
 
 
 def test_no_first_status_ends_without_sending(sides):

@@ -197,6 +197,42 @@ def test_a_guarded_approach_it_cannot_follow_is_refused(tmp_path, overrides, fie
     assert "\n" not in str(error.value)
 
 
+def test_the_shortest_slow_down_distance_is_refused_below_and_taken_at_and_above(tmp_path):
+    """The bound on slow_down_distance, approach_speed × blend_time + touch_speed ×
+    blend_time / 2 (13.25 mm for the Panda's guarded approach), from both sides: at it and
+    above it the path is built (SlideAndPress) and the scenario loads, and the speed
+    profile reaches approach_speed (the rise ends before the fall starts: the bound's
+    meaning, checked on the profile itself); just below it (1e-9 relative) and halfway
+    down to approach_speed × blend_time (13.125 mm) refused by both, and there the speed
+    never reaches approach_speed. Catches the bound without its touch-speed term (13.125 mm
+    taken: an approach that never reaches its speed), or compared the other way at the
+    bound (the bound itself refused): issue 46, mistake 11."""
+    v, v_t, b = GUARDED["approach_speed"], GUARDED["touch_speed"], 0.5
+    bound = v * b + 0.5 * v_t * b
+    assert bound == pytest.approx(0.01325, abs=1e-15)
+    times = np.append(np.linspace(0.0, 3.0, 3001), b)  # the peak at the bound is at t = blend_time
+
+    def peak_speed(d):
+        return max(approach_profile(t, v, b, v_t, d)[1] for t in times)
+
+    cases = [(bound, True), (bound * (1 + 1e-9), True), (0.02, True)]
+    cases += [(bound * (1 - 1e-9), False), (0.5 * (bound + v * b), False)]
+    assert peak_speed(0.5 * (bound + v * b)) < v - 1e-5  # well short of the approach speed there
+    for d, taken in cases:
+        config = tmp_path / "guarded.yaml"
+        config.write_text(yaml.safe_dump({"reference": {**GUARDED, "slow_down_distance": float(d)}}))
+        if taken:
+            assert peak_speed(d) == pytest.approx(v, abs=1e-12), d
+            press(slow_down_distance=d)
+            load_scenario("panda_wipe", config=config)
+        else:
+            words = "slow_down_distance: must be at least 0.01325 m"
+            with pytest.raises(TaskReferenceError, match=words):
+                press(slow_down_distance=d)
+            with pytest.raises(ScenarioError, match=f"reference.{words}"):
+                load_scenario("panda_wipe", config=config)
+
+
 # ---------------------------------------------------------------- the metrics
 
 

@@ -396,8 +396,11 @@ def test_the_loop_along_a_run_spans_its_postures():
     """loop_along_run over a few postures of fig3's arm: the range of ζ is the range of the
     per-posture damping ratios computed here from Drake's own mass matrix and Jacobian
     (H from CalcMassMatrix, J the tool's translational Jacobian, Z from SciPy's null_space),
-    ζ = D/(2√(K μ)) for the torque PD; the smallest margin the smallest of 2μ/(D T).
-    Catches figures taken at the start posture only, or from the wrong inertia."""
+    ζ = D/(2√(K μ)) for the torque PD; the slowest pole's range over the run the range of
+    each posture's slowest root of μ s² + D s + K (NumPy's roots); the smallest margin the
+    smallest of 2μ/(D T). Every output is checked. Catches figures taken at the start
+    posture only, from the wrong inertia, or the range's upper end taken with min (the
+    range collapsed to its lower end: issue 46, mistake 12)."""
     from pydrake.multibody.tree import JacobianWrtVariable
     from scipy.linalg import null_space
 
@@ -407,7 +410,7 @@ def test_the_loop_along_a_run_spans_its_postures():
     qs = np.array([q0 + d for d in (0.0, 0.15, -0.2, 0.3)])
     g = tuned_gains("dynamically_consistent_torque_pd", 50.0, 0.0049)
     T = 0.001
-    zetas, margins, mus = [], [], []
+    zetas, margins, slowest, mus = [], [], [], []
     for q in qs:
         plant.SetPositions(context, q)
         H = plant.CalcMassMatrix(context)
@@ -421,16 +424,28 @@ def test_the_loop_along_a_run_spans_its_postures():
         )[arm.rows]
         Z = null_space(J)
         mus += list(np.linalg.eigvalsh(Z.T @ H @ Z))
+        rates = []
         for mu in np.linalg.eigvalsh(Z.T @ H @ Z):
             zetas.append(g["posture_damping"] / (2 * np.sqrt(g["posture_stiffness"] * mu)))
             margins.append(2 * mu / (g["posture_damping"] * T))
+            # μ s² + D s + K = 0: the direction's poles (NumPy's roots), its slowest rate
+            rates.append(np.min(-np.roots([mu, g["posture_damping"], g["posture_stiffness"]]).real))
+        slowest.append(min(rates))  # the posture's slowest pole
     run = loop_along_run("dynamically_consistent_torque_pd", g, arm, qs, T)
-    assert run["zeta_min"] == pytest.approx(min(zetas), rel=1e-6)
-    assert run["zeta_max"] == pytest.approx(max(zetas), rel=1e-6)
-    assert run["gain_margin_min"] == pytest.approx(min(margins), rel=1e-5)
     delayed = min(gain_margin("dynamically_consistent_torque_pd", g, mu, T, delay=1) for mu in mus)
-    assert run["gain_margin_delay_min"] == pytest.approx(delayed, rel=1e-9)
+    expected = {
+        "zeta_min": (min(zetas), 1e-6),
+        "zeta_max": (max(zetas), 1e-6),
+        "slowest_pole_min": (min(slowest), 1e-9),
+        "slowest_pole_max": (max(slowest), 1e-9),
+        "gain_margin_min": (min(margins), 1e-5),
+        "gain_margin_delay_min": (delayed, 1e-9),
+    }
+    assert set(run) == set(expected)  # every output checked
+    for name, (value, rel) in expected.items():
+        assert run[name] == pytest.approx(value, rel=rel), name
     assert max(zetas) / min(zetas) > 1.05  # the postures differ enough to tell
+    assert max(slowest) / min(slowest) > 1.05  # … and so does the slowest pole's range
 
 
 def test_the_moved_posture_keeps_the_tool_where_it_was():
