@@ -72,24 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="nsdrake", description="Null-space velocity control (Nemec & Zlajpah 2000) on Drake."
     )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    run = sub.add_parser("run", help="run a scenario and write traces, metrics and plots")
-    run.add_argument(
-        "scenario", help=f"a shipped scenario ({', '.join(shipped_scenarios())}) or a scenario file's path"
-    )
-    run.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
-    run.add_argument(
-        "--out", type=Path, help="output folder (default: runs/SCENARIO, the file's stem, never overwritten)"
-    )
-    run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
-    run.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace the files an earlier nsdrake run wrote in --out (never others)",
-    )
-    run.add_argument(
-        "--meshcat", action="store_true", help="show the run live in Meshcat on localhost (prints the URL)"
-    )
-    run.add_argument("--no-replay", action="store_true", help="do not record replay.html")
+    _add_run_parser(sub)
     compare = sub.add_parser("compare", help="run a family of variants and tabulate the paper's claims")
     compare.add_argument("family", help=f"a shipped family: {', '.join(shipped_families())}")
     compare.add_argument(
@@ -129,6 +112,27 @@ def build_parser() -> argparse.ArgumentParser:
     _add_drive_parsers(sub)
     sub.add_parser("list", help="list the shipped scenarios, families and sweeps")
     return parser
+
+
+def _add_run_parser(sub) -> None:
+    run = sub.add_parser("run", help="run a scenario and write traces, metrics and plots")
+    run.add_argument(
+        "scenario", help=f"a shipped scenario ({', '.join(shipped_scenarios())}) or a scenario file's path"
+    )
+    run.add_argument("--config", type=Path, help="YAML file whose fields override the scenario's")
+    run.add_argument(
+        "--out", type=Path, help="output folder (default: runs/SCENARIO, the file's stem, never overwritten)"
+    )
+    run.add_argument("--duration", type=_duration, help="simulated time [s], overrides the scenario")
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the files an earlier nsdrake run wrote in --out (never others)",
+    )
+    run.add_argument(
+        "--meshcat", action="store_true", help="show the run live in Meshcat on localhost (prints the URL)"
+    )
+    run.add_argument("--no-replay", action="store_true", help="do not record replay.html")
 
 
 def _add_drive_parsers(sub) -> None:
@@ -257,18 +261,25 @@ def _seconds(text: str) -> float:
     return value
 
 
-def _load(args):
+def _load(args, *, notes: bool = True):
     """The scenario the command line names (a shipped one or a file, --config, --duration),
-    validated; what the loader did that changes it (a table dropped) printed, one line each."""
+    validated; what the loader did that changes it (a table dropped) printed, one line each
+    (``notes`` False: the caller says them once its own checks passed, :func:`_say_notes`)."""
     scenario = load_scenario(args.scenario, config=args.config, duration=args.duration)
-    for note in scenario.notes:
-        print(f"nsdrake: note: {note}")
+    if notes:
+        _say_notes(scenario)
     return scenario
 
 
+def _say_notes(scenario) -> None:
+    for note in scenario.notes:
+        print(f"nsdrake: note: {note}")
+
+
 def _run(args) -> int:
-    scenario = _load(args)
+    scenario = _load(args, notes=False)
     check_scenario(scenario)  # model files, joint names, checks' needs: fail before anything is written
+    _say_notes(scenario)  # a refused scenario says its one line only
     label = scenario_label(args.scenario)
     with _claimed(args.out, label, args.overwrite, computes=False) as out:
         try:

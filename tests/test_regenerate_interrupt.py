@@ -110,13 +110,14 @@ def test_ctrl_c_while_the_comparison_starts_is_one_line_and_130(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(3))
 def test_ctrl_c_at_a_random_moment_is_one_line_and_130(tmp_path, seed):
-    """SIGINT at a moment drawn uniformly over the first 15 s of the family's run (the
-    comparison of three 3 s variants takes about 40 s here, loaded): exit 130, one line, no traceback; the
+    """SIGINT at a moment drawn uniformly over the first 8 s of the family's run (the
+    comparison of three 3 s variants takes 12.7-14.4 s on the idle 2-core machine, measured
+    by the draws that fell after its end, about 40 s loaded): exit 130, one line, no traceback; the
     comparison's folder released, every variant that finished kept with its traces to the
     end, the others marked interrupted or not run; an interrupted family's committed table
     left as it was, a finished one's copied. Catches subprocess.run's kill of the child
     0.25 s after the signal (issue 43: 2 of 8 variants, no table, no mark)."""
-    delay = random.Random(seed).uniform(0.3, 15.0)
+    delay = random.Random(seed).uniform(0.3, 8.0)
     code, out, err = interrupt_after(tmp_path, delay)
     family = check_interrupted(tmp_path, code, out, err)
     print(json.dumps({"delay": delay, "family": family}))

@@ -145,9 +145,53 @@ def _visit(path: Path, chain: list[Path], package_map, where, sources: ModelSour
         _visit(child, [*chain, path], package_map, where, sources, seen)
 
 
+class _Tagged:
+    """A value under one of Drake's YAML tags (``!Rpy {deg: [...]}``, ``!AngleAxis``): kept
+    as written, so that a directives file read here and written again says the same."""
+
+    def __init__(self, tag: str, value):
+        self.tag, self.value = tag, value
+
+
+class _DirectivesLoader(yaml.SafeLoader):
+    """YAML's safe loader that takes Drake's tags (:class:`_Tagged`)."""
+
+
+def _construct_tagged(loader, suffix, node):
+    if isinstance(node, yaml.MappingNode):
+        value = loader.construct_mapping(node, deep=True)
+    elif isinstance(node, yaml.SequenceNode):
+        value = loader.construct_sequence(node, deep=True)
+    else:
+        value = loader.construct_scalar(node)
+    return _Tagged("!" + suffix, value)
+
+
+_DirectivesLoader.add_multi_constructor("!", _construct_tagged)
+
+
+class _DirectivesDumper(yaml.SafeDumper):
+    """YAML's safe dumper that writes :class:`_Tagged` back under its tag."""
+
+
+def _represent_tagged(dumper, tagged: _Tagged):
+    if isinstance(tagged.value, dict):
+        return dumper.represent_mapping(tagged.tag, tagged.value)
+    if isinstance(tagged.value, list):
+        return dumper.represent_sequence(tagged.tag, tagged.value)
+    return dumper.represent_scalar(tagged.tag, str(tagged.value))
+
+
+_DirectivesDumper.add_representer(_Tagged, _represent_tagged)
+
+
+def _read_directives(path: Path):
+    return yaml.load(path.read_text(), Loader=_DirectivesLoader)  # noqa: S506 (a safe loader with tags)
+
+
 def _directive_includes(path: Path, package_map, here: str) -> list[Path]:
     try:
-        data = yaml.safe_load(path.read_text())
+        data = _read_directives(path)
     except (yaml.YAMLError, OSError, UnicodeDecodeError) as e:
         raise ControllerConfigError(here, f"not readable YAML: {one_line(e)}") from None
     out = []
@@ -281,7 +325,7 @@ class HulledModel:
 
 def _rewritten(f: SourceFile, copies: dict, package_map, where: str, visuals: bool = True) -> str:
     if f.kind == "directives":
-        data = yaml.safe_load(f.path.read_text())
+        data = _read_directives(f.path)
         for item in data.get("directives", []):
             for key in ("add_model", "add_directives"):
                 entry = item.get(key) if isinstance(item, dict) else None
@@ -289,7 +333,7 @@ def _rewritten(f: SourceFile, copies: dict, package_map, where: str, visuals: bo
                     target = resolve_uri(entry["file"], f.path.parent, package_map)
                     if target is not None and target.resolve() in copies:
                         entry["file"] = "file://" + str(copies[target.resolve()])
-        return yaml.safe_dump(data, sort_keys=False)
+        return yaml.dump(data, Dumper=_DirectivesDumper, sort_keys=False)
     tree = ET.parse(f.path)
     root = tree.getroot()
     if not visuals:

@@ -298,6 +298,21 @@ def write_drive_folder(run: DriveRun, out: Path) -> RunResult:
         record_written(out)
 
 
+def _drive_extra(run: DriveRun, status: str, events) -> dict:
+    """metrics.json's description of the drive beside its metrics."""
+    extra = {
+        "scenario": run.scenario.source,
+        "duration": run.scenario.duration,
+        "status": status,
+        "contact_events": [{"event": e, "t": t} for e, t in events],
+        "driver": "simulated (memq://, lockstep)" if run.driver is not None else "on the bus",
+        "statuses_skipped": run.loop.skipped,
+    }
+    if run.failure:
+        extra["failure"] = run.failure
+    return extra
+
+
 def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     scenario = run.scenario
     declare(out, DRIVE_FILES)
@@ -326,16 +341,7 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
             "wrench the controller used"
         )
     events = contact_events(traces)
-    extra = {
-        "scenario": scenario.source,
-        "duration": scenario.duration,
-        "status": status,
-        "contact_events": [{"event": e, "t": t} for e, t in events],
-        "driver": "simulated (memq://, lockstep)" if run.driver is not None else "on the bus",
-        "statuses_skipped": run.loop.skipped,
-    }
-    if run.failure:
-        extra["failure"] = run.failure
+    extra = _drive_extra(run, status, events)
     station = run.loop.drive.station
     box, loops = controller_box(scenario, station), controller_loops(scenario, station)
     extra["loops"] = loops_json(loops)

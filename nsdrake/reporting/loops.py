@@ -21,14 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nsdrake.reporting.units import number, quantity
-from nsdrake.studies.null_space_laws import (
+from nsdrake.reporting.sampled_loops import (
     TASK_AXIS,
     VELOCITY_LOOP,
     law_key,
     loop_figures,
     null_space_loop,
 )
+from nsdrake.reporting.units import number, quantity
 
 LAW_WORDS = {
     "paper": "the paper's null-space velocity law (Eq. 21)",
@@ -163,7 +163,7 @@ def null_space_loop_of(scenario, station) -> Loop:
 def controller_box(scenario, station) -> list[tuple[str, str]]:
     """The controller as set up, as (what, value) rows: the period, the task's K and D
     per axis, the force gains and f_d, the null-space law, its projector and its gains."""
-    imp, ns, T = scenario.impedance, scenario.null_space, scenario.control_period
+    imp, T = scenario.impedance, scenario.control_period
     arm = station.arm_model
     normal = np.asarray(station.normal, dtype=float)
     n = normal / np.linalg.norm(normal) if np.linalg.norm(normal) > 0 else normal
@@ -199,6 +199,12 @@ def controller_box(scenario, station) -> list[tuple[str, str]]:
                 f"over {_seconds(scenario.reference.force_ramp_time)})",
             )
         )
+    return rows + _null_space_rows(scenario)
+
+
+def _null_space_rows(scenario) -> list[tuple[str, str]]:
+    """:func:`controller_box`'s rows of the null-space law: the law, its projector, its gains."""
+    ns, rows = scenario.null_space, []
     if ns.law == "paper":
         source = scenario.desired_null_space.source
         law = f"{LAW_WORDS['paper']}, q̇_dⁿ from the {source}"

@@ -707,6 +707,20 @@ def limit_metrics(traces: Traces) -> list[Metric]:
     return metrics
 
 
+def _clearance_metrics(traces: Traces, d_lim: float, obstacles: tuple[str, ...]) -> list[Metric]:
+    """The closest each obstacle (beyond d_lim) and the plate (beyond 0) came to the links."""
+    metrics = []
+    for name in obstacles:
+        closest = float(traces[f"d_{name}"].min())
+        metrics.append(
+            Metric(f"d_{name}_min", closest, "m", f"> d_lim = {quantity(d_lim, 'm')}", closest > d_lim)
+        )
+    if "d_plate" in traces:
+        closest = float(traces["d_plate"].min())
+        metrics.append(Metric("d_plate_min", closest, "m", "> 0 (no link touches the plate)", closest > 0))
+    return metrics
+
+
 def pose_metrics(
     traces: Traces,
     *,
@@ -742,15 +756,7 @@ def pose_metrics(
             rms_x <= POSITION_RMS_BOUND,
         )
     )
-    metrics += _orientation_metrics(traces, window)
-    for name in obstacles:
-        closest = float(traces[f"d_{name}"].min())
-        metrics.append(
-            Metric(f"d_{name}_min", closest, "m", f"> d_lim = {quantity(d_lim, 'm')}", closest > d_lim)
-        )
-    if "d_plate" in traces:
-        closest = float(traces["d_plate"].min())
-        metrics.append(Metric("d_plate_min", closest, "m", "> 0 (no link touches the plate)", closest > 0))
+    metrics += _orientation_metrics(traces, window) + _clearance_metrics(traces, d_lim, obstacles)
     forbidden = float(traces["forbidden_contacts"].max())
     metrics.append(
         Metric(

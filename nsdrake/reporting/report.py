@@ -203,7 +203,7 @@ def _controller_section(rows: Sequence[tuple[str, str]]) -> list[str]:
 
 
 def _margin(value: float) -> str:
-    from nsdrake.studies.null_space_laws import GAIN_MARGIN_MAX
+    from nsdrake.reporting.sampled_loops import GAIN_MARGIN_MAX
 
     return f"> {number(GAIN_MARGIN_MAX)}" if value >= GAIN_MARGIN_MAX else f"× {number(value)}"
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import logging
 import math
 import multiprocessing
 import multiprocessing.connection
@@ -618,8 +619,12 @@ def _variant_process(task: _Task, conn) -> None:
     """Worker process: one variant; sends ("simulating", None) once its run has simulated
     a hundredth, then ("ok", row), ("interrupted", t) or ("failed", reason), and exits.
     It starts with SIGINT ignored (:func:`start_quietly`), so that a Ctrl-C during its
-    start-up is not a traceback, and installs its handler first thing."""
+    start-up is not a traceback, and installs its handler first thing. The model's notes
+    (nsdrake's logger: a file's parser warnings, no torque limit) stay in the worker: every
+    variant would say its family's notes again, once per process; ``nsdrake run`` of the
+    scenario says them."""
     signal.signal(signal.SIGINT, _interrupt_once)
+    logging.getLogger("nsdrake").setLevel(logging.ERROR)
 
     def simulated(fraction: float) -> None:
         if not _WorkerState.simulating:

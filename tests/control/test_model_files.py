@@ -254,10 +254,14 @@ def test_every_spelling_of_urdf_goes_through_every_urdf_rule(tmp_path, suffix, r
     assert old in text
     path = tmp_path / f"arm7{suffix}"
     path.write_text(text.replace(old, replacement, 1))
-    for load in (ControllerModel.from_file, ControllerModel.from_urdf):
+    # each API names its own argument: from_file's model file, from_urdf's controller model
+    for load, argument in (
+        (ControllerModel.from_file, "model_file"),
+        (ControllerModel.from_urdf, "controller_model"),
+    ):
         with pytest.raises(ControllerConfigError) as e:
             load(path, tool_frame="tool", task_axes=POSE)
-        assert str(e.value).startswith(f"controller_model: arm7{suffix}: {words}"), str(e.value)
+        assert str(e.value).startswith(f"{argument}: arm7{suffix}: {words}"), str(e.value)
     with pytest.raises(ScenarioError) as e:
         station_with_arm(tmp_path, path.name)
     assert f"arm7{suffix}: {words}" in str(e.value) and "\n" not in str(e.value), str(e.value)

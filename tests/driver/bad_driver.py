@@ -133,7 +133,10 @@ def main() -> None:
 
 def _sleep_until(when: float, bus) -> None:
     while (remaining := when - time.monotonic()) > 0:
-        bus.handle_timeout(max(0, int(remaining * 1e3)))
+        try:
+            bus.handle_timeout(max(0, int(remaining * 1e3)))
+        except OSError:  # a signal (SIGTERM: stop and report) interrupted the wait: the loop decides
+            return
 
 
 if __name__ == "__main__":
