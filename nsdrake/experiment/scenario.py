@@ -227,10 +227,13 @@ def shipped_scenarios() -> list[str]:
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
 
 
-# The fields keyed by joint name. Each is one vector over the arm's joints, written as a
-# mapping so that a reader sees which joint each number is for; an overlay that gives one
-# replaces it whole, as it replaces a list (merging two vectors gives one nobody wrote:
-# a sweep direction {joint1: 1} on a base's {joint2: 1, joint3: -1} is not e1).
+# The fields keyed by joint name, written as a mapping so that a reader sees which joint
+# each number is for. On the same arm an overlay that gives one changes the joints it
+# names and keeps the others (a torque limit, a start position, a posture weight: one value
+# per joint, as the README's "only the fields you give change"; replacing would silently
+# drop the other joints' limits), except VECTOR_TABLES, which an overlay replaces whole as
+# it replaces a list (a direction: {joint1: 1} on a base's {joint2: 1, joint3: -1} merged
+# is a direction nobody wrote, not e1). On another arm the base's tables are dropped.
 JOINT_TABLES = (
     "arm.locked",  # keyed by the joints that are not the arm's (arm.joints)
     "arm.initial_positions",
@@ -243,6 +246,8 @@ JOINT_TABLES = (
     "actuator_limits.torque",
     "actuator_limits.torque_rate",
 )
+VECTOR_TABLES = ("desired_null_space.sweep.direction",)
+
 # The fields that choose the arm. An overlay that changes one and gives arm.initial_positions
 # for another set of joints (every joint must have one) chooses another arm: the base's
 # joint tables it does not give name the other arm's joints and are dropped, each said
@@ -280,9 +285,10 @@ def _set(scenario: "Scenario", path: str, value) -> None:
 def overlay(base: "Scenario", data, origin: str) -> "Scenario":
     """``base`` with the fields of ``data`` (parsed YAML: a file, a compare variant's
     overrides, a sweep run's values) set. A section the data gives merges field by field;
-    a list and a table keyed by joint name (JOINT_TABLES) the data gives replace the
-    base's whole. Data that chooses another arm (ARM_FIELDS) with positions for other
-    joints also drops the base's joint tables it does not give, each named in the
+    a list and a vector keyed by joint name (VECTOR_TABLES) the data gives replace the
+    base's whole; another table keyed by joint name (JOINT_TABLES) changes the joints
+    given. Data that chooses another arm (ARM_FIELDS) with positions for other joints
+    drops the base's joint tables it does not give, each named in the
     result's ``notes`` (from ``origin``, the overlay's name). ``base`` is not changed.
     Raises what ``yaml_load_typed`` raises (the caller names the file)."""
     base = copy.deepcopy(base)
@@ -294,7 +300,7 @@ def overlay(base: "Scenario", data, origin: str) -> "Scenario":
     dropped = []
     for path in JOINT_TABLES:
         given = value_at(data, path) is not _ABSENT
-        if given or other_arm:
+        if (given and path in VECTOR_TABLES) or other_arm:
             if not given and value_at(base, path):
                 dropped.append(path)
             _set(base, path, {})

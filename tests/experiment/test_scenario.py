@@ -14,6 +14,7 @@ from nsdrake.experiment.diagram import build_diagram
 from nsdrake.experiment.scenario import (
     JOINT_TABLES,
     SCENARIO_DIR,
+    VECTOR_TABLES,
     ScenarioError,
     load_scenario,
     load_scenario_file,
@@ -273,7 +274,8 @@ def test_oversized_file_is_refused(tmp_path):
 def test_an_overlay_replaces_a_joint_table_it_gives(tmp_path):
     """Issue 42: a sweep direction {joint1: 1.0} over self_motion's {joint2: 1, joint3: -1,
     joint4: 1} became all four (the maps merged): a direction nobody wrote. Catches a merge
-    of any table keyed by joint name, and a replace that loses the fields beside it."""
+    of a direction, a replace that loses the fields beside it, and a replace of a per-joint
+    table (a torque-rate limit given for one joint silently unlimiting the others)."""
     base = load_scenario("self_motion")
     assert base.desired_null_space.sweep.direction == {"joint2": 1.0, "joint3": -1.0, "joint4": 1.0}
     path = tmp_path / "one.yaml"
@@ -284,13 +286,22 @@ def test_an_overlay_replaces_a_joint_table_it_gives(tmp_path):
     assert s.desired_null_space.sweep.frequency == base.desired_null_space.sweep.frequency
     assert s.arm.initial_positions == base.arm.initial_positions  # a table not given is kept
     assert s.notes == []
-    # the same for every joint table: one entry given, one entry kept
+    # every other joint table changes the joint given and keeps the others (a torque limit
+    # given for one joint must not silently unlimit the rest): one entry given, the rest kept
     for table in JOINT_TABLES:
         section, *middle, leaf = table.split(".")
         text = f"{section}: " + "".join(f"{{{p}: " for p in middle) + f"{{{leaf}: {{joint1: 0.25}}}}"
         path.write_text(text + "}" * len(middle) + "\n")
         s = load_scenario("self_motion", config=path, validated=False)
-        assert value_at(s, table) == {"joint1": 0.25}, table
+        expected = {"joint1": 0.25}
+        if table not in VECTOR_TABLES:
+            expected = (value_at(base, table) or {}) | expected
+        assert value_at(s, table) == expected, table
+    # a Panda's rate limit lowered on one joint keeps the six others' (not unlimited)
+    path.write_text("actuator_limits: {torque_rate: {panda_joint6: 500.0}}\n")
+    panda = load_scenario("panda_wipe", config=path).actuator_limits.torque_rate
+    assert panda == load_scenario("panda_wipe").actuator_limits.torque_rate | {"panda_joint6": 500.0}
+    assert len(panda) == 7
 
 
 def test_an_overlay_that_chooses_another_arm_drops_the_bases_joint_tables_and_says_so(tmp_path):
