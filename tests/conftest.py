@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +14,10 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from nsdrake.control.dynamics import ArmModel
 from nsdrake.station.models import models_dir
+
+# The convex hulls nsdrake keeps for vendors' STL/DAE meshes: in a folder of the tests' own,
+# not the user's ~/.cache (child processes inherit it).
+os.environ.setdefault("NSDRAKE_CACHE", str(Path(tempfile.gettempdir()) / "nsdrake-tests-cache"))
 
 sys.path.insert(0, str(Path(__file__).parent))
 from models import TEST_ARMS  # noqa: E402

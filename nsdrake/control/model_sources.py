@@ -285,10 +285,19 @@ def convex_hull_obj(mesh: Path, where: str) -> Path:
         raise ControllerConfigError(
             where, f"cannot read the collision mesh {mesh.name}: {one_line(e)}"
         ) from None
-    out.parent.mkdir(parents=True, exist_ok=True)
     temporary = out.with_suffix(f".{os.getpid()}.tmp")
-    temporary.write_text(trimesh.exchange.obj.export_obj(hull, include_normals=False, include_texture=False))
-    temporary.replace(out)  # atomic: another process may write the same hull
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        temporary.write_text(
+            trimesh.exchange.obj.export_obj(hull, include_normals=False, include_texture=False)
+        )
+        temporary.replace(out)  # atomic: another process may write the same hull
+    except OSError as e:
+        raise ControllerConfigError(
+            where,
+            f"cannot keep the convex hull of {mesh.name} in {out.parent} ({one_line(e)}): "
+            "set NSDRAKE_CACHE to a folder you can write",
+        ) from None
     return out
 
 

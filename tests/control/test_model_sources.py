@@ -339,3 +339,22 @@ def test_drakes_parser_warnings_are_one_line_per_file(tmp_path, caplog):
     assert len(model.parsed.warnings["arm7.urdf"]) == 7 and all(
         "friction" in w for w in model.parsed.warnings["arm7.urdf"]
     )
+
+
+def test_a_hull_cache_that_cannot_be_written_is_one_line(tmp_path, monkeypatch):
+    """An STL collision mesh needs its hull kept on disk: with NSDRAKE_CACHE naming a file
+    (no folder can be made there) the model is refused in one line that names the mesh,
+    the folder and the variable to set, not a traceback. Catches the write left unguarded."""
+    arm = write_vendor_arm(tmp_path)
+    mesh = trimesh.util.concatenate([trimesh.creation.box(bounds=[b[0::2], b[1::2]]) for b in FIN_BOXES])
+    mesh.export(arm.package / "meshes" / "fin.stl")
+    arm.urdf.write_text(arm.urdf.read_text().replace("../meshes/fin.obj", "../meshes/fin.stl"))
+    blocked = tmp_path / "not_a_folder"
+    blocked.write_text("a file of the user's\n")
+    monkeypatch.setenv("NSDRAKE_CACHE", str(blocked))
+    ball = Obstacle("ball", Sphere(0.03), RigidTransform([0.3, 0.0, 0.1]))
+    with pytest.raises(ControllerConfigError) as e:
+        ControllerModel.from_file(arm.urdf, tool_frame="tool", task_axes=POSE, obstacles=[ball])
+    message = str(e.value)
+    assert "\n" not in message and "fin.stl" in message and "NSDRAKE_CACHE" in message, message
+    assert blocked.read_text() == "a file of the user's\n"
