@@ -8,10 +8,13 @@ plain calls, one tick per status (no Drake diagram runs per tick).
       ─► step.step(t_k, q, q̇, W, …)      ControllerStep: the scenario's controller, τ
       ─► command = τ − g(q) (robot_adds_gravity) ─► lcmt_panda_command (the status's utime)
 
-When the robot adds g(q), what its joints are asked for is the command, τ − g(q), and
-Franka's limits bound that: the step is built with ``robot_adds_gravity``
-(:class:`nsdrake.control.step.ControllerStep`), so the controller's actuator limits act
-on the command, their torque window centred on g(q) (τ − g(q) within ±τ_max however much
+What the robot's torque interface is asked for is τ − g(q) in both setups (the command
+when the robot adds g(q); with ``driver.robot_adds_gravity`` false the command is τ and the
+driver subtracts its own g(q) before the robot adds it back, drake-franka-driver's
+``--remove_gravity_compensation``, the controller model's g(q) standing for the driver's),
+and Franka's limits bound that (:attr:`ControllerSide.at_robot`): the step is built with
+``robot_adds_gravity`` (:class:`nsdrake.control.step.ControllerStep`), so the controller's
+actuator limits act on τ − g(q), their torque window centred on g(q) (τ − g(q) within ±τ_max however much
 of τ_max the gravity of the arm and a payload takes) and their rate limit's reference
 moved by g's change under a moving arm (the command changes by at most ρ_max T per tick).
 What is sent then passes the last gate (:func:`nsdrake.driver.panda.command_problem`, in
@@ -79,6 +82,11 @@ class ControllerSide:
         )
         self._zero3 = np.zeros(3)
         self.command = np.zeros(NUM_JOINTS)
+        # What the robot's torque interface is asked for on top of its own g(q): the command
+        # when the robot adds g; else τ − g(q), since a driver that takes τ with g included
+        # (drake-franka-driver's --remove_gravity_compensation) subtracts its g(q) before the
+        # robot adds it back. The controller model's g stands for the driver's.
+        self.at_robot = np.zeros(NUM_JOINTS)
         self.adds_gravity = self.scenario.driver.robot_adds_gravity
 
     def reset(self) -> None:
@@ -108,8 +116,9 @@ class ControllerSide:
         desired = self.reference.tick(t, wrench)
         rotation = () if self._quaternion is None else (self._quaternion, self._zero3, self._zero3)
         result = self.step.step(t, q, v, wrench, *desired, *rotation)
+        np.subtract(result.tau, self.step.gravity, out=self.at_robot)
         if self.adds_gravity:
-            np.subtract(result.tau, self.step.gravity, out=self.command)
+            self.command[:] = self.at_robot
         else:
             self.command[:] = result.tau
         return desired, result
@@ -170,7 +179,9 @@ def build_controller_side(scenario: Scenario) -> ControllerSide:
         normal=controller.normal,
         config=controller.config,
         wrench_point=controller.wrench_point,
-        robot_adds_gravity=scenario.driver.robot_adds_gravity,  # its limits on τ − g(q)
+        # its limits on τ − g(q), what the robot's torque interface is asked for in both setups
+        # (driver.robot_adds_gravity false: the driver subtracts its g(q) before the robot adds it)
+        robot_adds_gravity=True,
     )
     path, common = surface_path(scenario, station)
     R_d = None

@@ -156,7 +156,7 @@ class ControllerLoop:
         self.gap_counts = np.zeros(len(GAP_BINS), dtype=np.int64)
         self.longest_gap = 0  # [periods] the longest of them (0: none)
         self._deviation = np.zeros((2, NUM_JOINTS))
-        self._sent = np.zeros(NUM_JOINTS)  # the last command sent (the gate's rate check)
+        self._at_robot = np.zeros(NUM_JOINTS)  # what the last command asked of the robot (the rate check)
 
         self._wrench = np.zeros(6)
         self._anchor = self._last_clock = 0
@@ -427,13 +427,17 @@ class ControllerLoop:
         np.copyto(self._wrench, wrench)
         side = self.side
         desired, result = side.tick(self.time, self._q, self._v, self._wrench)
-        problem = command_problem(side.command, self._sent if self.commands else None, self._names)
+        # what the robot's torque interface is asked for: the command, or τ − g(q) when the
+        # driver subtracts its g(q) (driver.robot_adds_gravity false)
+        problem = command_problem(side.at_robot, self._at_robot if self.commands else None, self._names)
+        if problem and not side.adds_gravity:
+            problem = f"with the driver's g(q) subtracted (driver.robot_adds_gravity false): {problem}"
         if problem:  # the last gate: nothing beyond the robot's published limits leaves
             raise self._fault(f"command refused, not sent: {problem}")
         self.bus.publish(
             self.config.command_channel, self._command.set(self._status.utime(data), side.command)
         )
-        self._sent[:] = side.command
+        self._at_robot[:] = side.at_robot
         self.commands += 1
         self._last_arrival = arrival
         self.times.record(time.perf_counter() - wall, time.thread_time() - cpu)

@@ -181,8 +181,10 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
     def drive(mass, com, g_size, g_dir, pose, adds_gravity, on_command, ticks):
         gravity = g_size * np.asarray(g_dir) / np.linalg.norm(g_dir)
         g = payload_gravity(q_lo + np.asarray(pose) * (q_hi - q_lo), mass, np.asarray(com), gravity)
-        robot_g = g if adds_gravity else np.zeros(7)  # what the robot adds, and the sent τ − it
-        centre = robot_g if on_command else np.zeros(7)
+        # the robot's torque interface is asked for τ − g in both setups: the robot adds g to
+        # the command, or the driver subtracts its g from the τ it is sent (robot_adds_gravity
+        # false: drake-franka-driver's --remove_gravity_compensation)
+        centre = g if on_command else np.zeros(7)
         plan, kept = [], False
         for k, (tau_task, tau0, previous, has_previous) in enumerate(ticks):
             tau_task, tau0 = np.asarray(tau_task), np.asarray(tau0)
@@ -194,7 +196,7 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
                 tau_task, tau0, PUBLISHED_TORQUE, rates, CYCLE, previous, has_previous, centre
             )  # fmt: skip
             plan.append((out[:7].copy(), g))
-            if on_command and adds_gravity:  # would a limiter about 0 have sent beyond the limits?
+            if on_command:  # would a limiter about 0 have asked the robot beyond the limits?
                 zero = limited_torque(
                     tau_task, tau0, PUBLISHED_TORQUE, rates, CYCLE, previous, has_previous, np.zeros(7)
                 )  # fmt: skip
@@ -215,7 +217,8 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
                     status_bytes(side.station.q0, utime=utime, robot_utime=utime),
                 )
                 bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
-            expected = [tau - robot_g for tau, _ in plan]
+            expected = [tau - g if adds_gravity else tau for tau, _ in plan]  # on the wire
+            at_robot = [tau - g for tau, _ in plan]  # what the robot's interface is asked for
             step.plan = list(plan)
             refused = None
             try:
@@ -229,16 +232,16 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
         sent = [np.asarray(message.joint_torque) for _, message in bus.sent]
         previous = None
         for k, command in enumerate(sent):
-            assert not beyond(command, previous), (k, command, previous)
+            assert not beyond(at_robot[k], previous), (k, at_robot[k], previous)
             np.testing.assert_allclose(command, expected[k], rtol=0, atol=1e-12)
-            previous = command
+            previous = at_robot[k]
         assert len(sent) == loop.commands
         if on_command:  # the limiter alone keeps every command inside: the gate never stops it
             assert refused is None, refused
             seen["kept by the centre"] += kept
         if refused is not None:
             assert "command refused, not sent: " in refused.problem, refused
-            assert beyond(expected[len(sent)], previous)  # the gate refused only what was beyond
+            assert beyond(at_robot[len(sent)], previous)  # the gate refused only what was beyond
             seen["refused"] += 1
         else:
             assert len(sent) == len(plan)
@@ -421,3 +424,51 @@ def test_robot_adds_gravity_is_a_boolean(side):
                 robot_adds_gravity=bad,
             )
         assert str(info.value) == f"robot_adds_gravity: must be True or False, got {bad!r}"
+
+
+def test_a_driver_that_subtracts_its_gravity_is_never_asked_beyond_the_limits():
+    """driver.robot_adds_gravity false (drake-franka-driver's --remove_gravity_compensation:
+    the command is τ, g included, and the driver subtracts its g(q) before the robot adds
+    it back): the robot's torque interface is still asked for τ − g(q), so the limiter acts
+    on that. A rated 3 kg payload drives joint 6 to its limit while it carries 6-7 N m of
+    gravity (the rated-payload test above): every status is answered, each command sent is
+    τ, and τ − g(q) (g from plain Drake calls) stays within the published limits and rate,
+    at −12 N m exactly on joint 6 while it is held there. Catches the limiter left about 0
+    in this setup (τ − g = −18 N m asked of joint 6: the gate then stops the drive) and a
+    gate that checks only the wire's τ (it would send that −18 N m on)."""
+    com = np.array([0.1, 0.0, 0.1])
+    s = load_scenario("panda_wipe", duration=0.1)
+    s = dataclasses.replace(
+        s,
+        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=3.0, com=list(com))),
+        driver=dataclasses.replace(s.driver, first_status_timeout=0.3, robot_adds_gravity=False),
+    )
+    side = build_controller_side(s)
+    assert not side.adds_gravity
+    bus = FakeBus()
+    loop = ControllerLoop(side, bus, clock=bus.clock, capacity=64)
+    loop.ready()
+    q, v, speed, ticks = np.array(side.station.q0, dtype=float), np.zeros(7), 2.0, 40
+    qs = []
+    for k in range(ticks + 1):
+        if k:
+            q[5] += 0.5 * 1e-3 * (v[5] + speed)
+            v[5] = speed
+        qs.append(q.copy())
+        utime = UTIME0 + 1000 * k
+        bus.at((k + 1) * 1e-3, "PANDA_STATUS", status_bytes(q, v=v, utime=utime, robot_utime=utime))
+        bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
+    loop.start()
+    for _ in range(ticks):
+        loop.tick()
+    sent = np.array([message.joint_torque for _, message in bus.sent])
+    assert len(sent) == ticks + 1
+    g = np.array([payload_gravity(qk, 3.0, com, [0.0, 0.0, -9.81]) for qk in qs])
+    at_robot = sent - g  # what the driver leaves once it has subtracted its g(q)
+    previous = None
+    for asked in at_robot:
+        assert not beyond(asked, previous), asked
+        previous = asked
+    assert np.sum(np.abs(at_robot[:, 5] + 12.0) <= 1e-9) >= 5, at_robot[:, 5]  # held at the limit
+    # joint 6 carries 6-7 N m: a limiter about 0 (τ at −12) would have asked the robot for −18
+    assert g[:, 5].min() > 6.0

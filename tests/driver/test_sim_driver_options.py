@@ -152,8 +152,8 @@ def test_the_filter_is_off_from_1000_hz_on_and_on_just_below(scenario, cutoff):
     filter" (and any above it); the value beside it, 999 Hz, filters: its first period
     commands g = T / (T + 1/(2π 999)) = 0.863 of a 0.4 N m step, then SciPy's
     backward-difference filter, where 1000 Hz commands the step at once (issue 46: the value
-    beside each sentinel; above 1000 Hz the option is refused, test_drive_cli.py). Catches the filter switched off below 1000 Hz, or
-    left on at it."""
+    beside each sentinel; above 1000 Hz the option is refused, test_drive_cli.py). Catches
+    the filter switched off below 1000 Hz, or left on at it."""
     T = scenario.control_period
     _, controller = serve(scenario, 5, step(0.4), low_pass_freq=cutoff, rate_limit=False)
     got = controller.commanded()[:, JOINT]
