@@ -281,6 +281,31 @@ def test_the_command_keeps_the_rate_limit_while_gravity_moves(side):
     assert change.max() > 0.999 * PUBLISHED_RATE * CYCLE  # the limiter was at its rate limit
 
 
+def drive_joint6(side, ticks: int, speed: float = 2.0, after_ready=None):
+    """The drive's loop on a fake bus, answering ``ticks`` + 1 statuses of the Panda at its
+    start pose with joint 6 moving at ``speed`` [rad/s] (from rest, each status's position
+    the trapezoid of its velocities: consistent); (the commands sent, each status's q)."""
+    bus = FakeBus()
+    loop = ControllerLoop(side, bus, clock=bus.clock, capacity=64)
+    loop.ready()
+    if after_ready is not None:
+        after_ready()
+    q, v = np.array(side.station.q0, dtype=float), np.zeros(7)
+    qs = []
+    for k in range(ticks + 1):
+        if k:
+            q[5] += 0.5 * 1e-3 * (v[5] + speed)
+            v[5] = speed
+        qs.append(q.copy())
+        utime = UTIME0 + 1000 * k
+        bus.at((k + 1) * 1e-3, "PANDA_STATUS", status_bytes(q, v=v, utime=utime, robot_utime=utime))
+        bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
+    loop.start()
+    for _ in range(ticks):
+        loop.tick()
+    return np.array([message.joint_torque for _, message in bus.sent]), qs
+
+
 @pytest.mark.parametrize(
     "scale", [1.0, 2.0], ids=["earth", "twice earth's gravity"]
 )  # fmt: skip
@@ -313,24 +338,8 @@ def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(scale)
         return result
 
     side.step.step = recording_step
-    bus = FakeBus()
-    loop = ControllerLoop(side, bus, clock=bus.clock, capacity=64)
-    loop.ready()
-    taus.clear()  # the warm-up's
-    q, v, speed, ticks = np.array(side.station.q0, dtype=float), np.zeros(7), 2.0, 40
-    qs = []
-    for k in range(ticks + 1):
-        if k:
-            q[5] += 0.5 * 1e-3 * (v[5] + speed)
-            v[5] = speed
-        qs.append(q.copy())
-        utime = UTIME0 + 1000 * k
-        bus.at((k + 1) * 1e-3, "PANDA_STATUS", status_bytes(q, v=v, utime=utime, robot_utime=utime))
-        bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
-    loop.start()
-    for _ in range(ticks):
-        loop.tick()
-    sent = np.array([message.joint_torque for _, message in bus.sent])
+    ticks = 40
+    sent, qs = drive_joint6(side, ticks, after_ready=taus.clear)  # the warm-up's τ cleared
     assert len(sent) == ticks + 1 == len(taus)
     previous = None
     for command in sent:
@@ -445,23 +454,8 @@ def test_a_driver_that_subtracts_its_gravity_is_never_asked_beyond_the_limits():
     )
     side = build_controller_side(s)
     assert not side.adds_gravity
-    bus = FakeBus()
-    loop = ControllerLoop(side, bus, clock=bus.clock, capacity=64)
-    loop.ready()
-    q, v, speed, ticks = np.array(side.station.q0, dtype=float), np.zeros(7), 2.0, 40
-    qs = []
-    for k in range(ticks + 1):
-        if k:
-            q[5] += 0.5 * 1e-3 * (v[5] + speed)
-            v[5] = speed
-        qs.append(q.copy())
-        utime = UTIME0 + 1000 * k
-        bus.at((k + 1) * 1e-3, "PANDA_STATUS", status_bytes(q, v=v, utime=utime, robot_utime=utime))
-        bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
-    loop.start()
-    for _ in range(ticks):
-        loop.tick()
-    sent = np.array([message.joint_torque for _, message in bus.sent])
+    ticks = 40
+    sent, qs = drive_joint6(side, ticks)
     assert len(sent) == ticks + 1
     g = np.array([payload_gravity(qk, 3.0, com, [0.0, 0.0, -9.81]) for qk in qs])
     at_robot = sent - g  # what the driver leaves once it has subtracted its g(q)
