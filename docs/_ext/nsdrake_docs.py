@@ -450,6 +450,7 @@ class ResultsDirective(SphinxDirective):
 FIGURE = re.compile(r"^(?P<written>.+?)\s*<(?P<target>[^<>]+)>$", re.S)
 NUMBER = re.compile(r"^(?P<number>[−-]?\d+(?:[.,]\d+)?(?:e[−-]?\d+)?)(?:\s*(?P<unit>.*?))?$")
 PREFIXES = {"": 1.0, "k": 1e3, "m": 1e-3, "µ": 1e-6, "n": 1e-9}
+CELL_UNIT = re.compile(r"^[^\s:;,()]*(?: [^\s:;,()]+)?$")  # a unit: at most two words ('N m'), no punctuation
 FIGURE_ROLE = re.compile(r"\{nsdrake-figure\}`([^`]+)`")
 
 
@@ -466,13 +467,15 @@ def results_table(root, name: str) -> tuple[list[str], list[list[str]]]:
 
 
 def parse_number(text: str) -> tuple[float, int, str] | None:
-    """'375 µs' → (375.0, 0 decimals, 'µs'); None for text that is not a number (and unit)."""
+    """'375 µs' → (375.0, 0 decimals, 'µs'); '2.3e-13' → (2.3e-13, 14 decimals, ''); None for text
+    that is not a number (and unit)."""
     match = NUMBER.match(text.strip().replace("\u2009", "").replace("−", "-"))
     if not match:
         return None
     number = match.group("number").replace(",", ".")
-    mantissa = number.lower().split("e")[0]
-    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+    mantissa, _, exponent = number.lower().partition("e")
+    # the decimals of the figure itself: '2.3e-13' is written to 14 decimals, not 1
+    decimals = (len(mantissa.split(".")[1]) if "." in mantissa else 0) - int(exponent or 0)
     return float(number), decimals, (match.group("unit") or "").strip()
 
 
@@ -484,7 +487,8 @@ def figure_problem(root, written: str, target: str) -> str | None:
     cell rounded to the decimals written ('99.7%' for a cell '99.70%'); a cell that is a
     bare number needs UNIT, the cell's unit ('m'), and the written figure may carry a
     prefix of it ('62.9 µm'; '%' for a UNIT '1'); a cell of prose must contain the written
-    text word for word."""
+    text word for word. ROW may be ``ROW ÷ ROW2``: the written figure is then the ratio of
+    the two rows' cells, a bare number ('2.2' for 'en_rms' of a row over the clean one's)."""
     parts = [p.strip() for p in target.split("|")]
     if len(parts) not in (3, 4):
         return f"'{target}': not RESULTS | ROW | COLUMN [| UNIT]"
@@ -495,11 +499,15 @@ def figure_problem(root, written: str, target: str) -> str | None:
         return str(error)
     if column not in header:
         return f"docs/results/{name}/table.md has no column '{column}'"
-    found = [row for row in rows if row[0] == row_key] or [row for row in rows if row_key in row[0]]
-    if len(found) != 1:
-        return f"docs/results/{name}/table.md: {len(found)} rows contain '{row_key}' (one needed)"
-    cell = found[0][header.index(column)]
+    if "÷" in row_key:
+        return ratio_problem(name, header, rows, written, row_key, column)
+    row = find_row(name, rows, row_key)
+    if isinstance(row, str):
+        return row
+    cell = row[header.index(column)]
     have, want = parse_number(cell), parse_number(written)
+    if have is not None and not CELL_UNIT.match(have[2]):
+        have = None  # a sentence that starts with a figure ('0.598 s: a link touched …') is prose
     if have is None or want is None:
         if re.search(rf"(?<![\w.]){re.escape(written)}(?![\w])", cell):
             return None
@@ -517,6 +525,34 @@ def figure_problem(root, written: str, target: str) -> str | None:
         return f"'{written}': its unit is not the cell's ('{cell}', unit '{cell_unit or unit}')"
     if abs(value / scale - number) > 0.5 * 10.0**-decimals * (1 + 1e-9):
         return f"'{written}' is not '{cell}' (docs/results/{name}/table.md, '{row_key}', '{column}')"
+    return None
+
+
+def find_row(name: str, rows: list[list[str]], key: str) -> list[str] | str:
+    """The one row whose first cell is ``key`` (else contains it), or why there is none."""
+    found = [row for row in rows if row[0] == key] or [row for row in rows if key in row[0]]
+    if len(found) != 1:
+        return f"docs/results/{name}/table.md: {len(found)} rows contain '{key}' (one needed)"
+    return found[0]
+
+
+def ratio_problem(name, header, rows, written, row_key, column) -> str | None:
+    """``ROW ÷ ROW2``: the written figure, a bare number, is ROW's cell over ROW2's in the
+    column, rounded to the digits written (a ratio the prose states: '× 2.2')."""
+    numerator, denominator = (find_row(name, rows, k.strip()) for k in row_key.split("÷", 1))
+    for row in (numerator, denominator):
+        if isinstance(row, str):
+            return row
+    column_index = header.index(column)
+    top, bottom = (parse_number(r[column_index]) for r in (numerator, denominator))
+    want = parse_number(written)
+    if top is None or bottom is None or not bottom[0]:
+        return f"docs/results/{name}/table.md: '{row_key}' in '{column}' is not a ratio of two numbers"
+    if want is None or want[2]:
+        return f"'{written}': a ratio is a bare number"
+    ratio = top[0] / bottom[0]
+    if abs(ratio - want[0]) > 0.5 * 10.0 ** -want[1] * (1 + 1e-9):
+        return f"'{written}' is not {ratio:.4g} (docs/results/{name}/table.md, '{row_key}', '{column}')"
     return None
 
 

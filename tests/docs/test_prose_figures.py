@@ -90,6 +90,27 @@ def test_a_figure_that_differs_is_caught():
     assert "does not exist" in problem(ROOT, "1", "no_such_family | a | b")
 
 
+def test_a_ratio_a_prose_cell_and_a_small_figure_are_checked():
+    """A ratio ``ROW ÷ ROW2`` is the two cells' quotient to the digits written (gear
+    friction's tool error is 0.00773/6.291e-05 = 122.9 × the clean run's: '140' or '120',
+    a rounding by eye, fails); a figure inside a prose cell is found there (and a figure
+    the sentence does not hold is not); an e-notation figure is held to its own digits
+    ('8.8e-13' is not '8.738e-13', which a tolerance of 0.05 in the mantissa's decimals
+    let through)."""
+    problem = nsdrake_docs.figure_problem
+    ratio = "realism | gear friction ÷ clean | tangential_position_error_rms"
+    assert problem(ROOT, "123", ratio) is None
+    assert "is not 122.9" in problem(ROOT, "120", ratio)
+    assert "a ratio is a bare number" in problem(ROOT, "123 m", ratio)
+    assert "rows contain" in problem(ROOT, "1", "realism | gear friction ÷ no such row | en_rms")
+    failed = "gradient_projection | Moore-Penrose | failed_at"
+    assert problem(ROOT, "0.598 s", failed) is None and problem(ROOT, "73 N", failed) is None
+    assert "is not in" in problem(ROOT, "0.6 s", failed)
+    peak = "null_space_bandwidth | 80 rad/s / dyn. consistent PD (H) | task_disturbance_peak | m/s²"
+    assert problem(ROOT, "8.74e-13 m/s²", peak) is None
+    assert "is not" in problem(ROOT, "8.8e-13 m/s²", peak)
+
+
 # A path: a top-level folder of the repository, then path characters. Template paths
 # (FAMILY, NAME), globs and the outputs commands write (runs/, docs/_build) are not named
 # files.
