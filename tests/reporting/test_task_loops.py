@@ -1,0 +1,77 @@
+"""The task's loops as a run's report and docs/results/task_loops/table.md give them
+(nsdrake/reporting/loops.py, scripts/task_loops.py), against a construction of their own:
+SciPy's zero-order-hold discretisation of the unit mass ẍ = a, the acceleration
+a = −g (K x + D ẋ), and with a period's delay the command held one period more (an extra
+state); the margin is the g at which the spectral radius reaches 1, found by bisection.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydrake.systems.framework import DiagramBuilder
+from scipy.signal import cont2discrete
+
+from nsdrake.experiment.scenario import load_scenario
+from nsdrake.experiment.scenario_station import add_scenario_station
+from nsdrake.reporting.run_folder import controller_loops
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def spectral_radius(g: float, K: float, D: float, T: float, delayed: bool) -> float:
+    mass = (np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), 0)
+    Ad, Bd, *_ = cont2discrete(mass, T)
+    gains = g * np.array([[K, D]])
+    if not delayed:  # the command computed at t_k acts over [t_k, t_k+1)
+        return max(abs(np.linalg.eigvals(Ad - Bd @ gains)))
+    # state [x, v, u]: u, computed at t_k, acts over [t_k+1, t_k+2)
+    loop = np.block([[Ad, Bd], [-gains, np.zeros((1, 1))]])
+    return max(abs(np.linalg.eigvals(loop)))
+
+
+def margin(K: float, D: float, T: float, delayed: bool) -> float:
+    low, high = 1e-3, 1e3
+    for _ in range(80):
+        mid = np.sqrt(low * high)
+        low, high = (mid, high) if spectral_radius(mid, K, D, T, delayed) < 1 else (low, mid)
+    return low
+
+
+def test_fig3s_force_loop_is_left_barely_stable_by_a_periods_delay():
+    """fig3 in contact: ẍ = −(K_p,n + K_f k_c) x − K_v,n ẋ with K_p,n 100, K_f 1, k_c
+    50000 N/m, K_v,n 200, T 2 ms: margin 2/(K_v T) = 5 without delay and 1.106 with one
+    period (what docs/laws.md says). Catches the force loop built without the contact's
+    stiffness (its delayed margin is then 2.5), the delayed margin computed without the
+    delay (5), and either margin read at another period."""
+    scenario = load_scenario("fig3")
+    station = add_scenario_station(DiagramBuilder(), scenario, sensing=False)
+    loops = {lp.name: lp for lp in controller_loops(scenario, station)}
+    force = loops["task, normal to the plate, in contact (the force loop)"]
+    imp, T = scenario.impedance, scenario.control_period
+    K = imp.K_p_normal + imp.K_f * 50000.0  # the tool's and plate's stiffnesses in series
+    assert "k_c 50000 N/m" in force.gains
+    assert force.margin == pytest.approx(margin(K, imp.K_v_normal, T, delayed=False), rel=1e-3)
+    assert force.margin_delay == pytest.approx(margin(K, imp.K_v_normal, T, delayed=True), rel=1e-3)
+    assert force.margin_delay < 1.2  # barely stable with the delay
+    along = loops["task, along the plate"]
+    assert along.margin_delay == pytest.approx(
+        margin(imp.K_p_tangent, imp.K_v_tangent, T, delayed=True), rel=1e-3
+    )
+
+
+def test_the_committed_table_is_what_the_script_writes():
+    """docs/results/task_loops/table.md's rows are scripts/task_loops.py's rows today.
+    Catches a change to the loops or to a shipped scenario's gains without the table
+    regenerated (the pages cite its cells)."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import task_loops
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    committed = (ROOT / "docs" / "results" / "task_loops" / "table.md").read_text()
+    written = [row for name in task_loops.SCENARIOS for row in task_loops.rows(name)]
+    assert [line for line in committed.splitlines() if line.startswith("| ") and " / " in line] == written
