@@ -166,3 +166,74 @@ def test_a_missing_path_is_caught():
         "page: names nsdrake/priority.py, which does not exist",
         "page: names tests/docs/test_docs.py, which does not exist",
     ]
+
+
+# --- a measured-looking figure written bare -------------------------------------------------
+
+# The pages whose prose is held to it (the referee's pages, issue 45); the others still
+# state benchmark timings and set-up figures by hand (docs/development.md, "The result
+# tables").
+CHECKED_PAGES = ("docs/laws.md", "docs/claims.md")
+# A decimal figure with two significant digits or more, or one in e-notation, outside a
+# role, code, a table row and a math span: what a measurement looks like ('0.0114', '2.18',
+# '9.7e-7'). Set-up values are mostly single digits or integers ('10 N', '0.5 rad', '125 Hz',
+# '1000 N m/s'); a measured integer ('30 Hz') is therefore not caught.
+NUMBER = re.compile(r"(?<![\w.\-/^])[−+-]?\d+(?:\.\d+)?(?:e[−-]?\d+)?(?![\w])")
+
+
+def measured_looking(figure: str) -> bool:
+    mantissa, _, exponent = figure.lstrip("+−-").partition("e")
+    if exponent:
+        return True
+    return "." in mantissa and len(mantissa.replace(".", "").strip("0")) >= 2
+
+
+# The bare figures these pages may keep, each with why it is not a measurement.
+NOT_MEASURED = {
+    "1.06": "3/(2√2), the paper's law's damping ratio under the rule (a closed form)",
+    "0.92": "the factor of the delayed margin a test runs at (its choice)",
+    "1.05": "the factor of the delayed margin a test runs at (its choice)",
+    "2.3": "panda_self_motion's q_d moves from 2.3 s (the scenario's input)",
+    "3.5": "the push's start time [s] (the family's input)",
+    "0.066": "σ √((1 − a)/(1 + a)) of the sensor's configured noise (a closed form)",
+    "0.108": "the belt rung's configured rotor inertia per joint (an input)",
+    "1.94": "the gradient family's first step, tests/studies/test_gradient_projection_family.py",
+    "1.96": "the gradient family's first step, tests/studies/test_gradient_projection_family.py",
+}
+
+
+def bare_figures(text: str) -> list[str]:
+    """The measured-looking figures of a page's prose that are not an nsdrake-figure."""
+    found, fenced = [], False
+    for line in text.splitlines():
+        if line.lstrip().startswith(("```", "~~~")):
+            fenced = not fenced
+            continue
+        if fenced or line.startswith("|"):
+            continue
+        prose = re.sub(
+            r"`[^`]*`|\$[^$]*\$|(?:Sections?|Eqs?\.) [\d.]+", " ", nsdrake_docs.FIGURE_ROLE.sub(" ", line)
+        )
+        found += [
+            f for f in NUMBER.findall(prose) if measured_looking(f) and f.lstrip("+−-") not in NOT_MEASURED
+        ]
+    return found
+
+
+@pytest.mark.parametrize("page", CHECKED_PAGES)
+def test_no_measured_figure_is_written_bare(page):
+    """Every measured figure of the page is an nsdrake-figure, so that regenerating its
+    table flags it. Catches a figure copied from a table by hand (laws.md said '0.0048',
+    '0.046 rad', '0.25–0.31 s'; claims.md '30 Hz, 2.5 N', '+0.79 N/s')."""
+    assert bare_figures((ROOT / page).read_text()) == []
+
+
+def test_a_bare_figure_is_found():
+    """The check finds a measured figure written bare, in e-notation and as a ratio, and
+    leaves roles, code, tables, math and single-digit set-up values alone."""
+    text = (
+        "the error is 0.0048 rad (`0.0047`), 9.7e-7 predicted, × 2.2 the clean run's; "
+        "{nsdrake-figure}`0.0114 <a | b | c>` and $0.25$ at 10 N, 0.5 rad, 1000 N m/s\n"
+        "| 0.31 | a row |\n```\n0.77\n```\nSection 3.4 and Eq. 2.1"
+    )
+    assert bare_figures(text) == ["0.0048", "9.7e-7", "2.2"]
