@@ -229,7 +229,8 @@ def _loops_section(loops: Sequence, delay_periods: int) -> list[str]:
         "at the start posture): the damping ratio ζ (a range over the null-space directions), the slowest "
         "pole, and the gain margin: the factor by which the acceleration the loop's torque produces may "
         "grow before the loop turns unstable, without delay and with one period of computation delay "
-        "(the torque computed from the sample at t_k applied from t_{k+1}, as a real drive runs it). "
+        "(the torque computed from the sample at t<sub>k</sub> applied from t<sub>k+1</sub>, as a real drive "
+        "runs it). "
         f"This run: {applies}.</p>",
         "<table><thead><tr><th>loop</th><th>ζ</th><th>slowest pole</th><th>gain margin</th>"
         "<th>gain margin, a period's delay</th></tr></thead><tbody>",
