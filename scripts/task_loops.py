@@ -52,7 +52,7 @@ def main() -> int:
         "law's at the start posture; each sampled at the control period with the torque held. "
         "gain_margin is the factor on the loop's gain at which it turns unstable, gain_margin_delay "
         "the same with one period of computation delay (the torque computed from the sample at t_k "
-        "applied from t_k+1, as realism.delay and a real drive run it).\n\n"
+        "applied from t_(k+1), as realism.delay and a real drive run it).\n\n"
         + HEADER
         + "\n".join(row for name in SCENARIOS for row in rows(name))
         + "\n"
