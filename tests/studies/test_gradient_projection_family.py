@@ -6,6 +6,9 @@ Eq. 30's H⁻¹-rotated one cannot, and neither can Eq. 28 with the Moore–Penr
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import paper_arm
@@ -37,6 +40,9 @@ def test_at_fig3s_start_the_unrotated_step_with_j_bar_makes_the_torque_worse():
     _, Phi = joint_torque_criterion(terms.J, terms.dJ_dq, F_D)
     N_dc = GeneralizedInverse().at(terms).N
     N_mp = GeneralizedInverse(PseudoInverseKind.moore_penrose).at(terms).N
+    description = load_family("gradient_projection").description
+    quoted = re.search(r"negative: (-?\d+) at the initial pose", description)
+    assert Phi @ N_dc @ Phi == pytest.approx(float(quoted.group(1)), abs=1)  # the figure the table prints
     assert Phi @ N_dc @ Phi == pytest.approx(-330, abs=1)
     assert Phi @ N_dc @ terms.H_inv @ Phi > 0
     assert Phi @ N_mp @ Phi > 0
@@ -44,8 +50,9 @@ def test_at_fig3s_start_the_unrotated_step_with_j_bar_makes_the_torque_worse():
 
 def test_the_family_gives_every_variant_the_same_first_step():
     """The gains are set so that the unscaled q̇_dⁿ has the same size at the initial pose
-    in every variant (1.96 rad/s): the rows compare directions, not gains. Catches a
-    gain edited in one row only."""
+    in every variant (1.94–1.96 rad/s, within 2%): the rows compare directions, not gains.
+    Catches a gain edited in one row only, and a description or page that quotes another
+    step (they said 1.96 for all three)."""
     arm = paper_arm()
     terms = arm.terms(arm.plant.CreateDefaultContext(), Q0_FIG3, np.zeros(4), coriolis=False)
     _, Phi = joint_torque_criterion(terms.J, terms.dJ_dq, F_D)
@@ -60,6 +67,10 @@ def test_the_family_gives_every_variant_the_same_first_step():
         W_inv = terms.H_inv if d.rotate_gradient else np.eye(4)
         sizes.append(abs(d.criteria.joint_torque.gain) * np.linalg.norm(N @ W_inv @ Phi))
     np.testing.assert_allclose(sizes, 1.96, rtol=0.02)
+    # the steps' range as the family's description (its table's text) and docs/claims.md quote it
+    for text in (family.description, (Path(__file__).parents[2] / "docs" / "claims.md").read_text()):
+        low, high = re.search(r"(\d+\.\d+)[-–](\d+\.\d+) rad/s before the", text).groups()
+        assert (round(min(sizes), 2), round(max(sizes), 2)) == (float(low), float(high))
 
 
 @pytest.mark.slow
