@@ -3,18 +3,21 @@ planar arm pressing 5 N on a wall on a sensor joint, joint torques minimised in 
 space, T = 2 ms) with the plant stepping at T, at T/4 and continuously, connected directly,
 through nsdrake.ControlHold or through Drake's ZeroOrderHold.
 
-    python bench/bench_plant_timing.py [--duration SECONDS]
+    python bench/bench_plant_timing.py [--duration SECONDS] [--out DIR]
 
 Prints, per set-up, whether the diagram builds, the normal force at the end, RMS ‖eⁿ‖ from
 1.5 s on (after contact), and the process CPU time of the simulation; the last row repeats
 the continuous plant behind ControlHold with the q̈_dⁿ feed-forward switched off, to compare
-with the ZeroOrderHold row.
+with the ZeroOrderHold row. With ``--out`` it also writes them as DIR/table.md, the table
+docs/own_diagram.md ("The contract") cites (scripts/regenerate_results.py --family
+plant_timing). The CPU times are this machine's, under its load at the time.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 from pydrake.all import (
@@ -122,13 +125,15 @@ def build(time_step: float, connection: str, feedforward: bool = True):
     return builder.Build(), en, force
 
 
-def run(time_step: float, connection: str, duration: float, feedforward: bool = True) -> str:
+def run(time_step: float, connection: str, duration: float, feedforward: bool = True) -> dict:
+    """The set-up's figures: f_n at the end [N], RMS ‖eⁿ‖ from 1.5 s [rad/s], CPU [s]; or
+    ``builds``, why the diagram does not build."""
     try:
         diagram, en_log, force_log = build(time_step, connection, feedforward)
     except RuntimeError as e:
         if "algebraic loop" not in str(e):
             raise
-        return "does not build: " + " ".join(str(e).split())[:60] + " …"
+        return {"builds": "no: an algebraic loop (Drake's DiagramBuilder refuses it)"}
     simulator = Simulator(diagram)
     start = time.process_time()
     simulator.AdvanceTo(duration)
@@ -137,13 +142,21 @@ def run(time_step: float, connection: str, duration: float, feedforward: bool = 
     t = en_log.FindLog(context).sample_times()
     en = np.linalg.norm(en_log.FindLog(context).data(), axis=0)[t >= 1.5]
     f_n = force_log.FindLog(context).data()[1, -1]
-    return f"f_n {f_n:.3f} N, RMS ||e^n|| {np.sqrt(np.mean(en**2)):.2e} rad/s, CPU {cpu:.2f} s"
+    return {"builds": "yes", "f_n_end": f_n, "en_rms": float(np.sqrt(np.mean(en**2))), "cpu": cpu}
+
+
+def text(row: dict) -> str:
+    if row["builds"] != "yes":
+        return f"does not build ({row['builds'][4:]})"
+    return f"f_n {row['f_n_end']:.3f} N, RMS ||e^n|| {row['en_rms']:.2e} rad/s, CPU {row['cpu']:.2f} s"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=3.0)
+    parser.add_argument("--out", type=Path, help="also write the figures as DIR/table.md")
     args = parser.parse_args()
+    lines = []
     for time_step, connection, feedforward in (
         (T, "direct", True),
         (T / 4, "direct", True),
@@ -156,7 +169,25 @@ def main() -> None:
     ):
         plant = f"plant step {time_step * 1e3:g} ms" if time_step else "continuous plant"
         label = f"{plant}, {connection}" + ("" if feedforward else ", no q̈_dⁿ feed-forward")
-        print(f"{label:70s} {run(time_step, connection, args.duration, feedforward)}", flush=True)
+        row = run(time_step, connection, args.duration, feedforward)
+        print(f"{label:70s} {text(row)}", flush=True)
+        cells = [f"{row[k]:.4g}" if k in row else "" for k in ("f_n_end", "en_rms", "cpu")]
+        lines.append(f"| {label} | {row['builds']} | " + " | ".join(cells) + " |")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "table.md").write_text(
+            "# plant_timing\n\n"
+            "The controller behind plants of other time steps: diagrams/own_arm.py's set-up (a 5-joint "
+            "planar arm pressing 5 N on a wall, T = 2 ms) with the plant stepping at T, at T/4 and "
+            f"continuously, connected directly or through a hold, {args.duration:g} s each; f_n_end the "
+            "normal force at the end, "
+            "en_rms RMS ‖eⁿ‖ from 1.5 s on, cpu the process CPU time of the simulation (this machine's, "
+            "under its load at the time).\n\n"
+            "| set-up | builds | f_n_end [N] | en_rms [rad/s] | cpu [s] |\n|---|---|---|---|---|\n"
+            + "\n".join(lines)
+            + "\n"
+        )
+        print(f"wrote {args.out / 'table.md'}")
 
 
 if __name__ == "__main__":
