@@ -230,7 +230,9 @@ def _loops_section(loops: Sequence, delay_periods: int) -> list[str]:
         "pole, and the gain margin: the factor by which the acceleration the loop's torque produces may "
         "grow before the loop turns unstable, without delay and with one period of computation delay "
         "(the torque computed from the sample at t<sub>k</sub> applied from t<sub>k+1</sub>, as a real drive "
-        "runs it). "
+        "runs it). The force loop in contact sees the plate only through the sampled force term, "
+        "not the plate acting on the tool between samples: its margins are the model's, a floor on "
+        "fig3 (a run with a period's delay settles at twice its delayed margin; docs/laws.md). "
         f"This run: {applies}.</p>",
         "<table><thead><tr><th>loop</th><th>ζ</th><th>slowest pole</th><th>gain margin</th>"
         "<th>gain margin, a period's delay</th></tr></thead><tbody>",

@@ -41,12 +41,13 @@ def margin(K: float, D: float, T: float, delayed: bool) -> float:
     return low
 
 
-def test_fig3s_force_loop_is_left_barely_stable_by_a_periods_delay():
-    """fig3 in contact: ẍ = −(K_p,n + K_f k_c) x − K_v,n ẋ with K_p,n 100, K_f 1, k_c
-    50000 N/m, K_v,n 200, T 2 ms: margin 2/(K_v T) = 5 without delay and 1.106 with one
-    period (what docs/laws.md says). Catches the force loop built without the contact's
-    stiffness (its delayed margin is then 2.5), the delayed margin computed without the
-    delay (5), and either margin read at another period."""
+def test_fig3s_force_loop_as_the_report_models_it():
+    """fig3 in contact as the report models it: ẍ = −(K_p,n + K_f k_c) x − K_v,n ẋ with
+    K_p,n 100, K_f 1, k_c 50000 N/m, K_v,n 200, T 2 ms: margin 2/(K_v T) = 5 without delay
+    and 1.106 with one period (the model's figure; the run's margin is larger: the slow
+    test below). Catches the force loop built without the contact's stiffness (its delayed
+    margin is then 2.5), the delayed margin computed without the delay (5), and either
+    margin read at another period."""
     scenario = load_scenario("fig3")
     station = add_scenario_station(DiagramBuilder(), scenario, sensing=False)
     loops = {lp.name: lp for lp in controller_loops(scenario, station)}
@@ -56,7 +57,6 @@ def test_fig3s_force_loop_is_left_barely_stable_by_a_periods_delay():
     assert "k_c 50000 N/m" in force.gains
     assert force.margin == pytest.approx(margin(K, imp.K_v_normal, T, delayed=False), rel=1e-3)
     assert force.margin_delay == pytest.approx(margin(K, imp.K_v_normal, T, delayed=True), rel=1e-3)
-    assert force.margin_delay < 1.2  # barely stable with the delay
     along = loops["task, along the plate"]
     assert along.margin_delay == pytest.approx(
         margin(imp.K_p_tangent, imp.K_v_tangent, T, delayed=True), rel=1e-3
@@ -75,3 +75,44 @@ def test_the_committed_table_is_what_the_script_writes():
     committed = (ROOT / "docs" / "results" / "task_loops" / "table.md").read_text()
     written = [row for name in task_loops.SCENARIOS for row in task_loops.rows(name)]
     assert [line for line in committed.splitlines() if line.startswith("| ") and " / " in line] == written
+
+
+@pytest.mark.slow
+def test_fig3_with_a_periods_delay_diverges_above_the_approach_loops_margin_and_not_in_contact():
+    """End to end, the project's own delay (``realism.delay``, one period) on fig3 with the
+    normal loop's gains (K_p,n, K_v,n and K_f) scaled by g. The approach loop (normal to
+    the plate before contact, delayed margin 2.499) is exact: at 1.05 × its margin the run
+    diverges before contact, at 0.92 × it does not. The force loop's figure is a lower
+    bound, not the margin: that same run at 0.92 × 2.499 = 2.3, twice the force loop's
+    delayed margin (1.106), settles in contact (its force error over the last 0.3 s within
+    1 N of f_d): the model sees the contact only through the sampled force term, while
+    the plate's spring also acts on the tool between samples. 2.5 s runs. Catches an
+    approach loop's delayed margin computed without the delay (5 would call 2.62 safe) and
+    a report whose force-loop figure is taken for the loop's margin (the text says lower
+    bound)."""
+    import dataclasses
+
+    from nsdrake.experiment.simulate import DivergenceError, run
+
+    base = load_scenario("fig3", duration=2.5)
+    station = add_scenario_station(DiagramBuilder(), base, sensing=False)
+    loops = {lp.name: lp for lp in controller_loops(base, station)}
+    approach = loops["task, normal to the plate, before contact"].margin_delay
+    force = loops["task, normal to the plate, in contact (the force loop)"].margin_delay
+    assert approach == pytest.approx(2.499, abs=1e-3) and 0.92 * approach > 2 * force
+
+    def scaled(factor):
+        imp = base.impedance
+        impedance = dataclasses.replace(
+            imp, K_p_normal=factor * imp.K_p_normal, K_v_normal=factor * imp.K_v_normal, K_f=factor * imp.K_f
+        )
+        delay = dataclasses.replace(base.realism.delay, enabled=True, periods=1)
+        realism = dataclasses.replace(base.realism, delay=delay)
+        return dataclasses.replace(base, impedance=impedance, realism=realism)
+
+    traces, _ = run(scaled(0.92 * approach), null_space_task=False)
+    t, error = traces["t"], traces["f_n"] - traces["f_d"]
+    assert np.abs(error[t >= t[-1] - 0.3]).max() < 1.0  # in contact, settled
+    with pytest.raises(DivergenceError) as diverged:
+        run(scaled(1.05 * approach), null_space_task=False)
+    assert diverged.value.t < 1.27  # before fig3's first contact: the approach loop
