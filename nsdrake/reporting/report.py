@@ -231,7 +231,7 @@ def _loops_section(loops: Sequence, delay_periods: int) -> list[str]:
         "grow before the loop turns unstable, without delay and with one period of computation delay "
         "(the torque computed from the sample at t<sub>k</sub> applied from t<sub>k+1</sub>, as a real drive "
         "runs it). The force loop in contact sees the plate only through the sampled force term, "
-        "not the plate acting on the tool between samples: its margins are the model's, a floor on "
+        "not the plate's own push on the tool: its margins are the model's, a floor on "
         "fig3 (a run with a period's delay settles at twice its delayed margin; docs/laws.md). "
         f"This run: {applies}.</p>",
         "<table><thead><tr><th>loop</th><th>ζ</th><th>slowest pole</th><th>gain margin</th>"

@@ -85,8 +85,8 @@ def test_fig3_with_a_periods_delay_diverges_above_the_approach_loops_margin_and_
     diverges before contact, at 0.92 × it does not. The force loop's figure is a lower
     bound, not the margin: that same run at 0.92 × 2.499 = 2.3, twice the force loop's
     delayed margin (1.106), settles in contact (its force error over the last 0.3 s within
-    1 N of f_d): the model sees the contact only through the sampled force term, while
-    the plate's spring also acts on the tool between samples. 2.5 s runs. Catches an
+    1 N of f_d): the model sees the contact only through the sampled force term, not the
+    plate's own push on the tool, which Drake's contact solves implicitly. 2.5 s runs. Catches an
     approach loop's delayed margin computed without the delay (5 would call 2.62 safe) and
     a report whose force-loop figure is taken for the loop's margin (the text says lower
     bound)."""
