@@ -116,3 +116,24 @@ def test_fig3_with_a_periods_delay_diverges_above_the_approach_loops_margin_and_
     with pytest.raises(DivergenceError) as diverged:
         run(scaled(1.05 * approach), null_space_task=False)
     assert diverged.value.t < 1.27  # before fig3's first contact: the approach loop
+
+
+def test_the_committed_null_space_inertia_is_what_the_script_writes():
+    """docs/results/null_space_inertia/table.md's rows are scripts/null_space_inertia.py's
+    today, and its h_n is the geometric mean of the μ it lists (the Panda's one direction:
+    μ itself). Catches a start posture or a model changed without the table regenerated
+    (docs/laws.md cites h_n and fig3's lightest μ)."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import null_space_inertia
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    committed = (ROOT / "docs" / "results" / "null_space_inertia" / "table.md").read_text()
+    rows = [line for line in committed.splitlines() if line.startswith("| ") and "[" not in line]
+    assert rows == [null_space_inertia.row(*arm) for arm in null_space_inertia.SCENARIOS]
+    for line in rows:
+        directions, mu_min, mu_max, h_n = (float(c) for c in line.strip("| ").split(" | ")[2:])
+        if directions == 2:
+            assert h_n == pytest.approx(np.sqrt(mu_min * mu_max), rel=1e-3)
+        else:
+            assert mu_min == mu_max == h_n
