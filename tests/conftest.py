@@ -176,3 +176,42 @@ def without_notices(err: str) -> str:
 
     err = err.replace(NOTICE + "\n", "")
     return re.sub(r"(?m)^[^:\n]+: (\d+%|\d+/\d+ \w+)( \(\d+ failed\))?, [^\n]*\d+ s[^\n]*\n", "", err)
+
+
+@pytest.fixture(scope="session")
+def panda_wipe_direct():
+    """(traces, built) of the shipped panda_wipe simulated directly for its whole 28 s, once
+    per worker: the acceptance figures (experiment/test_panda_scenarios.py) and the drive's
+    comparison with the direct run (driver/test_drive_reproduces.py) read the same run.
+    Both tests carry ``xdist_group("panda_wipe")`` (with ``--dist loadgroup`` in addopts) so
+    that they run in one worker and the run is simulated once. Read it, never change it."""
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.experiment.simulate import run
+
+    return run(load_scenario("panda_wipe"))
+
+
+@pytest.fixture(scope="session")
+def finished_run(tmp_path_factory) -> Path:
+    """A finished ``nsdrake run fig3 --duration 0.1`` (with its replay), in process, once per
+    worker: the earlier run's folder that the --overwrite tests start from. Tests take a copy
+    (:func:`copy_of_finished_run`), never this folder."""
+    import contextlib
+    import io
+
+    from nsdrake.cli import main
+
+    out = tmp_path_factory.mktemp("finished") / "run"
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["run", "fig3", "--duration", "0.1", "--out", str(out)]) in (0, 1)  # before contact
+    return out
+
+
+def copy_of_finished_run(finished: Path, destination: Path) -> Path:
+    """A copy of :func:`finished_run`'s folder at ``destination`` (which must not exist):
+    byte for byte the folder that run would have written there (its manifest names files
+    relative to the folder)."""
+    import shutil
+
+    shutil.copytree(finished, destination)
+    return destination

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import copy_of_finished_run
 
 from nsdrake.cli import main
 from nsdrake.reporting.progress import Progress
@@ -333,13 +334,13 @@ def _tree(folder):
     }
 
 
-def test_overwrite_into_a_working_folder_removes_nothing(tmp_path, capsys, monkeypatch):
+def test_overwrite_into_a_working_folder_removes_nothing(tmp_path, capsys, monkeypatch, finished_run):
     """Issue 15, item 1 (data loss): `nsdrake sweep --overwrite` into a working folder
     holding a user's file and an earlier `nsdrake run`'s runs/ deleted runs/ whole and
     exited 0. Catches any removal there: the folder is refused with one line, every byte
     survives, and no sweep file is written."""
     monkeypatch.chdir(tmp_path)
-    assert main(["run", "fig3", "--duration", "0.1", "--no-replay"]) in (0, 1)
+    copy_of_finished_run(finished_run, tmp_path / "runs" / "fig3")  # nsdrake run fig3's default folder
     (tmp_path / "notes.txt").write_text("mine")
     spec = write_spec(tmp_path)
     before = _tree(tmp_path)
@@ -352,11 +353,10 @@ def test_overwrite_into_a_working_folder_removes_nothing(tmp_path, capsys, monke
     assert not (tmp_path / "sweep.json").exists()
 
 
-def test_overwrite_into_a_run_folder_with_a_users_file_removes_nothing(tmp_path, capsys):
+def test_overwrite_into_a_run_folder_with_a_users_file_removes_nothing(tmp_path, capsys, finished_run):
     """Catches a sweep that reclaims an `nsdrake run` folder while a file of the user's sits
     in it (the run's own files may go, but only when nothing else is there)."""
-    out = tmp_path / "run"
-    assert main(["run", "fig3", "--duration", "0.1", "--no-replay", "--out", str(out)]) in (0, 1)
+    out = copy_of_finished_run(finished_run, tmp_path / "run")
     (out / "mine.txt").write_text("mine")
     before = _tree(out)
     spec = write_spec(tmp_path)
