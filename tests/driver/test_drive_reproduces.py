@@ -59,7 +59,6 @@ def test_a_short_drive_reproduces_the_direct_simulation():
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("panda_wipe")  # shares conftest's panda_wipe_direct with test_panda_scenarios.py
 def test_panda_wipe_through_the_driver_meets_its_bounds_like_the_direct_run(panda_wipe_direct):
     """The whole 28 s: force error RMS, pose error RMS and the elbow's distance to the post
     within 10% of the direct simulation's, every bound met. (The direct run is conftest's

@@ -229,7 +229,6 @@ def passed(metrics):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("panda_wipe")  # shares conftest's panda_wipe_direct with test_drive_reproduces.py
 def test_panda_wipe_meets_the_acceptance_figures(wipe, tmp_path, panda_wipe_direct):
     """The shipped panda_wipe (28 s), from its traces.csv, from 0.5 s after first contact:
     normal force positive, RMS(f_n − f_d) ≤ 2% and max ≤ 10% of f_d, in-plane position
