@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import copy_of_finished_run
+from conftest import copy_of_finished_run, once_per_test_run
 
 from nsdrake.cli import main
 from nsdrake.reporting.progress import Progress
@@ -40,13 +40,17 @@ def write_spec(folder, text=SPEC, name="spec.yaml"):
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """The three-run sweep, simulated once in this process (--jobs 1): the bytes the
-    other engines and a resumed sweep must reproduce."""
-    folder = tmp_path_factory.mktemp("sweep")
-    spec = write_spec(folder)
-    out = folder / "serial"
-    assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
-    return spec, out
+    """The three-run sweep, simulated once in the whole test run (conftest's
+    once_per_test_run), in process (--jobs 1): the bytes the other engines and a resumed
+    sweep must reproduce. Tests read it or copy it, never change it."""
+
+    def sweep(folder):
+        spec = write_spec(folder)
+        out = folder / "serial"
+        assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
+        return spec, out
+
+    return once_per_test_run(tmp_path_factory, "sweep_reference", sweep)
 
 
 # The reason of a 0.2 s fig3 run: it ends before the tool reaches the plate (at 1.27 s).
