@@ -155,15 +155,48 @@ def simulate_to(scenario, t_end: float):
 SHORT_RUN_DURATION = 2.0
 
 
+def once_per_test_run(tmp_path_factory, name: str, compute):
+    """``compute(folder)``'s value, computed once in the whole pytest run and read back
+    (pickled) by every other worker: the xdist workers of one run share the parent of their
+    base temporary folders, and a lock file there makes the first worker compute while the
+    others wait (pytest-xdist's documented way to run a session fixture once; xdist's
+    ``--dist loadgroup`` cannot keep tests together under pytest 9). Without xdist: computed
+    here. ``folder`` holds what the computation writes; the value must pickle."""
+    import fcntl
+    import os
+    import pickle
+    import shutil
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    folder = root / f"shared-{name}"
+    with open(root / f"shared-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        done = folder / "value.pickle"
+        if not done.exists():
+            shutil.rmtree(folder, ignore_errors=True)  # what a worker that failed here left
+            folder.mkdir()
+            value = compute(folder)
+            partial = folder / "value.pickle.partial"
+            partial.write_bytes(pickle.dumps(value))
+            partial.replace(done)
+        return pickle.loads(done.read_bytes())
+
+
 @pytest.fixture(scope="session")
 def short_run(tmp_path_factory):
-    """(out folder, RunResult, ControlledStation-free facts) of ``run_to_folder`` on fig3 for 2 s."""
+    """(out folder, RunResult) of ``run_to_folder`` on fig3 for 2 s: simulated once in the
+    whole test run (:func:`once_per_test_run`). Tests read the folder, never change it."""
     from nsdrake.experiment.scenario import load_scenario
     from nsdrake.reporting.run_folder import run_to_folder
 
-    out = tmp_path_factory.mktemp("fig3_short")
-    result = run_to_folder(load_scenario("fig3", duration=SHORT_RUN_DURATION), out)
-    return out, result
+    def compute(folder):
+        out = folder / "fig3_short"
+        out.mkdir()  # run_to_folder writes into a folder that is ready
+        return out, run_to_folder(load_scenario("fig3", duration=SHORT_RUN_DURATION), out)
+
+    return once_per_test_run(tmp_path_factory, "fig3_short", compute)
 
 
 def without_notices(err: str) -> str:
@@ -176,3 +209,50 @@ def without_notices(err: str) -> str:
 
     err = err.replace(NOTICE + "\n", "")
     return re.sub(r"(?m)^[^:\n]+: (\d+%|\d+/\d+ \w+)( \(\d+ failed\))?, [^\n]*\d+ s[^\n]*\n", "", err)
+
+
+@pytest.fixture(scope="session")
+def panda_wipe_direct(tmp_path_factory):
+    """(traces, built) of the shipped panda_wipe simulated directly for its whole 28 s: the
+    acceptance figures (experiment/test_panda_scenarios.py) and the drive's comparison with
+    the direct run (driver/test_drive_reproduces.py) read the same run, simulated once in the
+    whole test run (:func:`once_per_test_run`: the traces; ``built`` is the same scenario's
+    diagram built again in this worker, unsimulated, for its station). Read them, never
+    change them."""
+    from nsdrake.experiment.diagram import build_diagram
+    from nsdrake.experiment.scenario import load_scenario
+    from nsdrake.experiment.simulate import run
+
+    scenario = load_scenario("panda_wipe")
+    traces = once_per_test_run(tmp_path_factory, "panda_wipe", lambda folder: run(scenario)[0])
+    return traces, build_diagram(scenario)
+
+
+@pytest.fixture(scope="session")
+def finished_run(tmp_path_factory) -> Path:
+    """A finished ``nsdrake run fig3 --duration 0.1`` (with its replay), in process, once in
+    the whole test run (:func:`once_per_test_run`): the earlier run's folder that the
+    --overwrite tests start from. Tests take a copy (:func:`copy_of_finished_run`), never
+    this folder."""
+    import contextlib
+    import io
+
+    from nsdrake.cli import main
+
+    def compute(folder):
+        out = folder / "run"
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            assert main(["run", "fig3", "--duration", "0.1", "--out", str(out)]) in (0, 1)  # before contact
+        return out
+
+    return once_per_test_run(tmp_path_factory, "finished_run", compute)
+
+
+def copy_of_finished_run(finished: Path, destination: Path) -> Path:
+    """A copy of :func:`finished_run`'s folder at ``destination`` (which must not exist):
+    byte for byte the folder that run would have written there (its manifest names files
+    relative to the folder)."""
+    import shutil
+
+    shutil.copytree(finished, destination)
+    return destination

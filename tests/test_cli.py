@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import copy_of_finished_run
 
 from nsdrake.cli import main
 from nsdrake.experiment.output import OutputFolderError, default_output_folder, prepare_output_folder
@@ -85,11 +86,11 @@ def test_non_empty_output_folder_is_refused_even_with_overwrite(tmp_path, capsys
     assert (out / "notes.txt").read_text() == "keep me"
 
 
-def test_overwrite_replaces_exactly_an_earlier_runs_files(tmp_path):
+def test_overwrite_replaces_exactly_an_earlier_runs_files(tmp_path, finished_run):
     """Catches --overwrite leaving an earlier run's files beside the new ones (replay.html
-    of a run with replay, after a run without), and a manifest that misses files."""
-    out = tmp_path / "run"
-    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out)]) in (0, 1)
+    of a run with replay, after a run without), and a manifest that misses files. (The
+    earlier run, fig3 for 0.1 s with its replay, is conftest's finished_run, copied.)"""
+    out = copy_of_finished_run(finished_run, tmp_path / "run")
     assert (out / "replay.html").is_file()
     listed = (out / ".nsdrake-run").read_text().splitlines()
     assert sorted(p.name for p in out.iterdir() if p.name != ".nsdrake-run") == sorted(
@@ -105,11 +106,10 @@ def test_overwrite_replaces_exactly_an_earlier_runs_files(tmp_path):
 
 
 @pytest.mark.parametrize("where", ["notes.txt", "sub/notes.txt"])
-def test_overwrite_refuses_a_file_nsdrake_did_not_write(tmp_path, capsys, where):
+def test_overwrite_refuses_a_file_nsdrake_did_not_write(tmp_path, capsys, where, finished_run):
     """Catches --overwrite deleting (or writing beside) a file the user put into an
-    nsdrake run's folder."""
-    out = tmp_path / "run"
-    assert main(["run", "fig3", "--duration", "0.1", "--out", str(out), "--no-replay"]) in (0, 1)
+    nsdrake run's folder (conftest's finished_run, copied)."""
+    out = copy_of_finished_run(finished_run, tmp_path / "run")
     before = (out / "traces.csv").read_bytes()
     (out / where).parent.mkdir(exist_ok=True)
     (out / where).write_text("keep me")
@@ -195,8 +195,13 @@ def test_concurrent_claims_never_share_a_folder(tmp_path):
     assert sum(isinstance(r, Path) for r in results) == 1, results
 
 
+@pytest.mark.slow
 def test_two_runs_started_together_write_two_complete_folders(tmp_path):
-    """Catches two concurrent `nsdrake run fig3` (default folder) writing into one folder."""
+    """Catches two concurrent `nsdrake run fig3` (default folder) writing into one folder.
+    Slow (two processes, ~7 s on 2 cores): the fast subset keeps the race itself in
+    test_concurrent_claims_never_share_a_folder (eight claims at one barrier, in process)
+    and the default folder's choice through the command in
+    test_default_output_folder_never_overwrites."""
     command = [sys.executable, "-m", "nsdrake.cli", "run", "fig3", "--duration", "0.1", "--no-replay"]
     runs = [
         subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE) for _ in "ab"
@@ -238,9 +243,11 @@ def test_output_paths_that_cannot_be_folders_fail_with_one_line(
 
 
 def test_default_output_folder_never_overwrites(tmp_path, monkeypatch):
+    """Two runs into the default folder, one after the other: runs/fig3, then runs/fig3-2
+    (the replay plays no part in the folder's choice: --no-replay)."""
     monkeypatch.chdir(tmp_path)
-    main(["run", "fig3", "--duration", "0.1"])
-    main(["run", "fig3", "--duration", "0.1"])
+    main(["run", "fig3", "--duration", "0.1", "--no-replay"])
+    main(["run", "fig3", "--duration", "0.1", "--no-replay"])
     assert (tmp_path / "runs" / "fig3" / "traces.csv").exists()
     assert (tmp_path / "runs" / "fig3-2" / "traces.csv").exists()
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import PANDA_POSE_AXES, panda_arm, panda_configurations, terms_at
+from conftest import PANDA_POSE_AXES, once_per_test_run, panda_arm, panda_configurations, terms_at
 from pydrake.systems.framework import DiagramBuilder
 
 from nsdrake.control.criteria.joint_torque import joint_torque_criterion
@@ -46,8 +46,13 @@ def central_differences(f, q, h=1e-5):
 
 
 @pytest.fixture(scope="module")
-def configurations():
-    return panda_configurations(RANDOM, seed=41, near_singular=NEAR_SINGULAR)
+def configurations(tmp_path_factory):
+    """Computed once in the whole test run (its singular-pose searches are the costly part)."""
+    return once_per_test_run(
+        tmp_path_factory,
+        "panda_configurations",
+        lambda folder: panda_configurations(RANDOM, seed=41, near_singular=NEAR_SINGULAR),
+    )
 
 
 @pytest.fixture(scope="module", params=[PANDA_POSE_AXES, ("x", "y", "z")], ids=["pose6", "position3"])
@@ -151,16 +156,21 @@ def separated(scene, configurations, clearance=0.003):
 
 
 @pytest.fixture(scope="module")
-def clear_configurations(scene):
-    """100 random separated poses and 10 separated near-singular ones."""
-    rng_seed = 43
-    out = []
-    while len(out) < RANDOM:
-        out += separated(scene, panda_configurations(40, seed=rng_seed))
-        rng_seed += 1
-    near = separated(scene, panda_configurations(0, seed=44, near_singular=40))
-    assert len(near) >= 10
-    return out[:RANDOM] + near[:10]
+def clear_configurations(scene, tmp_path_factory):
+    """100 random separated poses and 10 separated near-singular ones (chosen once in the
+    whole test run: the same seeds give the same poses in every worker)."""
+
+    def choose(folder):
+        rng_seed = 43
+        out = []
+        while len(out) < RANDOM:
+            out += separated(scene, panda_configurations(40, seed=rng_seed))
+            rng_seed += 1
+        near = separated(scene, panda_configurations(0, seed=44, near_singular=40))
+        assert len(near) >= 10
+        return out[:RANDOM] + near[:10]
+
+    return once_per_test_run(tmp_path_factory, "panda_clear_configurations", choose)
 
 
 def test_every_link_against_a_box_and_a_cylinder(scene, clear_configurations):

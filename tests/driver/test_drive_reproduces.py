@@ -59,11 +59,12 @@ def test_a_short_drive_reproduces_the_direct_simulation():
 
 
 @pytest.mark.slow
-def test_panda_wipe_through_the_driver_meets_its_bounds_like_the_direct_run():
+def test_panda_wipe_through_the_driver_meets_its_bounds_like_the_direct_run(panda_wipe_direct):
     """The whole 28 s: force error RMS, pose error RMS and the elbow's distance to the post
-    within 10% of the direct simulation's, every bound met."""
+    within 10% of the direct simulation's, every bound met. (The direct run is conftest's
+    panda_wipe_direct: run(load_scenario("panda_wipe")), simulated once per worker.)"""
     scenario = load_scenario("panda_wipe")
-    direct, built = run(scenario)
+    direct, built = panda_wipe_direct
     driven = run_simulated(scenario, realtime_rate=0.0)
     assert driven.failure is None
     traces = drive_traces(driven)

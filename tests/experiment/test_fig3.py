@@ -8,7 +8,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import fig3_with
+from conftest import fig3_with, once_per_test_run
 from models import serial_arm_urdf
 
 from nsdrake.experiment.simulate import run
@@ -22,12 +22,16 @@ CI_DURATION = 2.6
 
 @pytest.fixture(scope="module")
 def fig3_run(tmp_path_factory):
+    """(out folder, RunResult) of fig3 for CI_DURATION, simulated once in the whole test run
+    (conftest's once_per_test_run: the two tests below may run in different workers)."""
     from nsdrake.experiment.scenario import load_scenario
 
-    out = tmp_path_factory.mktemp("fig3")
-    scenario = load_scenario("fig3", duration=CI_DURATION)
-    result = run_to_folder(scenario, out)
-    return out, result
+    def compute(folder):
+        out = folder / "fig3"
+        out.mkdir()  # run_to_folder writes into a folder that is ready
+        return out, run_to_folder(load_scenario("fig3", duration=CI_DURATION), out)
+
+    return once_per_test_run(tmp_path_factory, "fig3_ci", compute)
 
 
 @pytest.mark.slow

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import copy_of_finished_run, once_per_test_run
 
 from nsdrake.cli import main
 from nsdrake.reporting.progress import Progress
@@ -39,13 +40,17 @@ def write_spec(folder, text=SPEC, name="spec.yaml"):
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """The three-run sweep, simulated once in this process (--jobs 1): the bytes the
-    other engines and a resumed sweep must reproduce."""
-    folder = tmp_path_factory.mktemp("sweep")
-    spec = write_spec(folder)
-    out = folder / "serial"
-    assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
-    return spec, out
+    """The three-run sweep, simulated once in the whole test run (conftest's
+    once_per_test_run), in process (--jobs 1): the bytes the other engines and a resumed
+    sweep must reproduce. Tests read it or copy it, never change it."""
+
+    def sweep(folder):
+        spec = write_spec(folder)
+        out = folder / "serial"
+        assert main(["sweep", str(spec), "--out", str(out), "--jobs", "1"]) == 0
+        return spec, out
+
+    return once_per_test_run(tmp_path_factory, "sweep_reference", sweep)
 
 
 # The reason of a 0.2 s fig3 run: it ends before the tool reaches the plate (at 1.27 s).
@@ -333,13 +338,13 @@ def _tree(folder):
     }
 
 
-def test_overwrite_into_a_working_folder_removes_nothing(tmp_path, capsys, monkeypatch):
+def test_overwrite_into_a_working_folder_removes_nothing(tmp_path, capsys, monkeypatch, finished_run):
     """Issue 15, item 1 (data loss): `nsdrake sweep --overwrite` into a working folder
     holding a user's file and an earlier `nsdrake run`'s runs/ deleted runs/ whole and
     exited 0. Catches any removal there: the folder is refused with one line, every byte
     survives, and no sweep file is written."""
     monkeypatch.chdir(tmp_path)
-    assert main(["run", "fig3", "--duration", "0.1", "--no-replay"]) in (0, 1)
+    copy_of_finished_run(finished_run, tmp_path / "runs" / "fig3")  # nsdrake run fig3's default folder
     (tmp_path / "notes.txt").write_text("mine")
     spec = write_spec(tmp_path)
     before = _tree(tmp_path)
@@ -352,11 +357,10 @@ def test_overwrite_into_a_working_folder_removes_nothing(tmp_path, capsys, monke
     assert not (tmp_path / "sweep.json").exists()
 
 
-def test_overwrite_into_a_run_folder_with_a_users_file_removes_nothing(tmp_path, capsys):
+def test_overwrite_into_a_run_folder_with_a_users_file_removes_nothing(tmp_path, capsys, finished_run):
     """Catches a sweep that reclaims an `nsdrake run` folder while a file of the user's sits
     in it (the run's own files may go, but only when nothing else is there)."""
-    out = tmp_path / "run"
-    assert main(["run", "fig3", "--duration", "0.1", "--no-replay", "--out", str(out)]) in (0, 1)
+    out = copy_of_finished_run(finished_run, tmp_path / "run")
     (out / "mine.txt").write_text("mine")
     before = _tree(out)
     spec = write_spec(tmp_path)
