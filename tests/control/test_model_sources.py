@@ -20,7 +20,14 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from scipy.spatial import ConvexHull
 
-from nsdrake.control import ControllerConfig, ControllerConfigError, ControllerModel, ControllerStep, Obstacle
+from nsdrake.control import (
+    ControllerConfig,
+    ControllerConfigError,
+    ControllerModel,
+    ControllerStep,
+    Obstacle,
+    model_files,
+)
 from nsdrake.control.controller import torque_limits
 from nsdrake.control.dynamics import ArmModel
 from tests.vendor_arm import FIN_BOXES, Q0, fin_vertices, write_vendor_arm
@@ -358,3 +365,31 @@ def test_a_hull_cache_that_cannot_be_written_is_one_line(tmp_path, monkeypatch):
     message = str(e.value)
     assert "\n" not in message and "fin.stl" in message and "NSDRAKE_CACHE" in message, message
     assert blocked.read_text() == "a file of the user's\n"
+
+
+def test_a_locked_joint_without_a_stated_position_is_said_in_one_line(tmp_path, caplog, monkeypatch):
+    """j6 and j7 left out of joints= and j7 alone given in locked=: j6 is held at 0, the
+    default, said once in one line naming j6 only (not j7, whose position is stated); a
+    model whose locked joints all have a position says nothing. Locking at 0 without a word
+    (before issue 42's leftovers) fails this."""
+    monkeypatch.setattr(model_files, "_SAID", set())  # what this process said before
+    arm = write_vendor_arm(tmp_path)
+    chosen = [j for j in ARM if j not in ("j6", "j7")]
+    with caplog.at_level(logging.WARNING, logger="nsdrake"):
+        for _ in range(2):
+            model = ControllerModel.from_file(
+                arm.urdf, tool_frame="tool", task_axes=("x", "y", "z"), joints=chosen, locked={"j7": 0.3}
+            )
+        ControllerModel.from_file(
+            arm.urdf,
+            tool_frame="tool",
+            task_axes=("x", "y", "z"),
+            joints=chosen,
+            locked={"j6": 0.0, "j7": 0.3},
+        )
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("locked:")]
+    assert model.parsed.locked == {"j6": 0.0, "j7": 0.3}
+    assert lines == [
+        "locked: j6 held at 0 [rad or m], the default: no position stated for them in locked "
+        "(arm.locked in a scenario)"
+    ]
