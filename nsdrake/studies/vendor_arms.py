@@ -134,10 +134,11 @@ def packages() -> dict[str, str]:
 
 def load(arm: VendorArm, **options):
     """The controller's model of ``arm`` (:meth:`nsdrake.ControllerModel.from_file`, the file as
-    shipped) and its task axes."""
+    shipped; ``damping_time`` :data:`DAMPING_TIME` unless ``options`` say) and its task axes."""
     from nsdrake.control import ControllerModel
 
     path = robots_folder() / arm.file
+    options = {"damping_time": DAMPING_TIME, **options}
     common = dict(packages=packages(), joints=arm.joints, locked=dict(arm.locked), **options)
     model = ControllerModel.from_file(path, tool_frame=arm.tool, task_axes=POSITION, **common)
     if model.n >= 7:
