@@ -311,6 +311,19 @@ def _say_warnings(warnings: dict[str, list[str]], where: str, path: Path) -> Non
         say_once(line, path.resolve())
 
 
+MODEL_WARNINGS = "model_warnings.txt"  # a run folder's file of Drake's parser warnings, in full
+
+
+def warnings_text(warnings: dict[str, list[str]]) -> str:
+    """Every parser warning in full (:attr:`ParsedModel.warnings`), a file's after its name:
+    the text of a run's :data:`MODEL_WARNINGS`, of which the log says one line per file."""
+    sections = [
+        f"# {name}: {len(texts)} warning(s) of Drake's parser\n" + "".join(f"{t.rstrip()}\n" for t in texts)
+        for name, texts in warnings.items()
+    ]
+    return "\n".join(sections)
+
+
 _SAID: set = set()
 
 

@@ -30,6 +30,9 @@ from nsdrake.control import (
 )
 from nsdrake.control.controller import torque_limits
 from nsdrake.control.dynamics import ArmModel
+from nsdrake.control.model_files import MODEL_WARNINGS
+from nsdrake.experiment.scenario import load_scenario_file
+from nsdrake.reporting.run_folder import run_to_folder
 from tests.vendor_arm import FIN_BOXES, Q0, fin_vertices, write_vendor_arm
 
 POSE = ("x", "y", "z", "rx", "ry", "rz")
@@ -393,3 +396,47 @@ def test_a_locked_joint_without_a_stated_position_is_said_in_one_line(tmp_path, 
         "locked: j6 held at 0 [rad or m], the default: no position stated for them in locked "
         "(arm.locked in a scenario)"
     ]
+
+
+RUN = """
+duration: 0.01
+arm:
+  urdf: myarm/urdf/arm7.urdf
+  initial_positions: {%s}
+plate:
+  position: [1.5, 1.5, -1.0]
+task:
+  axes: [x, y, z, rx, ry, rz]
+reference:
+  approach_speed: 0.0
+report:
+  compare_without_null_space_task: false
+  checks: []
+"""
+
+
+def test_a_run_keeps_every_parser_warning_in_full_in_its_folder(tmp_path):
+    """The log says one line per file; the run folder's model_warnings.txt keeps all seven
+    warnings (one per joint with friction), each in Drake's full text, under the file's
+    name. A run of a file without warnings writes no such file. Keeping only the first
+    warning, or none, fails this."""
+    arm = write_vendor_arm(tmp_path)
+    text = arm.urdf.read_text()
+    for name in ARM:
+        text = text.replace(
+            f'<joint name="{name}" type="revolute">',
+            f'<joint name="{name}" type="revolute"><dynamics friction="0.5"/>',
+        )
+    joints = ", ".join(f"j{k + 1}: {q}" for k, q in enumerate(Q0))
+    (tmp_path / "scenario.yaml").write_text(RUN % joints)
+    (tmp_path / "clean").mkdir()
+    (tmp_path / "run").mkdir()
+    clean = run_to_folder(load_scenario_file(tmp_path / "scenario.yaml"), tmp_path / "clean", replay=False)
+    assert clean.failure is None and not (tmp_path / "clean" / MODEL_WARNINGS).exists()
+    arm.urdf.write_text(text)
+    result = run_to_folder(load_scenario_file(tmp_path / "scenario.yaml"), tmp_path / "run", replay=False)
+    assert result.failure is None
+    lines = (tmp_path / "run" / MODEL_WARNINGS).read_text().splitlines()
+    assert lines[0] == "# arm7.urdf: 7 warning(s) of Drake's parser"
+    assert len(lines) == 8 and all("warning:" in line and "'friction'" in line for line in lines[1:])
+    assert all(str(arm.urdf) in line for line in lines[1:])  # Drake's text: the file, its line
