@@ -609,7 +609,7 @@ class PinocchioDynamics:
         # and the inertia T_D D it adds over a held command as Pinocchio's armature, which its
         # mass matrix (computeAllTerms) carries on the diagonal as ArmModel's H does.
         self._damping = self._to_pin(arm.damping) if np.any(arm.damping) else None
-        self._model.armature = self._to_pin(arm.damping_inertia).copy()
+        self._model.armature = self._model.armature + self._to_pin(arm.damping_inertia)
 
     @property
     def order(self) -> np.ndarray:
