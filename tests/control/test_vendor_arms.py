@@ -19,11 +19,11 @@ pytestmark = pytest.mark.skipif(
     va.robots_folder() is None, reason=f"{va.PACKAGE} is not installed: {va.INSTALL}"
 )
 LOADED = [a for a in va.ARMS if not a.name.startswith("TALOS")]
-# Four files (xArm7, TIAGo, Z1, Z1 on B1) declare joint damping whose time constant is near
-# or below the 1 ms period (the xArm7's wrist: T D / H_jj ≈ 14, the Z1's ≈ 1.3). Drake's
-# discrete plant integrates the damping implicitly, which adds h D to each joint's inertia
-# over a step: the law's model carries it (damping_time = h, nsdrake.control.dynamics.ArmModel).
-# With D q̇ alone (damping_time 0) they missed the bound: xArm7 18 µm / 0.19°, TIAGo 21 µm /
+# Four files (xArm7, TIAGo, Z1, Z1 on B1) declare joint damping D. Drake's discrete plant
+# integrates it implicitly, which adds h D to each joint's inertia over a step h: the law's
+# model carries it (damping_time = h, nsdrake.control.dynamics.ArmModel). At the holds'
+# start h D / H_jj is 14 on the xArm7's wrist, 1.1 on the Z1's, 0.03 on the TIAGo's. With
+# D q̇ alone (damping_time 0) they missed the bound: xArm7 18 µm / 0.19°, TIAGo 21 µm /
 # 0.014°, Z1 and Z1 on B1 12 µm (docs/results/vendor_arms: the column "the damping as D q̇ only").
 
 
