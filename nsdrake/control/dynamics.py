@@ -322,8 +322,11 @@ class ArmModel:
         # and T_D D, the inertia it adds over a held command, is on H's diagonal (class docstring).
         self.damping = np.array([j.default_damping() for j in self.joints], dtype=float)
         self._damped = bool(np.any(self.damping))
-        if not (math.isfinite(damping_time) and damping_time >= 0.0):
-            raise ValueError(f"damping_time must be a finite time >= 0 [s], got {damping_time!r}")
+        from nsdrake.control.validation import damping_time_problem  # validation imports this module
+
+        problem = damping_time_problem(damping_time)
+        if problem:
+            raise ValueError(f"damping_time: {problem}")
         self.damping_time = float(damping_time)
         self.damping_inertia = self.damping_time * self.damping  # (n,) T_D D [kg m² or kg]
         self._damping_inertia = bool(np.any(self.damping_inertia))

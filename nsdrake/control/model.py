@@ -54,6 +54,7 @@ from nsdrake.control.urdf_checks import parse_urdf, urdf_problems
 from nsdrake.control.validation import (
     ControllerConfigError,
     arm_problem,
+    damping_time_problem,
     gravity_problem,
     length_problem,
     one_line,
@@ -421,17 +422,6 @@ def _urdf_text(urdf) -> tuple[str, str]:
     for link, problem in urdf_problems(root):
         raise ControllerConfigError(f"{where}: {link}", problem)
     return text, where
-
-
-def damping_time_problem(damping_time) -> str | None:
-    """Why ``damping_time`` (None, or T_D [s]: :class:`ControllerModel`) is no such time, or None."""
-    if damping_time is None:
-        return None
-    if isinstance(damping_time, bool) or not isinstance(damping_time, int | float):
-        return f"must be a time [s] or None, got {show(damping_time)}"
-    if not (math.isfinite(damping_time) and damping_time >= 0.0):
-        return f"must be a finite time >= 0 [s] (a plant's step, half a control period), got {damping_time!r}"
-    return None
 
 
 def damping_note(arm: ArmModel) -> str:
