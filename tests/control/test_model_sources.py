@@ -198,6 +198,16 @@ FINGERS = f"""
 </robot>"""
 
 
+def with_dynamics(text: str, attributes: dict[str, str]) -> str:
+    """The URDF ``text`` with ``<dynamics ATTRIBUTES/>`` on each named revolute joint."""
+    for name, attribute in attributes.items():
+        text = text.replace(
+            f'<joint name="{name}" type="revolute">',
+            f'<joint name="{name}" type="revolute"><dynamics {attribute}/>',
+        )
+    return text
+
+
 def test_a_mimic_joint_is_refused_in_one_line_unless_locked_with_its_leader(tmp_path):
     """Drake couples a <mimic> joint to its leader; the controller's joints are independent,
     so a model that keeps it is refused in one line naming both. With joints=[j1..j7] the
@@ -268,12 +278,7 @@ def test_joint_damping_is_compensated_as_part_of_the_bias_term(tmp_path, dynamic
     D = np.array([10.0, 10.0, 5.0, 5.0, 5.0, 2.0, 2.0])
     arm = write_vendor_arm(tmp_path)
     text = arm.urdf.read_text()
-    damped = text
-    for name, d in zip(ARM, D, strict=True):
-        damped = damped.replace(
-            f'<joint name="{name}" type="revolute">',
-            f'<joint name="{name}" type="revolute"><dynamics damping="{d}"/>',
-        )
+    damped = with_dynamics(text, {name: f'damping="{d}"' for name, d in zip(ARM, D, strict=True)})
     (arm.urdf.parent / "damped.urdf").write_text(damped)
     model = ControllerModel.from_file(
         arm.urdf.parent / "damped.urdf", tool_frame="tool", task_axes=POSE, dynamics=dynamics
@@ -335,11 +340,7 @@ def test_drakes_parser_warnings_are_one_line_per_file(tmp_path, caplog):
     the file (how many, the first), and keeps every warning's full text on the model."""
     arm = write_vendor_arm(tmp_path)
     text = arm.urdf.read_text()
-    for name in ARM:
-        text = text.replace(
-            f'<joint name="{name}" type="revolute">',
-            f'<joint name="{name}" type="revolute"><dynamics friction="0.5"/>',
-        )
+    text = with_dynamics(text, {name: 'friction="0.5"' for name in ARM})
     arm.urdf.write_text(text)
     with caplog.at_level(logging.WARNING):
         model = ControllerModel.from_file(arm.urdf, tool_frame="tool", task_axes=POSE)
@@ -422,11 +423,7 @@ def test_a_run_keeps_every_parser_warning_in_full_in_its_folder(tmp_path):
     warning, or none, fails this."""
     arm = write_vendor_arm(tmp_path)
     text = arm.urdf.read_text()
-    for name in ARM:
-        text = text.replace(
-            f'<joint name="{name}" type="revolute">',
-            f'<joint name="{name}" type="revolute"><dynamics friction="0.5"/>',
-        )
+    text = with_dynamics(text, {name: 'friction="0.5"' for name in ARM})
     joints = ", ".join(f"j{k + 1}: {q}" for k, q in enumerate(Q0))
     (tmp_path / "scenario.yaml").write_text(RUN % joints)
     (tmp_path / "clean").mkdir()
