@@ -16,7 +16,10 @@ TITLE = """# vendor_arms
 
 Every fixed-base arm description of example-robot-data, untouched, holding its tool for 1 s
 against Drake's own plant of the same file while the null space moves the joints (largest
-errors over the second; without the files' damping: in the plant and the model both).
+errors over the second). The controller's model compensates a file's joint damping D as D q̇
+and as the inertia h D it adds over the plant's implicit step h (damping_time = h); "the
+damping as D q̇ only": without that inertia (damping_time 0; – for a file without damping);
+"without the file's damping": removed from the plant and the model both.
 
 """
 

@@ -81,7 +81,7 @@ class RobotTerms:
 
     q: np.ndarray  # (n,) joint positions [rad]
     v: np.ndarray  # (n,) joint velocities q̇ [rad/s]
-    H: np.ndarray  # (n, n) joint-space inertia [kg m²]
+    H: np.ndarray  # (n, n) joint-space inertia, plus the joints' damping T_D D (ArmModel) [kg m²]
     H_inv: np.ndarray  # (n, n) its inverse
     Cv: np.ndarray  # (n,) Coriolis and centrifugal torques C q̇, plus the joints' damping D q̇ [N m]
     g: np.ndarray  # (n,) gravity torques of Eq. 5 [N m]
@@ -260,18 +260,38 @@ class ArmModel:
     """Reads :class:`RobotTerms` off a finalized ``MultibodyPlant``.
 
     The plant's generalized velocities must all belong to revolute or prismatic
-    joints of the arm (the plate and obstacles are welded), and nq == nv. A joint's
-    viscous damping D (the plant applies −D q̇) is part of the terms' C q̇, so that a law
-    that cancels C q̇ cancels it too.
+    joints of the arm (the plate and obstacles are welded), and nq == nv.
+
+    A joint's viscous damping D (URDF ``<dynamics damping>``; the plant applies −D q̇) enters
+    the terms twice, so that the law's model (Eq. 5) is the arm's motion over one command's
+    hold, not at an instant only:
+
+    - D q̇ of the tick's state in C q̇, so that a law that cancels C q̇ cancels it;
+    - T_D D on H's diagonal (T_D = ``damping_time`` [s]): over a command held for a period T
+      the damping also opposes the velocity the command itself builds up, −D (q̇ₙ₊₁ − q̇ₙ),
+      which the arm feels as an extra inertia. Drake's discrete plant integrates joint
+      damping implicitly, M (q̇ₙ₊₁ − q̇ₙ) = h (τ − b − D q̇ₙ₊₁) over its step h, i.e.
+      (M + h D) q̈ = τ − b − D q̇ₙ: exactly T_D = h when it steps once per control period.
+      With k steps h = T/k per period, or continuous damping (a real arm, k → ∞) under a
+      held command, the same first-order expansion in T D H⁻¹ gives T_D = (T + h)/2, and
+      T/2 for the real arm (exact only while T D ≪ H: the damping's own time constant
+      H_jj / D_j longer than the period). Without T_D D the law's H, Λ = (J H⁻¹ Jᵀ)⁻¹,
+      J̄ = H⁻¹ Jᵀ Λ (Eq. 13) and null-space projector are those of a lighter arm than the one
+      the command moves: the xArm7's wrist (D 2 N m s/rad, H_jj ≈ 1.4e-4 kg m²) has
+      T D / H_jj ≈ 14 at 1 kHz, and its 1 ms pose hold leaves 18 µm instead of 0.05 µm
+      (docs/results/vendor_arms).
 
     Args:
         plant: the finalized plant.
         tool_frame: the frame whose origin is the task point (the tool tip).
         task_axes: world axes of the task, e.g. ("x", "y"), ("x", "y", "z") or the
             full pose ("x", "y", "z", "rx", "ry", "rz"); m = len(task_axes).
+        damping_time: T_D above [s], finite and ≥ 0; 0 compensates D q̇ only.
     """
 
-    def __init__(self, plant: MultibodyPlant, tool_frame: Frame, task_axes: Sequence[str]):
+    def __init__(
+        self, plant: MultibodyPlant, tool_frame: Frame, task_axes: Sequence[str], damping_time: float = 0.0
+    ):
         if not plant.is_finalized():
             raise ValueError("ArmModel needs a finalized MultibodyPlant")
         if plant.num_positions() != plant.num_velocities():
@@ -298,9 +318,18 @@ class ArmModel:
         self.joint_names = tuple(j.name() for j in self.joints)
         self.revolute = np.array([j.type_name() == "revolute" for j in self.joints])
         # D, the joints' viscous damping as the model declares it (URDF <dynamics damping>):
-        # the plant applies −D q̇, so the terms' C q̇ carries + D q̇ and the law compensates it.
+        # the plant applies −D q̇, so the terms' C q̇ carries + D q̇ and the law compensates it;
+        # and T_D D, the inertia it adds over a held command, is on H's diagonal (class docstring).
         self.damping = np.array([j.default_damping() for j in self.joints], dtype=float)
         self._damped = bool(np.any(self.damping))
+        from nsdrake.control.validation import damping_time_problem  # validation imports this module
+
+        problem = damping_time_problem(damping_time)
+        if problem:
+            raise ValueError(f"damping_time: {problem}")
+        self.damping_time = float(damping_time)
+        self.damping_inertia = self.damping_time * self.damping  # (n,) T_D D [kg m² or kg]
+        self._damping_inertia = bool(np.any(self.damping_inertia))
         self.inboard = self._inboard_matrix()
         self._partials = JacobianPartials(self.revolute, self.inboard, self.rows, self.rot_rows)
         self._origin = np.zeros(3)
@@ -384,6 +413,8 @@ class ArmModel:
         Cv = plant.CalcBiasTerm(context)
         if self._damped:
             Cv = Cv + self.damping * v
+        if self._damping_inertia:
+            H = H + np.diag(self.damping_inertia)
         g = -plant.CalcGravityGeneralizedForces(context)
         J_spatial = plant.CalcJacobianSpatialVelocity(
             context, JacobianWrtVariable.kV, self.tool_frame, self._origin, self._world, self._world

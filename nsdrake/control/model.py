@@ -54,6 +54,7 @@ from nsdrake.control.urdf_checks import parse_urdf, urdf_problems
 from nsdrake.control.validation import (
     ControllerConfigError,
     arm_problem,
+    damping_time_problem,
     gravity_problem,
     length_problem,
     one_line,
@@ -90,6 +91,14 @@ class ControllerModel:
         n, m: joints, task axes.
         joint_names: in velocity order.
         dynamics: "drake" or "pinocchio", the library the model terms come from.
+
+    ``damping_time`` (every constructor): T_D [s], the time over which the model takes the
+    joints' declared damping D to act on a held command, added to its inertia as H + T_D D
+    (:class:`nsdrake.control.dynamics.ArmModel` says why). State it: the plant's step ``h``
+    for Drake's discrete plant stepping once per control period T (exact), (T + h)/2 with
+    several steps per period, T/2 for a real arm (continuous damping, the command held over
+    the period); None: 0 (D q̇ compensated at the tick's state only), said in one line when
+    the model has damping.
     """
 
     def __init__(
@@ -102,14 +111,18 @@ class ControllerModel:
         diagram=None,
         fast_terms: bool = False,
         dynamics: str = "auto",
+        damping_time: float | None = None,
     ):
         _check_arguments(plant, tool_frame, task_axes, dynamics)
+        problem = damping_time_problem(damping_time)
+        if problem:
+            raise ControllerConfigError("damping_time", problem)
         self.plant = plant
         self.scene_graph = scene_graph
         self.diagram = diagram
         self.tool_frame_name = tool_frame
         try:
-            self.arm = ArmModel(plant, plant.GetFrameByName(tool_frame), task_axes)
+            self.arm = ArmModel(plant, plant.GetFrameByName(tool_frame), task_axes, damping_time or 0.0)
         except ValueError as e:  # joints nsdrake cannot model (floating, ball, …)
             raise ControllerConfigError("controller_model", one_line(e)) from None
         problem = arm_problem(self.arm.n, self.arm.m, task_axes)
@@ -128,6 +141,8 @@ class ControllerModel:
             self.obstacle_geometries = proximity_geometries(inspector, plant, [world])
         self._pinocchio = _pinocchio_dynamics(fast_terms, self.arm, dynamics)
         self.dynamics = "pinocchio" if self._pinocchio else "drake"
+        if damping_time is None and np.any(self.arm.damping):
+            say_once(damping_note(self.arm))
         # What the model file's parse found (nsdrake.control.model_files.ParsedModel), or None.
         self.parsed = None
 
@@ -146,6 +161,7 @@ class ControllerModel:
         joints: Sequence[str] | None = None,
         locked: Mapping[str, float] | None = None,
         base_pose: RigidTransform | None = None,
+        damping_time: float | None = None,
     ) -> ControllerModel:
         """The arm of a model file as its vendor ships it: a URDF, an SDF or Drake model
         directives (``.dmd.yaml``), parsed by Drake from the file, so relative mesh URIs
@@ -165,7 +181,8 @@ class ControllerModel:
         ``locked`` ({name: position}, 0 if not given) and its links' mass joins its parent
         (gripper fingers, a mobile base). A ``<mimic>`` joint must be locked. A joint's
         ``<limit effort>`` gives its torque limit when the file has no ``<transmission>``;
-        its ``<dynamics damping>`` is compensated (:class:`nsdrake.control.dynamics.ArmModel`)."""
+        its ``<dynamics damping>`` D is compensated, as D q̇ and as the inertia ``damping_time``
+        · D it adds over a held command (the class docstring)."""
         problem = model_file_problem(path)
         if problem:
             raise ControllerConfigError("model_file", problem)
@@ -185,6 +202,7 @@ class ControllerModel:
             obstacles=obstacles,
             payload=payload,
             dynamics=dynamics,
+            damping_time=damping_time,
         )
 
     @classmethod
@@ -198,6 +216,7 @@ class ControllerModel:
         obstacles: Sequence[Obstacle] = (),
         payload: Payload | None = None,
         dynamics: str = "auto",
+        damping_time: float | None = None,
     ) -> ControllerModel:
         """The arm of a URDF, welded to the world by the file itself, with ``obstacles``
         fixed in the world and ``gravity`` [m/s²]. ``urdf``: a ``Path``, or a ``str`` that
@@ -216,6 +235,7 @@ class ControllerModel:
                 obstacles=obstacles,
                 payload=payload,
                 dynamics=dynamics,
+                damping_time=damping_time,
             )
 
         def add(plant):
@@ -233,10 +253,13 @@ class ControllerModel:
             obstacles=obstacles,
             payload=payload,
             dynamics=dynamics,
+            damping_time=damping_time,
         )
 
     @classmethod
-    def _parsed(cls, add_models, where, *, tool_frame, task_axes, gravity, obstacles, payload, dynamics):
+    def _parsed(
+        cls, add_models, where, *, tool_frame, task_axes, gravity, obstacles, payload, dynamics, damping_time
+    ):
         """The model of what ``add_models(plant)`` parses, with obstacles, payload and gravity."""
         problem = gravity_problem(gravity)
         if problem:
@@ -276,6 +299,7 @@ class ControllerModel:
             diagram=diagram,
             fast_terms=True,
             dynamics=dynamics,
+            damping_time=damping_time,
         )
         model.parsed = parsed
         limits = [plant.get_joint_actuator(a).effort_limit() for a in plant.GetJointActuatorIndices()]
@@ -289,10 +313,21 @@ class ControllerModel:
 
     @classmethod
     def from_plant(
-        cls, plant: MultibodyPlant, *, tool_frame: str, task_axes: Sequence[str]
+        cls,
+        plant: MultibodyPlant,
+        *,
+        tool_frame: str,
+        task_axes: Sequence[str],
+        damping_time: float | None = None,
     ) -> ControllerModel:
         """A finalized plant of the arm alone (not the simulated one): Drake terms, no obstacles."""
-        return cls(plant=plant, tool_frame=tool_frame, task_axes=task_axes, dynamics="drake")
+        return cls(
+            plant=plant,
+            tool_frame=tool_frame,
+            task_axes=task_axes,
+            dynamics="drake",
+            damping_time=damping_time,
+        )
 
     @property
     def has_geometry(self) -> bool:
@@ -387,6 +422,17 @@ def _urdf_text(urdf) -> tuple[str, str]:
     for link, problem in urdf_problems(root):
         raise ControllerConfigError(f"{where}: {link}", problem)
     return text, where
+
+
+def damping_note(arm: ArmModel) -> str:
+    """The line that says an unstated ``damping_time`` is taken as 0 on a damped model."""
+    damped = [f"{name} {d:g}" for name, d in zip(arm.joint_names, arm.damping, strict=True) if d]
+    return (
+        f"controller model: the joints' damping D [N m s/rad] ({', '.join(damped)}) is compensated as "
+        "D q̇ only: damping_time not stated, its inertia damping_time · D over a held command taken as 0 "
+        "(state it: the plant's step h for Drake's discrete plant stepping once per period T, (T + h)/2 "
+        "with several steps, T/2 on a real arm)"
+    )
 
 
 def check_obstacles(obstacles: Sequence[Obstacle]) -> None:
@@ -549,8 +595,11 @@ class PinocchioDynamics:
         self._rotation = arm.m_r > 0
         self._drake_rows = np.array([3, 4, 5, 0, 1, 2])
         self._partials = arm._partials
-        # The joints' damping D in Pinocchio's order, added to nle (ArmModel's C q̇ has it too).
+        # The joints' damping D in Pinocchio's order, added to nle (ArmModel's C q̇ has it too),
+        # and the inertia T_D D it adds over a held command as Pinocchio's armature, which its
+        # mass matrix (computeAllTerms) carries on the diagonal as ArmModel's H does.
         self._damping = self._to_pin(arm.damping) if np.any(arm.damping) else None
+        self._model.armature = self._model.armature + self._to_pin(arm.damping_inertia)
 
     @property
     def order(self) -> np.ndarray:

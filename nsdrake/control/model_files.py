@@ -311,6 +311,19 @@ def _say_warnings(warnings: dict[str, list[str]], where: str, path: Path) -> Non
         say_once(line, path.resolve())
 
 
+MODEL_WARNINGS = "model_warnings.txt"  # a run folder's file of Drake's parser warnings, in full
+
+
+def warnings_text(warnings: dict[str, list[str]]) -> str:
+    """Every parser warning in full (:attr:`ParsedModel.warnings`), a file's after its name:
+    the text of a run's :data:`MODEL_WARNINGS`, of which the log says one line per file."""
+    sections = [
+        f"# {name}: {len(texts)} warning(s) of Drake's parser\n" + "".join(f"{t.rstrip()}\n" for t in texts)
+        for name, texts in warnings.items()
+    ]
+    return "\n".join(sections)
+
+
 _SAID: set = set()
 
 
@@ -382,11 +395,11 @@ def add_effort_actuators(plant: MultibodyPlant, instances, efforts: Mapping[str,
 def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where: str = "joints") -> dict:
     """Keeps ``joints`` (names; None: every joint) as the arm's joints and welds every other
     revolute or prismatic joint at its position in ``locked`` ({name: position} [rad or m];
-    0 if not given, a mimic joint at its leader's image), so that its child's mass joins its
-    parent's; in the not yet finalized ``plant``. A ``<mimic>`` joint (``mimics``: the
-    follower's name → :class:`nsdrake.control.model_sources.Mimic`) among the arm's joints, or
-    following one of them, is refused: the controller's joints are independent. Returns the
-    locked positions. Every problem is a one-line ControllerConfigError."""
+    0 if not given, said in one line naming them; a mimic joint at its leader's image), so that
+    its child's mass joins its parent's; in the not yet finalized ``plant``. A ``<mimic>``
+    joint (``mimics``: the follower's name → :class:`nsdrake.control.model_sources.Mimic`)
+    among the arm's joints, or following one of them, is refused: the controller's joints are
+    independent. Returns the locked positions. Every problem is a one-line ControllerConfigError."""
     movable = [plant.get_joint(j) for j in plant.GetJointIndices() if plant.get_joint(j).num_velocities()]
     names = [j.name() for j in movable]
     locked = {} if locked is None else locked
@@ -398,7 +411,7 @@ def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where:
                 f"mimics '{mimic.leader}' (<mimic>): the arm's joints must be independent; leave both out "
                 "of joints=[...] (they are locked)",
             )
-    positions = {}
+    positions, unstated = {}, []
     locked_indices = {j.index() for j in movable if j.name() not in chosen}
     present = [m for m in mimics.values() if m.joint in names]
     if locked_indices and present and plant.num_constraints() == len(present):
@@ -412,6 +425,8 @@ def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where:
         if q is None and mimic is not None:
             leader = locked.get(mimic.leader, 0.0)
             q = mimic.multiplier * leader + mimic.offset
+        if q is None:
+            unstated.append(joint.name())
         q = 0.0 if q is None else float(q)
         lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
         if not lower - 1e-12 <= q <= upper + 1e-12:
@@ -421,6 +436,11 @@ def choose_joints(plant: MultibodyPlant, joints, locked, mimics: Mapping, where:
             )
         positions[joint.name()] = q
         _weld(plant, joint, q, where)  # the joint object is gone after this
+    if unstated:
+        say_once(
+            f"locked: {', '.join(unstated)} held at 0 [rad or m], the default: no position stated "
+            "for them in locked (arm.locked in a scenario)"
+        )
     return positions
 
 

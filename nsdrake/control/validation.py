@@ -120,6 +120,18 @@ def show(value) -> str:
     return text if len(text) <= SHOW_LENGTH else text[: SHOW_LENGTH - 1] + "…"
 
 
+def damping_time_problem(damping_time) -> str | None:
+    """Why ``damping_time`` (None, or T_D [s]: :class:`nsdrake.control.model.ControllerModel`)
+    is no such time, or None."""
+    if damping_time is None:
+        return None
+    if not is_number(damping_time):
+        return f"must be a time [s] or None, got {show(damping_time)}"
+    if not (math.isfinite(damping_time) and damping_time >= 0.0):
+        return f"must be a finite time >= 0 [s] (a plant's step, half a control period), got {damping_time!r}"
+    return None
+
+
 def is_number(value) -> bool:
     """A real number (numpy's too), not a bool nor a string."""
     if type(value) in _PLAIN_NUMBERS:  # the usual case, without the ABC's isinstance (per tick)

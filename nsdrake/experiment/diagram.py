@@ -101,11 +101,24 @@ def controller_config(scenario: Scenario, *, null_space_task: bool = True) -> Co
     return config if null_space_task else without_null_space_task(config)
 
 
-def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
+def simulated_damping_time(scenario: Scenario, station: Station) -> float:
+    """T_D [s], the time over which the controller's model takes the file's joint damping D to
+    act on a held command (the inertia T_D D: :class:`nsdrake.control.dynamics.ArmModel`), for
+    the station's simulated plant: it steps h = T / substeps per control period T and
+    integrates the damping implicitly, so T_D = (T + h)/2: exactly h = T at one step per
+    period, to first order in T D H⁻¹ with more."""
+    return (scenario.control_period + station.plant.time_step()) / 2
+
+
+def controller_model(
+    scenario: Scenario, station: Station, damping_time: float | None = None
+) -> ControllerModel:
     """The controller's own model: the arm's model file (its packages as the station's), the
     gravity of the scenario, the payload when it is declared, and the plate and obstacles
     where the station put them. With ``realism.model_error``, the URDF's link and tool
-    masses (and inertias) scaled by (1 + mass_error)."""
+    masses (and inertias) scaled by (1 + mass_error). ``damping_time``: T_D of the model's
+    joint damping (:class:`nsdrake.control.model.ControllerModel`); None: the simulated
+    plant's (:func:`simulated_damping_time`); a real arm's is about half the period."""
     payload = station.payload if station.payload_declared else None
     common = dict(
         tool_frame=scenario.arm.tool_frame,
@@ -113,6 +126,7 @@ def controller_model(scenario: Scenario, station: Station) -> ControllerModel:
         gravity=station.gravity,
         obstacles=station_obstacles(station),
         payload=payload,
+        damping_time=simulated_damping_time(scenario, station) if damping_time is None else damping_time,
     )
     if scenario.realism.model_error.enabled:
         text = scale_urdf_masses(

@@ -15,6 +15,7 @@ import yaml
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import DiagramBuilder
 
+from nsdrake.control.model_files import MODEL_WARNINGS, warnings_text
 from nsdrake.experiment.checks import check_with_model
 from nsdrake.experiment.diagram import build_diagram, speed_limit_vector
 from nsdrake.experiment.output import (  # noqa: F401 (re-exported: diagrams/fig3.py, the CLI)
@@ -96,6 +97,8 @@ def run_to_folder(
     - pose.png: force, path on the surface, position and orientation errors, obstacle
       distances, joint-limit margins, the elbow's swivel (with the pose or self_motion check);
     - scenario.yaml: the scenario as run;
+    - model_warnings.txt: every warning Drake's parser gave on the arm's model files, in
+      full (the log says one line per file), if there were any;
     - diagram.dot and diagram.svg (if Graphviz's dot is found): the Drake diagram;
     - replay.html: the main run in Meshcat, self-contained (unless not ``replay``);
     - report.html: all of the above on one page.
@@ -129,6 +132,7 @@ RUN_FILES = (
     "priority.png",
     "pose.png",
     "report.html",
+    MODEL_WARNINGS,
 )
 
 
@@ -141,6 +145,8 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
     # after the simulation: until its first step (where the kernels compile), the folder
     # stays empty, so that a Ctrl-C there undoes the claim (nsdrake/ctrl_c.py)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
+    if sim.built.station.model_warnings:  # the log said one line per file: here is every line
+        (out / MODEL_WARNINGS).write_text(warnings_text(sim.built.station.model_warnings))
     replay_path = write_replay(meshcat, out / "replay.html") if replay else None
     picture = write_diagram_picture(sim.built.diagram, out)
     traces = Traces.read_csv(out / "traces.csv")

@@ -97,6 +97,9 @@ class Station:
     # The payload welded to the tool, and whether the controller is told about it.
     payload: Payload | None = None
     payload_declared: bool = True
+    # Drake's parser warnings on the arm's model files, {file name: [full text]}: the run's
+    # model_warnings.txt (said one line per file as they are parsed).
+    model_warnings: dict = field(default_factory=dict)
     # Bodies of the extra obstacles (welded to the world).
     obstacle_bodies: list = field(default_factory=list)
     # Proximity geometries of the arm's links (the tool's excepted) and of the obstacles (plate included).
@@ -213,6 +216,7 @@ class _World(NamedTuple):
     gravity: np.ndarray
     packages: dict
     payload: Payload | None
+    model_warnings: dict  # Drake's parser warnings on the arm's files: {file name: [full text]}
 
 
 def _add_world(
@@ -232,7 +236,9 @@ def _add_world(
     packages = package_folders(arm, base_dir, source)
     arm_file = _model_file(source, "arm.urdf", arm.urdf, base_dir, packages)
     plate_file = _model_file(source, "plate.urdf", plate.urdf, base_dir)
-    arm_instance, plate_instance = _parse(plant, arm_file, plate_file, belt, packages, arm, source)
+    arm_instance, plate_instance, model_warnings = _parse(
+        plant, arm_file, plate_file, belt, packages, arm, source
+    )
     payload = station_payload(arm, source)
     if payload is not None:
         add_payload(plant, plant.GetFrameByName(arm.tool_frame, arm_instance), payload)
@@ -259,6 +265,7 @@ def _add_world(
         gravity,
         packages,
         payload,
+        model_warnings,
     )
 
 
@@ -317,6 +324,7 @@ def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> 
         packages=world.packages,
         payload=world.payload,
         payload_declared=arm.payload.declared,
+        model_warnings=world.model_warnings,
         obstacle_bodies=world.obstacle_bodies,
         X_WP=world.X_WP,
         elastic=elastic,
@@ -326,7 +334,8 @@ def _station_on(world: _World, arm: ArmConfig, task_axes, belt, source: str) -> 
 
 
 def _parse(plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, packages, arm: ArmConfig, src: str):
-    """(the arm's model instance, the plate's): the arm's is the one that holds the tool frame
+    """(the arm's model instance, the plate's, Drake's parser warnings on the arm's files by
+    file name): the arm's is the one that holds the tool frame
     (a model directives file may add several). The arm's files are read as the controller's
     model reads them (:func:`nsdrake.control.model_files.parse_model_file`: every included
     file checked, meshes Drake takes no hull of given as hulls, a floating root welded, an
@@ -348,7 +357,7 @@ def _parse(plant: MultibodyPlant, arm_file: Path, plate_file: Path, belt, packag
     holding = [i for i in parsed.instances if plant.HasFrameNamed(arm.tool_frame, i)]
     if len(holding) != 1:
         raise StationError(f"{src}: arm.tool_frame: no frame '{arm.tool_frame}' in {arm_file.name}")
-    return holding[0], plate
+    return holding[0], plate, parsed.warnings
 
 
 def _the_one_body(plant: MultibodyPlant, plate: ModelInstanceIndex, src: str):

@@ -11,13 +11,16 @@ by the law). That plant is a discrete ``MultibodyPlant`` parsed from the file by
 (no nsdrake code), its floating root welded with ``WeldFrames``, every joint not controlled
 held by Drake's joint locking (``Joint.Lock``), the commands applied as generalized forces.
 
-The figures: the largest tool position and orientation errors over the run, as shipped and
-with the joints' damping removed (plant and controller both), the largest command relative
-to the file's effort limit, and how far the joints moved. The law compensates the damping
-as D q̇ of the tick's state (:class:`nsdrake.control.dynamics.ArmModel`); Drake's discrete
-plant integrates it implicitly, −D q̇ at the step's end, which adds T D to each joint's
-inertia over a step: on the xArm7's wrist (T D / H_jj ≈ 14: the file declares damping whose
-time constant is 0.07 ms, and no rotor inertia) that is the whole remaining error.
+The figures: the largest tool position and orientation errors over the run, as shipped; as
+shipped with the law's model compensating the damping as D q̇ only (``damping_time`` 0); with
+the joints' damping removed (plant and controller both); the largest command relative to the
+file's effort limit, and how far the joints moved. The law compensates the file's damping D
+as D q̇ of the tick's state and as the inertia T_D D it adds over a held command
+(:class:`nsdrake.control.dynamics.ArmModel`): Drake's discrete plant integrates it
+implicitly, −D q̇ at the step's end, so with the plant stepping once per control period
+T_D = :data:`PLANT_STEP` exactly (:data:`DAMPING_TIME`). Without that term the xArm7's wrist
+(T D / H_jj ≈ 14: the file declares damping whose time constant is 0.07 ms, and no rotor
+inertia) is a much heavier joint than the law's model of it.
 
 ``python bench/bench_vendor_arms.py`` writes the table (``docs/results/vendor_arms/table.md``).
 """
@@ -41,6 +44,9 @@ INSTALL = "pip install 'nsdrake[arms]' (or: pip install example-robot-data)"
 DURATION = 1.0  # [s]
 PERIOD = 0.001  # the control period [s]
 PLANT_STEP = PERIOD  # the simulated plant's step [s]
+# T_D, the damping's inertia time of the controller's model: Drake's discrete plant stepping
+# once per control period integrates −D q̇ₙ₊₁, an added inertia h D exactly [s].
+DAMPING_TIME = PLANT_STEP
 POSE = ("x", "y", "z", "rx", "ry", "rz")
 POSITION = ("x", "y", "z")
 NULL_SPACE_SPEED = 0.1  # |q̇_dⁿ| per joint, signs alternating along the chain [rad/s]
@@ -128,10 +134,11 @@ def packages() -> dict[str, str]:
 
 def load(arm: VendorArm, **options):
     """The controller's model of ``arm`` (:meth:`nsdrake.ControllerModel.from_file`, the file as
-    shipped) and its task axes."""
+    shipped; ``damping_time`` :data:`DAMPING_TIME` unless ``options`` say) and its task axes."""
     from nsdrake.control import ControllerModel
 
     path = robots_folder() / arm.file
+    options = {"damping_time": DAMPING_TIME, **options}
     common = dict(packages=packages(), joints=arm.joints, locked=dict(arm.locked), **options)
     model = ControllerModel.from_file(path, tool_frame=arm.tool, task_axes=POSITION, **common)
     if model.n >= 7:
@@ -180,6 +187,7 @@ class Hold:
     effort: float  # the largest |τ_j| / effort limit_j over the run and the joints
     joint_motion: float  # the largest |q_j(t) − q_j(0)| over the run [rad or m]
     limited: bool  # every joint has a finite effort limit
+    damped: bool  # the file declares damping on some joint of the arm
 
 
 def simulated_plant(arm: VendorArm, model, damping: bool = True):
@@ -230,14 +238,21 @@ def simulated_plant(arm: VendorArm, model, damping: bool = True):
     )
 
 
-def hold(arm: VendorArm, duration: float = DURATION, damping: bool = True, compensate: bool = True) -> Hold:
+def hold(
+    arm: VendorArm,
+    duration: float = DURATION,
+    damping: bool = True,
+    compensate: bool = True,
+    damping_time: float = DAMPING_TIME,
+) -> Hold:
     """Holds the tool of ``arm`` where it starts for ``duration`` (module docstring).
     ``damping``: the simulated joints keep the file's damping; ``compensate``: the controller's
-    model keeps it too (else it is zeroed there, as if the law ignored it)."""
+    model keeps it too (else it is zeroed there, as if the law ignored it), with the inertia
+    ``damping_time`` · D it adds over a held command (0: D q̇ only)."""
     from nsdrake.control import ControllerStep
     from nsdrake.control.controller import torque_limits
 
-    model, axes = load(arm)
+    model, axes = load(arm, damping_time=damping_time if compensate else 0.0)
     if not compensate:
         model.arm.damping[:] = 0.0
         model.arm._damped = False
@@ -289,37 +304,48 @@ def hold(arm: VendorArm, duration: float = DURATION, damping: bool = True, compe
         effort=worst_effort,
         joint_motion=motion,
         limited=bool(np.all(np.isfinite(limits))),
+        damped=bool(np.any(D[v_index])),
     )
 
 
 HEADER = (
     "| arm | file | joints | task | position error [µm] | orientation error [°] "
+    "| the damping as D q̇ only: position [µm] | D q̇ only: orientation [°] "
     "| without the file's damping: position [µm] | orientation [°] | largest command / effort limit "
     "| joint motion [rad] |"
 )
+COLUMNS = HEADER.count("|") - 1
 
 
 def row(arm: VendorArm) -> str:
-    """The table's row of ``arm``: its hold as shipped, then with its joints' damping removed
-    from the file (the plant and the controller's model both), or the one line that refuses it."""
+    """The table's row of ``arm``: its hold as shipped, as shipped with the law's model taking
+    the damping as D q̇ only (``damping_time`` 0; "–" for a file without damping, where the two
+    models are one), then with its joints' damping removed from the file (the plant and the
+    controller's model both), or the one line that refuses it."""
     from nsdrake.control import ControllerConfigError
 
     try:
         shipped, undamped = hold(arm), hold(arm, damping=False, compensate=False)
+        rate_only = hold(arm, damping_time=0.0) if shipped.damped else None
     except ControllerConfigError as e:
         text = str(e).replace(str(robots_folder()) + "/", "")
-        return f"| {arm.name} | `{arm.file}` | refused: {text.replace('|', '/')} | | | | | | | |"
+        return f"| {arm.name} | `{arm.file}` | refused: {text.replace('|', '/')} |" + " |" * (COLUMNS - 3)
 
-    def degrees(h: Hold) -> str:
-        return f"{math.degrees(h.angle_error):.2g}" if h.task == "pose" else "–"
+    def degrees(h: Hold | None) -> str:
+        return f"{math.degrees(h.angle_error):.2g}" if h is not None and h.task == "pose" else "–"
 
+    def microns(h: Hold | None) -> str:
+        return f"{h.position_error * 1e6:.2g}" if h is not None else "–"
+
+    efforts = [h.effort for h in (shipped, undamped, rate_only) if h is not None]
     return (
-        f"| {arm.name} | `{arm.file}` | {shipped.n} | {shipped.task} | {shipped.position_error * 1e6:.2g} "
-        f"| {degrees(shipped)} | {undamped.position_error * 1e6:.2g} | {degrees(undamped)} "
-        f"| {max(shipped.effort, undamped.effort):.2f} | {shipped.joint_motion:.2g} |"
+        f"| {arm.name} | `{arm.file}` | {shipped.n} | {shipped.task} "
+        f"| {microns(shipped)} | {degrees(shipped)} "
+        f"| {microns(rate_only)} | {degrees(rate_only)} | {microns(undamped)} | {degrees(undamped)} "
+        f"| {max(efforts):.2f} | {shipped.joint_motion:.2g} |"
     )
 
 
 def table() -> str:
     """The markdown table of every arm's hold (module docstring)."""
-    return "\n".join([HEADER, "|" + "---|" * 10, *(row(arm) for arm in ARMS)]) + "\n"
+    return "\n".join([HEADER, "|" + "---|" * COLUMNS, *(row(arm) for arm in ARMS)]) + "\n"

@@ -20,9 +20,19 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from scipy.spatial import ConvexHull
 
-from nsdrake.control import ControllerConfig, ControllerConfigError, ControllerModel, ControllerStep, Obstacle
+from nsdrake.control import (
+    ControllerConfig,
+    ControllerConfigError,
+    ControllerModel,
+    ControllerStep,
+    Obstacle,
+    model_files,
+)
 from nsdrake.control.controller import torque_limits
 from nsdrake.control.dynamics import ArmModel
+from nsdrake.control.model_files import MODEL_WARNINGS
+from nsdrake.experiment.scenario import load_scenario_file
+from nsdrake.reporting.run_folder import run_to_folder
 from tests.vendor_arm import FIN_BOXES, Q0, fin_vertices, write_vendor_arm
 
 POSE = ("x", "y", "z", "rx", "ry", "rz")
@@ -188,6 +198,16 @@ FINGERS = f"""
 </robot>"""
 
 
+def with_dynamics(text: str, attributes: dict[str, str]) -> str:
+    """The URDF ``text`` with ``<dynamics ATTRIBUTES/>`` on each named revolute joint."""
+    for name, attribute in attributes.items():
+        text = text.replace(
+            f'<joint name="{name}" type="revolute">',
+            f'<joint name="{name}" type="revolute"><dynamics {attribute}/>',
+        )
+    return text
+
+
 def test_a_mimic_joint_is_refused_in_one_line_unless_locked_with_its_leader(tmp_path):
     """Drake couples a <mimic> joint to its leader; the controller's joints are independent,
     so a model that keeps it is refused in one line naming both. With joints=[j1..j7] the
@@ -258,12 +278,7 @@ def test_joint_damping_is_compensated_as_part_of_the_bias_term(tmp_path, dynamic
     D = np.array([10.0, 10.0, 5.0, 5.0, 5.0, 2.0, 2.0])
     arm = write_vendor_arm(tmp_path)
     text = arm.urdf.read_text()
-    damped = text
-    for name, d in zip(ARM, D, strict=True):
-        damped = damped.replace(
-            f'<joint name="{name}" type="revolute">',
-            f'<joint name="{name}" type="revolute"><dynamics damping="{d}"/>',
-        )
+    damped = with_dynamics(text, {name: f'damping="{d}"' for name, d in zip(ARM, D, strict=True)})
     (arm.urdf.parent / "damped.urdf").write_text(damped)
     model = ControllerModel.from_file(
         arm.urdf.parent / "damped.urdf", tool_frame="tool", task_axes=POSE, dynamics=dynamics
@@ -325,11 +340,7 @@ def test_drakes_parser_warnings_are_one_line_per_file(tmp_path, caplog):
     the file (how many, the first), and keeps every warning's full text on the model."""
     arm = write_vendor_arm(tmp_path)
     text = arm.urdf.read_text()
-    for name in ARM:
-        text = text.replace(
-            f'<joint name="{name}" type="revolute">',
-            f'<joint name="{name}" type="revolute"><dynamics friction="0.5"/>',
-        )
+    text = with_dynamics(text, {name: 'friction="0.5"' for name in ARM})
     arm.urdf.write_text(text)
     with caplog.at_level(logging.WARNING):
         model = ControllerModel.from_file(arm.urdf, tool_frame="tool", task_axes=POSE)
@@ -358,3 +369,71 @@ def test_a_hull_cache_that_cannot_be_written_is_one_line(tmp_path, monkeypatch):
     message = str(e.value)
     assert "\n" not in message and "fin.stl" in message and "NSDRAKE_CACHE" in message, message
     assert blocked.read_text() == "a file of the user's\n"
+
+
+def test_a_locked_joint_without_a_stated_position_is_said_in_one_line(tmp_path, caplog, monkeypatch):
+    """j6 and j7 left out of joints= and j7 alone given in locked=: j6 is held at 0, the
+    default, said once in one line naming j6 only (not j7, whose position is stated); a
+    model whose locked joints all have a position says nothing. Locking at 0 without a word
+    (before issue 42's leftovers) fails this."""
+    monkeypatch.setattr(model_files, "_SAID", set())  # what this process said before
+    arm = write_vendor_arm(tmp_path)
+    chosen = [j for j in ARM if j not in ("j6", "j7")]
+    with caplog.at_level(logging.WARNING, logger="nsdrake"):
+        for _ in range(2):
+            model = ControllerModel.from_file(
+                arm.urdf, tool_frame="tool", task_axes=("x", "y", "z"), joints=chosen, locked={"j7": 0.3}
+            )
+        ControllerModel.from_file(
+            arm.urdf,
+            tool_frame="tool",
+            task_axes=("x", "y", "z"),
+            joints=chosen,
+            locked={"j6": 0.0, "j7": 0.3},
+        )
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("locked:")]
+    assert model.parsed.locked == {"j6": 0.0, "j7": 0.3}
+    assert lines == [
+        "locked: j6 held at 0 [rad or m], the default: no position stated for them in locked "
+        "(arm.locked in a scenario)"
+    ]
+
+
+RUN = """
+duration: 0.01
+arm:
+  urdf: myarm/urdf/arm7.urdf
+  initial_positions: {%s}
+plate:
+  position: [1.5, 1.5, -1.0]
+task:
+  axes: [x, y, z, rx, ry, rz]
+reference:
+  approach_speed: 0.0
+report:
+  compare_without_null_space_task: false
+  checks: []
+"""
+
+
+def test_a_run_keeps_every_parser_warning_in_full_in_its_folder(tmp_path):
+    """The log says one line per file; the run folder's model_warnings.txt keeps all seven
+    warnings (one per joint with friction), each in Drake's full text, under the file's
+    name. A run of a file without warnings writes no such file. Keeping only the first
+    warning, or none, fails this."""
+    arm = write_vendor_arm(tmp_path)
+    text = arm.urdf.read_text()
+    text = with_dynamics(text, {name: 'friction="0.5"' for name in ARM})
+    joints = ", ".join(f"j{k + 1}: {q}" for k, q in enumerate(Q0))
+    (tmp_path / "scenario.yaml").write_text(RUN % joints)
+    (tmp_path / "clean").mkdir()
+    (tmp_path / "run").mkdir()
+    clean = run_to_folder(load_scenario_file(tmp_path / "scenario.yaml"), tmp_path / "clean", replay=False)
+    assert clean.failure is None and not (tmp_path / "clean" / MODEL_WARNINGS).exists()
+    arm.urdf.write_text(text)
+    result = run_to_folder(load_scenario_file(tmp_path / "scenario.yaml"), tmp_path / "run", replay=False)
+    assert result.failure is None
+    lines = (tmp_path / "run" / MODEL_WARNINGS).read_text().splitlines()
+    assert lines[0] == "# arm7.urdf: 7 warning(s) of Drake's parser"
+    assert len(lines) == 8 and all("warning:" in line and "'friction'" in line for line in lines[1:])
+    assert all(str(arm.urdf) in line for line in lines[1:])  # Drake's text: the file, its line
