@@ -33,18 +33,20 @@ def table_lines(text: str) -> list[str]:
     return lines[start:end]
 
 
-def readme_copies(readme: str) -> dict[str, list[str]]:
-    """Marker path -> the table lines right after the marker."""
+def readme_copies(readme: str) -> list[tuple[str, list[str]]]:
+    """(marker path, the table lines right after the marker), for every marker: a table
+    copied into two pages is two copies, each checked (a dict kept only the last page's)."""
     lines = readme.splitlines()
-    copies = {}
+    copies = []
     for i, line in enumerate(lines):
         m = MARKER.match(line)
         if m:
-            copies[m.group(1)] = (
+            copy = (
                 table_lines("\n".join(lines[i + 1 :]))
                 if lines[i + 1 : i + 2] and lines[i + 1].startswith("|")
                 else []
             )
+            copies.append((m.group(1), copy))
     return copies
 
 
@@ -52,7 +54,7 @@ def differences(readme: str, root: Path) -> list[str]:
     """One line per copied table that is not its file's table, or per file not copied."""
     problems = []
     copies = readme_copies(readme)
-    for path, copy in copies.items():
+    for path, copy in copies:
         file = root / path
         if not file.exists():
             problems.append(f"{path}: a page names it, but it does not exist")
@@ -66,7 +68,7 @@ def differences(readme: str, root: Path) -> list[str]:
             problems.append(f"{path}: the page's copy differs from line {first + 1} of its table")
     for file in sorted((root / "docs" / "results").glob("**/table.md")):  # drive/filter/ too
         path = file.relative_to(root).as_posix()
-        if path not in copies:
+        if path not in {p for p, _ in copies}:
             problems.append(f"{path}: not copied into any page (no marker)")
     return problems
 
@@ -86,13 +88,25 @@ def test_a_changed_digit_is_caught():
     """The check itself fails on pages whose copy differs by one digit, and on pages that
     leave a results table out: it is not a test that cannot fail."""
     readme = pages_text()
-    path = next(iter(readme_copies(readme)))
+    path = readme_copies(readme)[0][0]
     row = table_lines((ROOT / path).read_text())[2]
     changed = row.replace("0", "9", 1) if "0" in row else row + " x"
     found = differences(readme.replace(row, changed, 1), ROOT)
     assert found[0].startswith(f"{path}: the page's copy differs")
     dropped = readme.replace(f"<!-- table: {path} -->", "", 1)
     assert f"{path}: not copied into any page (no marker)" in differences(dropped, ROOT)
+
+
+def test_a_table_copied_into_two_pages_is_checked_in_both():
+    """A second, stale copy of a table (docs/own_diagram.md kept the vendor table's older
+    columns while your_arm.md's copy was current) is caught, whichever page comes first."""
+    path = "docs/results/vendor_arms/table.md"
+    table = "\n".join(table_lines((ROOT / path).read_text()))
+    stale = table.replace("|---|", "|---|---|", 1)
+    for first, second in ((table, stale), (stale, table)):
+        pages = f"<!-- table: {path} -->\n{first}\n\ntext\n\n<!-- table: {path} -->\n{second}\n"
+        found = [line for line in differences(pages, ROOT) if line.startswith(path)]
+        assert found == [f"{path}: the page's copy differs from line 2 of its table"]
 
 
 @pytest.mark.parametrize("folder", sorted(p.name for p in (ROOT / "docs" / "results").glob("*/")))

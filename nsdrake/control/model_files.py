@@ -270,7 +270,11 @@ def parse_model_file(
                 if "unknown package" in text
                 else ""
             )
-            text = text if len(text) <= 240 else text[:239] + "…"
+            # 240 characters of Drake's words, the file's own folder not counted (it repeats
+            # the path: where the file is installed must not change what the line keeps).
+            folder = str(path.parent) + "/"
+            budget = 240 + text.count(folder) * len(folder)
+            text = text if len(text) <= budget else text[: budget - 1] + "…"
             raise ControllerConfigError(
                 f"{where}: {path.name}", f"Drake cannot parse it: {text}{hint}"
             ) from None

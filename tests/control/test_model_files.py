@@ -411,3 +411,29 @@ def test_an_sdf_link_that_is_not_physical_is_refused_in_one_line(tmp_path, old, 
     with pytest.raises(ControllerConfigError) as e:
         ControllerModel.from_file(arm.sdf, tool_frame="tool", task_axes=POSE)
     assert str(e.value).startswith(f"model_file: arm7.sdf: {message}") and "\n" not in str(e.value)
+
+
+def test_drakes_refusal_keeps_the_same_words_wherever_the_file_is_installed(tmp_path):
+    """Drake's message repeats the file's path; the one line keeps 240 characters of Drake's
+    words with the file's folder not counted, so the same file in a short and a deep folder
+    is refused with the same line but for the folder (vendor_arms' table row of TALOS's arm
+    changed with the install folder when the cut counted the path)."""
+    inertial = '<mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/>'
+    name = "j" * 150  # Drake's words about a fixed joint with a mimic run past 240 characters
+    urdf = f"""<robot name="r">
+  <link name="base"/>
+  <link name="a"><inertial>{inertial}</inertial></link>
+  <link name="b"><inertial>{inertial}</inertial></link>
+  <joint name="{name}" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="10" velocity="1"/></joint>
+  <joint name="fixed_{name}" type="fixed"><parent link="a"/><child link="b"/><mimic joint="{name}"/></joint>
+</robot>"""
+    lines = []
+    for folder in (tmp_path / "s", tmp_path / ("deep" * 30) / "er"):
+        folder.mkdir(parents=True)
+        (folder / "arm.urdf").write_text(urdf)
+        with pytest.raises(ControllerConfigError) as e:
+            ControllerModel.from_file(folder / "arm.urdf", tool_frame="b", task_axes=["x"])
+        lines.append(str(e.value).replace(str(folder) + "/", ""))
+    assert "cannot mimic" in lines[0] and len(lines[0]) > 240
+    assert lines[0] == lines[1]
