@@ -196,7 +196,7 @@ class ControllerLoop:
         self._lengths = np.zeros(COMPILED_INBOX, dtype=np.int64)
         self._scratch = np.zeros(SCRATCH)
         self._limits, self._gate = limit_table(), gate_bounds()
-        self._motion = motion_table(lambda k: [a for a, _ in self._allowances(k)], self._compiled_gap())
+        self._motion_config = self._motion = None  # the allowances' table, and the config it is of
         self._names = side.station.arm_model.joint_names
         self._inbox: list[
             tuple[float, float, float, bytes]
@@ -311,9 +311,11 @@ class ControllerLoop:
             jump = (joint_step_allowance(elapsed), "its velocity limit allows (nsdrake/driver/panda.py)")
         return jump, (velocity_mismatch_allowance(elapsed), "")
 
-    def _compiled_gap(self) -> int:
-        """The longest gap [periods] the compiled path's allowance table covers."""
-        return int(min(COMPILED_GAP, self.bound_periods))
+    def _motion_table(self) -> np.ndarray:
+        """The allowances of :meth:`_allowances` for the compiled path, up to COMPILED_GAP
+        periods (or the silence bound): :func:`nsdrake.driver.tick.motion_table`."""
+        longest = int(min(COMPILED_GAP, self.bound_periods))
+        return motion_table(lambda k: [allowance for allowance, _ in self._allowances(k)], longest)
 
     def _bound_words(self) -> str:
         expire = self.config.expire_sec
@@ -384,6 +386,8 @@ class ControllerLoop:
         inbox = self._inbox
         count = len(inbox)
         if self.compiled and count <= COMPILED_INBOX:
+            if self._motion_config is not self.config:  # driver.max_joint_step sets the allowances
+                self._motion, self._motion_config = self._motion_table(), self.config
             raw, lengths = self._raw, self._lengths
             for k, (_, _, _, data) in enumerate(inbox):
                 size = lengths[k] = len(data)

@@ -88,11 +88,18 @@ class ServeResult:
     answered_robot_us: list[int | None] = field(default_factory=lambda: [None, None])
     # the serving thread's scheduling and locked memory, read back (nsdrake.driver.realtime.Applied)
     realtime: dict = field(default_factory=dict)
+    cpu_seconds: float = 0.0  # the serving thread's CPU time over its periods [s]
+    served: int = 0  # periods served (the first command's wait included)
 
     @property
     def fresh_fraction(self) -> float:
         """Of the periods up to the last command received, those that applied a fresh one."""
         return self.commanded_fresh / self.commanded_periods if self.commanded_periods else math.nan
+
+    @property
+    def cpu_per_period_us(self) -> float:
+        """The serving thread's CPU time per period served [µs] (the plant's step, the bus)."""
+        return 1e6 * self.cpu_seconds / self.served if self.served else math.nan
 
     def line(self) -> str:
         return (
@@ -104,6 +111,7 @@ class ServeResult:
             + self._answered()
             + _realtime_note(self.realtime)
             + (f"; {self.undecodable} undecodable command messages dropped" if self.undecodable else "")
+            + (f"; its own CPU {self.cpu_per_period_us:.0f} µs per period" if self.served else "")
         )
 
     def _answered(self) -> str:
@@ -214,8 +222,9 @@ def serve_simulated_driver(
     gc.freeze()
     with idle_cpus_polling(), realtime_mode(realtime) as applied:
         server.result.realtime = applied.as_dict()
+        cpu, k = time.thread_time(), 0
         try:
-            start, k = clock(), 0  # deadlines start + k periods: no rounding drift
+            start = clock()  # deadlines start + k periods: no rounding drift
             while server.first is None or server.driver.time < server.first + duration - 0.5 * period:
                 if stop is not None and stop.requested:
                     break
@@ -228,6 +237,7 @@ def serve_simulated_driver(
                 if progress is not None and server.first is not None and server.result.periods % 1000 == 0:
                     progress((server.driver.time - server.first) / duration)
         finally:
+            server.result.cpu_seconds, server.result.served = time.thread_time() - cpu, k
             gc.unfreeze()
     return server.result
 
