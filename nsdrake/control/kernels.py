@@ -240,6 +240,7 @@ def _entry_points() -> list[tuple[str, str, tuple]]:
         ("nsdrake.driver.tick", "finish_tick", (f1, f1, types.boolean, f1, f1, f1, f2, i1, u1, f1)),
         ("nsdrake.driver.tick", "robot_torques", (f1, f1, types.boolean, f1, f1)),
         ("nsdrake.driver.tick", "decode_status", (u1, i64, u1, f1, f1, i1)),
+        ("nsdrake.driver.tick", "decode_force_torque", (A("uint8", 1, readonly=True), u1, f1, f1)),
     ]  # fmt: skip
 
 

@@ -81,6 +81,7 @@ from nsdrake.driver.tick import (
     I_UTIME,
     INTS,
     SCRATCH,
+    decode_force_torque,
     finish_tick,
     gate_bounds,
     limit_table,
@@ -209,6 +210,7 @@ class ControllerLoop:
             CommandBuffer(),
         )
         self._fingerprint = np.frombuffer(self._status._fingerprint, dtype=np.uint8).copy()
+        self._ft_fingerprint = np.frombuffer(self._wrench_message._fingerprint, dtype=np.uint8).copy()
         self._command_bytes = np.frombuffer(self._command.buffer, dtype=np.uint8)  # a view: set in place
         f = self._floats
         self._measured = f[F_MEASURED : F_MEASURED + 3 * NUM_JOINTS].reshape(3, NUM_JOINTS)  # a view
@@ -503,22 +505,26 @@ class ControllerLoop:
         side = self.side
         if not side.sensor:
             return side.estimated_wrench(self._q, self._tau_ext)
+        message = self._wrench_message
         if self._force_torque is not None:
             self._force_torque_arrival, data = self._force_torque
             self._force_torque = None
-            problem = self._wrench_message.problem(data)
-            if problem:
-                raise self._fault(
-                    f"force-torque message refused on {self.config.force_torque_channel}: {problem}"
-                )
-            self._wrench_message.load(data)
+            if not self.compiled or decode_force_torque(  # compiled: into message.wrench, else
+                np.frombuffer(data, np.uint8), self._ft_fingerprint, self._scratch, message.wrench
+            ):  # the Python path, which says why it refuses  # fmt: skip
+                problem = message.problem(data)
+                if problem:
+                    raise self._fault(
+                        f"force-torque message refused on {self.config.force_torque_channel}: {problem}"
+                    )
+                message.load(data)
         silent = arrival - self._force_torque_arrival
         if silent > self.bound:
             raise self._fault(
                 f"no lcmt_force_torque on {self.config.force_torque_channel} for {silent * 1e3:.1f} ms "
                 f"({self._bound_words()})"
             )
-        return self._wrench_message.wrench
+        return message.wrench
 
     def _answer(self, data: bytes, arrival: float, wall: float, cpu: float) -> None:
         """The controller side's tick for the loaded status, its command sent and recorded:

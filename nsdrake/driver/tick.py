@@ -1,13 +1,14 @@
 """The drive's tick in compiled code: the bytes of the statuses in, the bytes of the command out.
 
-:class:`nsdrake.driver.loop.ControllerLoop` answers each status with two compiled calls
-around the controller side's (the reference, then :class:`nsdrake.control.step.ControllerStep`,
-whose stages are compiled already):
+:class:`nsdrake.driver.loop.ControllerLoop` answers each status with compiled calls around
+the controller side's (the reference, then :class:`nsdrake.control.step.ControllerStep`,
+whose stages are compiled already; the reference is still Python):
 
 - :func:`take_statuses`: every status received since the last tick, in order, decoded from
   its LCM bytes (:func:`decode_status`) and held to the loop's rules (its clock, then the
   newest one's q, q̇, τ_ext and its motion since the status answered before:
   nsdrake/driver/loop.py's docstring), the loop's state updated only when all of them pass;
+- :func:`decode_force_torque`: the sensor's newest ``lcmt_force_torque``, when one came;
 - :func:`finish_tick`: what the robot's torque interface is asked for
   (:func:`robot_torques`), the last gate (:func:`nsdrake.driver.panda.command_problem`'s
   bounds) and the command's bytes (:func:`encode_command`).
@@ -100,6 +101,25 @@ def decode_status(data, length, fingerprint, bits, fields, ints) -> int:
     ints[1] = _i64(data, 477)
     ints[2] = np.int8(data[476])
     ints[3] = np.int8(data[485])
+    return 0
+
+
+@njit(cache=True)
+def decode_force_torque(data, fingerprint, bits, wrench) -> int:
+    """``data`` as an ``lcmt_force_torque`` with finite values (nsdrake/driver/wire.py's
+    layout, :meth:`nsdrake.driver.wire.ForceTorqueBuffer.problem`'s verdict): 0 and
+    ``wrench`` [M; f] (6) its tx ty tz, fx fy fz; else 1 and ``wrench`` as it was."""
+    if data.shape[0] != 64:
+        return 1
+    for k in range(8):
+        if data[k] != fingerprint[k]:
+            return 1
+    _doubles(data, 16, 6, bits, bits[8:14])
+    for k in range(6):
+        if not np.isfinite(bits[8 + k]):
+            return 1
+    for k in range(3):
+        wrench[k], wrench[3 + k] = bits[11 + k], bits[8 + k]
     return 0
 
 

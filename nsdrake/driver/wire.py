@@ -97,7 +97,7 @@ class ForceTorqueBuffer:
         self.buffer = bytearray(FORCE_TORQUE_SIZE)
         self._fingerprint = _fingerprint(lcmt_force_torque)
         values = np.ndarray((6,), ">f8", buffer=self.buffer, offset=16)
-        self.wrench = values[[3, 4, 5, 0, 1, 2]]  # refreshed by load()
+        self.wrench = values[[3, 4, 5, 0, 1, 2]].astype(np.float64)  # native order; refreshed by load()
         self._values = values
 
     def problem(self, data: bytes) -> str | None:
