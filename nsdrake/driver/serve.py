@@ -67,6 +67,7 @@ ROBOT_UP_US = 60_000_000
 # the fraction of the period after the status at which the simulated plant steps (module
 # docstring): the first half is the controller's to answer in
 PHYSICS_AT = 0.5
+_thread_time = time.thread_time  # the serving thread's CPU clock (a test may replace the module's time)
 
 
 @dataclass
@@ -110,8 +111,8 @@ class ServeResult:
             f"{self.expired} fell back to damping; the driver itself started {self.behind} periods late"
             + self._answered()
             + _realtime_note(self.realtime)
-            + (f"; {self.undecodable} undecodable command messages dropped" if self.undecodable else "")
             + (f"; its own CPU {self.cpu_per_period_us:.0f} µs per period" if self.served else "")
+            + (f"; {self.undecodable} undecodable command messages dropped" if self.undecodable else "")
         )
 
     def _answered(self) -> str:
@@ -222,7 +223,7 @@ def serve_simulated_driver(
     gc.freeze()
     with idle_cpus_polling(), realtime_mode(realtime) as applied:
         server.result.realtime = applied.as_dict()
-        cpu, k = time.thread_time(), 0
+        cpu, k = _thread_time(), 0
         try:
             start = clock()  # deadlines start + k periods: no rounding drift
             while server.first is None or server.driver.time < server.first + duration - 0.5 * period:
@@ -237,7 +238,7 @@ def serve_simulated_driver(
                 if progress is not None and server.first is not None and server.result.periods % 1000 == 0:
                     progress((server.driver.time - server.first) / duration)
         finally:
-            server.result.cpu_seconds, server.result.served = time.thread_time() - cpu, k
+            server.result.cpu_seconds, server.result.served = _thread_time() - cpu, k
             gc.unfreeze()
     return server.result
 
