@@ -32,6 +32,14 @@ A status two periods or more after the one answered before, within the bound, is
 glitch: counted by its length (``gap_counts``, :data:`nsdrake.driver.timing.GAP_BINS`).
 A fault (:class:`DriveFaultError`) or Ctrl-C (:mod:`nsdrake.driver.stop`) stops
 commanding at once: nothing is sent after it.
+
+Every tick's rules run in compiled code (:mod:`nsdrake.driver.tick`: the statuses' and the
+sensor's bytes decoded and checked, the torques, the last gate, the command's bytes), the
+Python loop doing the socket, the clock, the reference and the step's call; whatever the
+compiled path refuses (or cannot tell: over :data:`COMPILED_INBOX` statuses at once, a gap
+over :data:`COMPILED_GAP` periods) goes through the same rules in Python, which say why
+in words (``ControllerLoop.compiled = False``: all of it in Python, the reference the
+compiled path is tested against).
 """
 
 from __future__ import annotations
