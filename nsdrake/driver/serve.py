@@ -54,6 +54,7 @@ from pydrake.lcm import DrakeLcm, DrakeLcmInterface
 from nsdrake.driver.panda import NUM_JOINTS, TORQUE_RATE_LIMIT
 from nsdrake.driver.realtime import RealtimeSettings, realtime_mode
 from nsdrake.driver.simulated_driver import SimulatedDriver
+from nsdrake.driver.wire import stamp_status
 from nsdrake.experiment.driver_config import driver_problems
 from nsdrake.experiment.scenario import Scenario
 
@@ -310,15 +311,12 @@ class _Server:
         d = self.channels
         self.inner.HandleSubscriptions(0)
         for channel, data in self.outgoing:
-            if channel == d.status_channel:
-                status = lcmt_panda_status.decode(data)
-                status.robot_utime = ROBOT_UP_US + round(self.driver.time * 1e6)
-                status.utime = self.wall_utime()
-                status.robot_mode = ROBOT_MODE_MOVE
-                status.control_command_success_rate = float(np.mean(self.recent)) if self.recent else 1.0
-                self.published.append(status.utime)
-                self.published_robot.append(status.robot_utime)
-                data = status.encode()
+            if channel == d.status_channel:  # stamped in place (wire.stamp_status: no decode, no encode)
+                robot_utime, utime = ROBOT_UP_US + round(self.driver.time * 1e6), self.wall_utime()
+                rate = float(np.mean(self.recent)) if self.recent else 1.0
+                data = stamp_status(data, utime, robot_utime, ROBOT_MODE_MOVE, rate)
+                self.published.append(utime)
+                self.published_robot.append(robot_utime)
             self.lcm.Publish(channel, data)
         self.outgoing.clear()
 

@@ -17,7 +17,7 @@ import pytest
 from drake import lcmt_panda_command, lcmt_panda_status
 
 from nsdrake.driver.tick import SCRATCH, decode_status, encode_command
-from nsdrake.driver.wire import STATUS_ARRAYS, STATUS_SIZE, CommandBuffer
+from nsdrake.driver.wire import STATUS_ARRAYS, STATUS_SIZE, CommandBuffer, stamp_status
 
 FINGERPRINT = np.frombuffer(lcmt_panda_status._get_packed_fingerprint(), np.uint8).copy()
 
@@ -137,3 +137,22 @@ def test_a_command_s_bytes_are_the_lcm_package_s(seed):
             np.frombuffer(buffer.buffer, np.uint8), command.utime, np.array(command.joint_torque), bits
         )
         assert bytes(buffer.buffer) == command.encode()
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_a_stamped_status_is_the_lcm_package_s_decode_set_encode(seed):
+    """The simulated driver's stamp (wire.stamp_status: utime, robot_utime, robot_mode and
+    control_command_success_rate written into the bytes in place): the bytes
+    lcmt_panda_status.decode, setting the four fields and encode() give, for random statuses
+    and values over their types' ranges, 6-joint statuses too (catches an offset one off,
+    the mode's byte taken for the clock's, a little-endian write)."""
+    rng = np.random.default_rng(300 + seed)
+    for joints in [7] * 100 + [6] * 5:
+        data = random_status(rng, joints).encode()
+        utime, robot_utime = (int(x) for x in rng.integers(-(2**63), 2**63 - 1, 2, dtype=np.int64))
+        mode = int(rng.integers(-128, 128))
+        rate = float(rng.integers(0, 2**64, dtype=np.uint64).view(np.float64))
+        expected = lcmt_panda_status.decode(data)
+        expected.utime, expected.robot_utime, expected.robot_mode = utime, robot_utime, mode
+        expected.control_command_success_rate = rate
+        assert stamp_status(data, utime, robot_utime, mode, rate) == expected.encode()
