@@ -201,11 +201,6 @@ class ControllerLoop:
         # libfranka's: the fraction of its last 100 cycles that received a command in time)
         self.success_rate_min = float("nan")
         self._clock = clock
-        self._raw = np.zeros((COMPILED_INBOX, STATUS_SIZE), dtype=np.uint8)  # the statuses' bytes
-        self._lengths = np.zeros(COMPILED_INBOX, dtype=np.int64)
-        self._scratch = np.zeros(SCRATCH)
-        self._limits, self._gate = limit_table(), gate_bounds()
-        self._motion_config = self._motion = None  # the allowances' table, and the config it is of
         self._names = side.station.arm_model.joint_names
         self._inbox: list[
             tuple[float, float, float, bytes]
@@ -217,9 +212,7 @@ class ControllerLoop:
             ForceTorqueBuffer(),
             CommandBuffer(),
         )
-        self._fingerprint = np.frombuffer(self._status._fingerprint, dtype=np.uint8).copy()
-        self._ft_fingerprint = np.frombuffer(self._wrench_message._fingerprint, dtype=np.uint8).copy()
-        self._command_bytes = np.frombuffer(self._command.buffer, dtype=np.uint8)  # a view: set in place
+        self._compiled_buffers()
         f = self._floats
         self._measured = f[F_MEASURED : F_MEASURED + 3 * NUM_JOINTS].reshape(3, NUM_JOINTS)  # a view
         self._q, self._v, self._tau_ext = self._measured
@@ -241,6 +234,17 @@ class ControllerLoop:
         if side.sensor:
             bus.subscribe(c.force_torque_channel, self._on_force_torque)
         warm_up(side)
+
+    def _compiled_buffers(self) -> None:
+        """The compiled tick's arrays (nsdrake/driver/tick.py) beside its state."""
+        self._raw = np.zeros((COMPILED_INBOX, STATUS_SIZE), dtype=np.uint8)  # the statuses' bytes
+        self._lengths = np.zeros(COMPILED_INBOX, dtype=np.int64)
+        self._scratch = np.zeros(SCRATCH)
+        self._limits, self._gate = limit_table(), gate_bounds()
+        self._motion_config = self._motion = None  # the allowances' table, and the config it is of
+        self._fingerprint = np.frombuffer(self._status._fingerprint, dtype=np.uint8).copy()
+        self._ft_fingerprint = np.frombuffer(self._wrench_message._fingerprint, dtype=np.uint8).copy()
+        self._command_bytes = np.frombuffer(self._command.buffer, dtype=np.uint8)  # a view: set in place
 
     def _on_status(self, data: bytes) -> None:
         self._inbox.append((self._clock(), time.perf_counter(), time.thread_time(), data))

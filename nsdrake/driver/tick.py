@@ -141,6 +141,40 @@ def encode_command(buffer, utime, torque, bits) -> None:
 
 
 @njit(cache=True)
+def _reading_problem(q, v, tau_ext, header, limits) -> int:
+    """The newest status's q, q̇, τ_ext finite (5), within the Panda's limits
+    (panda.limit_problem's comparisons: 6), its robot in kMove when it reports its own
+    state (7); 0: fine."""
+    for j in range(7):
+        if not (np.isfinite(q[j]) and np.isfinite(v[j]) and np.isfinite(tau_ext[j])):
+            return 5
+        if not (q[j] >= limits[0, j] and q[j] <= limits[1, j]):
+            return 6
+        if not (v[j] <= limits[2, j] and v[j] >= -limits[2, j]):
+            return 6
+    if header[1] != 0 and header[2] != 2:  # robot_utime, robot_mode: loop.ROBOT_MODE_MOVE
+        return 7
+    return 0
+
+
+@njit(cache=True)
+def _motion_problem(q, v, q_last, v_last, allowances, elapsed) -> int:
+    """A joint that moved more than ``allowances[0]`` since the status answered before
+    (10), or whose move disagrees with its reported velocities by more than
+    ``allowances[1]`` over ``elapsed`` [s] (11): faults.jump_problem's and
+    velocity_mismatch_problem's verdicts; 0: fine."""
+    for j in range(7):
+        if np.abs(q[j] - q_last[j]) - allowances[0, j] > 0.0:
+            return 10
+    for j in range(7):
+        moved = q[j] - q_last[j]
+        expected = 0.5 * elapsed * (v[j] + v_last[j])
+        if np.abs(moved - expected) - allowances[1, j] > 0.0:
+            return 11
+    return 0
+
+
+@njit(cache=True)
 def take_statuses(raw, lengths, count, fingerprint, ints, floats, limits, motion, scratch) -> int:
     """Every status of ``raw[:count]`` (``lengths``: their sizes) by the loop's rules
     (module docstring); 0 and the state (``ints``, ``floats``) updated, else nonzero and
@@ -168,33 +202,20 @@ def take_statuses(raw, lengths, count, fingerprint, ints, floats, limits, motion
         anchor += anchor_step(clock, anchor, period_us, accepted)
         accepted += 1
     periods = elapsed_periods(last, anchor, period_us)
-    # the newest: finite, within the Panda's limits (panda.limit_problem's comparisons)
     q, v, tau_ext = fields[0:7], fields[14:21], fields[49:56]
-    for j in range(7):
-        if not (np.isfinite(q[j]) and np.isfinite(v[j]) and np.isfinite(tau_ext[j])):
-            return 5
-        if not (q[j] >= limits[0, j] and q[j] <= limits[1, j]):
-            return 6
-        if not (v[j] <= limits[2, j] and v[j] >= -limits[2, j]):
-            return 6
-    mode, robot_utime = header[2], header[1]
-    if robot_utime != 0 and mode != 2:  # loop.ROBOT_MODE_MOVE
-        return 7
+    robot_utime = header[1]
+    code = _reading_problem(q, v, tau_ext, header, limits)
+    if code:
+        return code
     step = periods - ints[I_PERIODS]
     if step >= 2 and step > bound:
         return 8
     if step < 1 or step >= motion.shape[0]:
         return 9  # beyond the precomputed allowances (the Python path decides)
     q_last, v_last = floats[F_MEASURED : F_MEASURED + 7], floats[F_MEASURED + 7 : F_MEASURED + 14]
-    elapsed = step * floats[F_PERIOD]
-    for j in range(7):
-        if np.abs(q[j] - q_last[j]) - motion[step, 0, j] > 0.0:
-            return 10
-    for j in range(7):
-        moved = q[j] - q_last[j]
-        expected = 0.5 * elapsed * (v[j] + v_last[j])
-        if np.abs(moved - expected) - motion[step, 1, j] > 0.0:
-            return 11
+    code = _motion_problem(q, v, q_last, v_last, motion[step], step * floats[F_PERIOD])
+    if code:
+        return code
     # every rule passed: the state moves on
     if robot_utime != 0 and ints[I_COMMANDS] >= 100:  # loop.SUCCESS_RATE_WINDOW
         rate, low = fields[56], floats[F_SUCCESS_MIN]
