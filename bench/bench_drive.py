@@ -115,6 +115,7 @@ DRIVER_LINE = re.compile(
     r"command, (\d+) a stale one, (\d+) fell back to damping; the driver itself started (\d+)"
 )
 ANSWERED = re.compile(r"the commands answered the statuses from robot time (\d+) µs to (\d+) µs")
+DRIVER_CPU = re.compile(r"its own CPU (\d+) µs per period")
 DRIVER_REALTIME = re.compile(r"real-time: SCHED_FIFO (\d+) on cores \[([\d, ]+)\]")
 # the real-time mode of the UDP runs with --realtime: the driver on one core, the controller on
 # the other, both at SCHED_FIFO 80 with memory locked (nsdrake/driver/realtime.py)
@@ -176,7 +177,9 @@ def driver_figures(driver_line: str) -> dict:
     )
     answered = ANSWERED.search(driver_line)
     realtime = DRIVER_REALTIME.search(driver_line)
+    cpu = DRIVER_CPU.search(driver_line)
     return {
+        "cpu_per_period_us": int(cpu.group(1)) if cpu else None,
         "periods": periods, "commands": commands, "fresh": fresh, "stale": stale, "expired": expired,
         "started_late": behind, "commanded_periods": commanded,
         "fresh_fraction": commanded_fresh / commanded if commanded else None,
@@ -198,10 +201,11 @@ def cell(value, unit: str = " µs", digits: int = 0) -> str:
 def table(results: dict) -> str:
     """The measured table (docs/results/drive/table.md): one row per run."""
     header = (
-        "| panda_wipe at 1 kHz | load (1 min) | ran | CPU p50 | CPU p99.9 | wall p50 | wall p99.9 "
-        "| ticks over 1 ms | statuses skipped | late statuses: 2 / 3–10 / 11–50 periods (longest) "
-        "| longest silence | driver: fresh commands | bounds met |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| panda_wipe at 1 kHz | load (1 min) | ran | CPU p50 | CPU p99.9 | tick / step p50 "
+        "| tick / step p99.9 | wall p50 | wall p99.9 | ticks over 1 ms | statuses skipped "
+        "| late statuses: 2 / 3–10 / 11–50 periods (longest) | longest silence | driver: fresh commands "
+        "| driver: CPU per period | bounds met |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     rows = []
     loop = results.get("loop_alone")
@@ -209,7 +213,12 @@ def table(results: dict) -> str:
         rows.append(
             f"| loop alone: a recorded 6 s, in-process bus, unpaced (median of {loop['runs']}) "
             f"| {loop['load_average_1min']:.2f} | {loop['ticks']} ticks | {cell(loop['cpu_p50_us'])} "
-            f"| {cell(loop['cpu_p999_us'])} | – | – | – | – | – | – | – | – |"
+            f"| {cell(loop['cpu_p999_us'])} | {ratio_cells(loop)} | – | – | – | – | – | – | – | – | – |"
+        )
+        rows.append(
+            f"| plain ControllerStep.step: the same calls, back to back (median of {loop['runs']}) "
+            f"| {loop['load_average_1min']:.2f} | {loop['ticks']} calls | {cell(loop['step_cpu_p50_us'])} "
+            f"| {cell(loop['step_cpu_p999_us'])} | 1.00 | 1.00 | – | – | – | – | – | – | – | – | – |"
         )
     runs = [("memq://, lockstep with the simulated driver", results.get("memq"))]
     runs += [(udp_label(r), r) for r in results.get("udp_runs", [])]
@@ -217,7 +226,7 @@ def table(results: dict) -> str:
         if not r:
             continue
         if r.get("ticks") is None:
-            rows.append(f"| {label} | – | not run: {r.get('failure')} |" + " – |" * 10)
+            rows.append(f"| {label} | – | not run: {r.get('failure')} |" + " – |" * 13)
             continue
         load = r["load_average_1min"]
         ran = f"{results['duration_s']:g} s" if not r.get("failure") else f"stopped: {r['failure']}"
@@ -227,8 +236,9 @@ def table(results: dict) -> str:
         silence = "–" if lockstep else cell(r["longest_silence_us"] / 1e3, " ms", 2)
         rows.append(
             f"| {label} | {load[0]:.2f}–{load[1]:.2f} | {ran} | {cell(r['cpu_p50_us'])} "
-            f"| {cell(r['cpu_p999_us'])} | {cell(r['p50_us'])} | {cell(r['p999_us'])} | {r['over_period']} "
-            f"| {r['statuses_skipped']} | {'–' if lockstep else glitches(r)} | {silence} | {percent(fresh)} "
+            f"| {cell(r['cpu_p999_us'])} | {ratio_cells(r)} | {cell(r['p50_us'])} | {cell(r['p999_us'])} "
+            f"| {r['over_period']} | {r['statuses_skipped']} | {'–' if lockstep else glitches(r)} "
+            f"| {silence} | {percent(fresh)} | {cell(driver.get('cpu_per_period_us'))} "
             f"| {'– (stopped)' if r.get('failure') else ('yes' if r.get('bounds_met') else 'no')} |"
         )
     title = (
@@ -239,9 +249,19 @@ def table(results: dict) -> str:
         "late statuses are those answered two periods or more after the previous one, within the "
         "silence bound (the drive's glitch counts); "
         "fresh commands are the driver's share of periods that applied a command answering its "
-        "previous status. This machine's figures, with its load.\n\n"
+        "previous status, and its CPU per period the simulated driver's own (its plant's step and its "
+        "bus), beside the controller. Tick / step: each row's CPU p50 and p99.9 over the plain "
+        "ControllerStep.step's, measured in the same run on the arguments the loop gave it in the "
+        "replay (issue 44's targets: 1.5 and 2). This machine's figures, with its load.\n\n"
     )
     return title + header + "\n".join(rows) + "\n"
+
+
+def ratio_cells(r: dict) -> str:
+    """The tick / step cells (p50, p99.9)."""
+    if r.get("tick_over_step_p50") is None:
+        return "– | –"
+    return f"{r['tick_over_step_p50']:.2f} | {r['tick_over_step_p999']:.2f}"
 
 
 def udp_label(r: dict) -> str:
@@ -450,37 +470,107 @@ def recorded_statuses(duration: float) -> list[tuple[bytes, bytes]]:
     return [tuple(pair) for pair in pairs]
 
 
-def profile(duration: float = 6.0) -> dict:
-    """The loop alone, replaying a recorded panda_wipe sequence on an in-process bus."""
-    from nsdrake.driver.bus import LcmBus
-    from nsdrake.driver.controller_side import build_controller_side
-    from nsdrake.driver.loop import ControllerLoop
+class Replay:
+    """The loop alone, replaying a recorded panda_wipe sequence (:func:`recorded_statuses`,
+    ``duration`` [s]) on an in-process bus (``lcm`` memq://), unpaced; and the plain
+    ``ControllerStep.step`` alone on the arguments the loop gave it in that replay."""
 
-    pairs = recorded_statuses(duration)
-    side = build_controller_side(load_scenario("panda_wipe", duration=duration))
-    bus = LcmBus("memq://")
+    def __init__(self, duration: float = 6.0):
+        from nsdrake.driver.bus import LcmBus
+        from nsdrake.driver.controller_side import build_controller_side
 
-    def run(profiler=None):
+        self.pairs = recorded_statuses(duration)
+        self.side = build_controller_side(load_scenario("panda_wipe", duration=duration))
+        self.bus = LcmBus("memq://")
+        self.calls = []
+        self.ticks(record=True)
+
+    def ticks(self, profiler=None, record: bool = False) -> np.ndarray:
+        """Each tick's CPU time [µs] (the loop's own measure: a status's arrival to the
+        command's publish); ``record``: keep each ControllerStep.step call's arguments."""
+        from nsdrake.driver.loop import ControllerLoop
+
+        side, bus = self.side, self.bus
         side.reset()
         loop = ControllerLoop(side, bus)
-        loop.ready()
-        for k, (status, sensor) in enumerate(pairs):
-            bus.publish("PANDA_STATUS", status)
-            bus.publish("PANDA_FORCE_TORQUE", sensor)
-            if k == 0:
-                loop.start()
+        if record:
+            step = side.step.step
+
+            def recorded(*args):
+                self.calls.append(tuple(np.array(a) if isinstance(a, np.ndarray) else a for a in args))
+                return step(*args)
+
+            side.step.step = recorded  # an instance attribute: the loop calls it
+        try:
+            with collector_paused():
+                loop.ready()
+                for k, (status, sensor) in enumerate(self.pairs):
+                    bus.publish("PANDA_STATUS", status)
+                    bus.publish("PANDA_FORCE_TORQUE", sensor)
+                    if k == 0:
+                        loop.start()
+                        if profiler is not None:
+                            profiler.enable()
+                    else:
+                        loop.tick()
                 if profiler is not None:
-                    profiler.enable()
-            else:
-                loop.tick()
-        if profiler is not None:
-            profiler.disable()
+                    profiler.disable()
+        finally:
+            side.step.__dict__.pop("step", None)
         return loop.times.cpu_seconds * 1e6
 
-    with collector_paused():
-        cpu = run()  # unprofiled: the tick's own CPU time
-        profiler = cProfile.Profile(time.thread_time)
-        run(profiler)
+    def steps(self) -> np.ndarray:
+        """Each plain ControllerStep.step call's CPU time [µs], back to back, on the replay's
+        arguments (the same states, the same contact and reference)."""
+        step = self.side.step
+        step.reset()
+        cpu = np.empty(len(self.calls))
+        with collector_paused():
+            for k, args in enumerate(self.calls):
+                start = time.thread_time()
+                step.step(*args)
+                cpu[k] = time.thread_time() - start
+        return cpu * 1e6
+
+
+def figures(cpu: np.ndarray) -> dict:
+    return {"cpu_p50_us": float(np.percentile(cpu, 50)), "cpu_p999_us": float(np.percentile(cpu, 99.9))}
+
+
+def loop_alone(rounds: int) -> dict:
+    """``rounds`` alternating rounds of the loop alone and of the plain step (:class:`Replay`):
+    the medians of each one's p50 and p99.9, and the ratios tick / step of those medians."""
+    replay = Replay()
+    ticks, steps, loads = [], [], []
+    for _ in range(rounds):
+        loads.append(os.getloadavg()[0])
+        ticks.append(figures(replay.ticks()))
+        steps.append(figures(replay.steps()))
+    result = {"runs": rounds, "ticks": len(replay.pairs), "load_average_1min": float(np.median(loads))}
+    for name, runs in (("", ticks), ("step_", steps)):
+        for key in ("cpu_p50_us", "cpu_p999_us"):
+            result[name + key] = float(np.median([r[key] for r in runs]))
+    return result | ratios(result, result)
+
+
+def ratios(tick: dict, step: dict) -> dict:
+    """The tick's CPU p50 and p99.9 over the plain step's (issue 44's targets: 1.5 and 2)."""
+    if not step or step.get("step_cpu_p50_us") is None or tick.get("cpu_p50_us") is None:
+        return {}
+    return {
+        "tick_over_step_p50": tick["cpu_p50_us"] / step["step_cpu_p50_us"],
+        "tick_over_step_p999": tick["cpu_p999_us"] / step["step_cpu_p999_us"],
+    }
+
+
+def profile(duration: float = 6.0) -> dict:
+    """The loop alone (:class:`Replay`): its ticks' CPU time unprofiled, the plain step's,
+    then where the tick goes under cProfile."""
+    replay = Replay(duration)
+    cpu = replay.ticks()  # unprofiled: the tick's own CPU time
+    step = replay.steps()
+    profiler = cProfile.Profile(time.thread_time)
+    replay.ticks(profiler)
     stats = pstats.Stats(profiler)
     total = sum(v[3] for k, v in stats.stats.items() if k[2] == "tick" and "loop.py" in k[0])
 
@@ -490,18 +580,20 @@ def profile(duration: float = 6.0) -> dict:
     shares = {
         "ControllerStep.step": cumulative("control/step.py", "step"),
         "reference": cumulative("experiment/reference.py", "tick"),
-        "status decode and checks": cumulative("driver/loop.py", "_load"),
+        "status decode and checks (compiled)": cumulative("driver/loop.py", "tick")
+        - cumulative("driver/loop.py", "_answer")
+        - cumulative("driver/loop.py", "_wait_for_a_status"),
         "record": cumulative("driver/controller_side.py", "record"),
         "bus (handle, publish)": cumulative("driver/bus.py", "handle")
         + cumulative("driver/bus.py", "publish"),
     }
-    return {
-        "ticks": int(cpu.size),
-        "load_average_1min": os.getloadavg()[0],
-        "cpu_p50_us": float(np.percentile(cpu, 50)),
-        "cpu_p999_us": float(np.percentile(cpu, 99.9)),
-        "share_of_tick_under_cprofile": {name: seconds / total for name, seconds in shares.items()},
-    }
+    result = {"ticks": int(cpu.size), "load_average_1min": os.getloadavg()[0]} | figures(cpu)
+    result |= {"step_" + key: value for key, value in figures(step).items()}
+    return (
+        result
+        | ratios(result, result)
+        | {"share_of_tick_under_cprofile": {name: seconds / total for name, seconds in shares.items()}}
+    )
 
 
 def arguments():
@@ -576,11 +668,10 @@ def main():
         results["udp_runs"] = udp_runs(args)
         results["udp"] = results["udp_runs"][0]
     if args.loop_runs:
-        alone = [profile() for _ in range(args.loop_runs)]
-        results["loop_alone"] = {"runs": len(alone), "ticks": alone[0]["ticks"]} | {
-            key: float(np.median([a[key] for a in alone]))
-            for key in ("cpu_p50_us", "cpu_p999_us", "load_average_1min")
-        }
+        results["loop_alone"] = loop_alone(args.loop_runs)
+        for run in [results.get("memq"), *results.get("udp_runs", [])]:
+            if run:
+                run.update(ratios(run, results["loop_alone"]))
     (args.out / "table.md").write_text(table(results))
     print(table(results), end="")
     if args.filter:

@@ -64,8 +64,13 @@ HELPER_SHARE = ("run_stages", "segments_box", "segments_sphere")
 
 
 def kernel_sources(package: Path = PACKAGE) -> list[Path]:
-    """The package's source files that define numba kernels, sorted."""
-    return sorted(p for p in package.rglob("*.py") if "@njit" in p.read_text(encoding="utf-8"))
+    """The package's source files that define numba kernels (or functions compiled into
+    them, ``@register_jitable``), sorted."""
+    return sorted(p for p in package.rglob("*.py") if _defines_kernels(p.read_text(encoding="utf-8")))
+
+
+def _defines_kernels(text: str) -> bool:
+    return "@njit" in text or "@register_jitable" in text
 
 
 def fingerprint(sources: list[Path], package: Path = PACKAGE) -> str:
@@ -199,6 +204,7 @@ def _entry_points() -> list[tuple[str, str, tuple]]:
     f1, f2, f3, i1 = A("float64", 1), A("float64", 2), A("float64", 3), A("int64", 1)
     i64, f64 = types.int64, types.float64
     f2F, b2 = A("float64", 2, "F"), A("bool_", 2)
+    u1, u2 = A("uint8", 1), A("uint8", 2)
     return [
         # the controller's stages (nsdrake.control.plan): Pinocchio's arrays, then the plan's
         ("nsdrake.control.stages", "run_stages", (i64, f64, f64, f1, i1, i1, f1, f2, f1, f1, f1, f1, f1)),
@@ -229,6 +235,12 @@ def _entry_points() -> list[tuple[str, str, tuple]]:
         ("nsdrake.station.force_sensor", "contact_wrench", (f2F, f1, f1)),
         ("nsdrake.control.orientation", "orientation_error", (f2, f2)),
         ("nsdrake.control.null_space_laws", "posture_target", (f1, f1, f64, f64, f64)),
+        # the drive's tick (nsdrake.driver.loop, controller_side): LCM bytes in, a command's out
+        ("nsdrake.driver.tick", "take_statuses", (u2, i1, i64, u1, i1, f1, f2, f3, f1)),
+        ("nsdrake.driver.tick", "finish_tick", (f1, f1, types.boolean, f1, f1, f1, f2, i1, u1, f1)),
+        ("nsdrake.driver.tick", "robot_torques", (f1, f1, types.boolean, f1, f1)),
+        ("nsdrake.driver.tick", "decode_status", (u1, i64, u1, f1, f1, i1)),
+        ("nsdrake.driver.tick", "decode_force_torque", (A("uint8", 1, readonly=True), u1, f1, f1)),
     ]  # fmt: skip
 
 

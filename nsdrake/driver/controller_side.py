@@ -48,6 +48,7 @@ from nsdrake.driver.panda import (
     panda_driver_problems,
     payload_rating_problem,
 )
+from nsdrake.driver.tick import robot_torques
 from nsdrake.driver.wrench import wrench_from_external_torques
 from nsdrake.experiment.checks import check_with_model
 from nsdrake.experiment.diagram import build_controller, surface_path
@@ -87,7 +88,7 @@ class ControllerSide:
         # (drake-franka-driver's --remove_gravity_compensation) subtracts its g(q) before the
         # robot adds it back. The controller model's g stands for the driver's.
         self.at_robot = np.zeros(NUM_JOINTS)
-        self.adds_gravity = self.scenario.driver.robot_adds_gravity
+        self.adds_gravity = bool(self.scenario.driver.robot_adds_gravity)
 
     def reset(self) -> None:
         self.step.reset()
@@ -112,16 +113,17 @@ class ControllerSide:
         """The reference and the controller at t [s] for the measured q, q̇ and wrench;
         returns (the reference's (x_d, ẋ_d, ẍ_d, f_d), the step's result); the torque to
         send is in :attr:`command` (τ − g(q) when the robot adds g, g the controller model's
-        own gravity term, which the step has just computed at q)."""
+        own gravity term, which the step has just computed at q: :func:`robot_torques`)."""
+        desired, result = self.compute(t, q, v, wrench)
+        robot_torques(result.tau, self.step.gravity, self.adds_gravity, self.at_robot, self.command)
+        return desired, result
+
+    def compute(self, t: float, q: np.ndarray, v: np.ndarray, wrench: np.ndarray):
+        """:meth:`tick` without the torques sent (the drive's loop has them from its
+        compiled tick, nsdrake/driver/tick.py)."""
         desired = self.reference.tick(t, wrench)
         rotation = () if self._quaternion is None else (self._quaternion, self._zero3, self._zero3)
-        result = self.step.step(t, q, v, wrench, *desired, *rotation)
-        np.subtract(result.tau, self.step.gravity, out=self.at_robot)
-        if self.adds_gravity:
-            self.command[:] = self.at_robot
-        else:
-            self.command[:] = result.tau
-        return desired, result
+        return desired, self.step.step(t, q, v, wrench, *desired, *rotation)
 
 
 def drive_scenario(scenario: Scenario, station: Station) -> Scenario:

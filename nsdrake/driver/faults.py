@@ -4,6 +4,7 @@ the problem in words (None: fine), so that the loop can stop with one line."""
 from __future__ import annotations
 
 import numpy as np
+from numba.extending import register_jitable
 
 
 def start_problem(q: np.ndarray, q0: np.ndarray, tolerance: float, joint_names) -> str | None:
@@ -71,30 +72,48 @@ def clock_problem(
     forward beyond the bound (a stream at 250 Hz, statuses lost, a wall clock stepped by
     NTP). Jitter of less than half a period around the anchor (a PC's utime; the loop keeps
     the anchor on the stream's phase, :func:`anchor_step`) is taken."""
+    verdict = clock_verdict(clock, previous, anchor, period_us, bound_periods)
     gap = clock - previous
-    if gap == 0:
+    if verdict == 0:
+        return None
+    if verdict == 1:
         return f"its {name} {clock} µs repeats the previous status's (a second publisher on the channel?)"
-    if gap < 0:
+    if verdict == 2:
         return (
             f"its {name} went back {-gap} µs, from {previous} to {clock} µs "
             "(a second publisher on the channel?)"
         )
-    if elapsed_periods(clock, anchor, period_us) <= elapsed_periods(previous, anchor, period_us):
+    if verdict == 3:
         return (
             f"its {name} advanced {gap} µs from the previous status's, within the same control "
             f"period: the stream is faster than the controller's period of {period_us} µs"
         )
+    return (
+        f"its {name} jumped {gap * 1e-3:.3f} ms ({gap / period_us:.1f} periods) from the previous "
+        f"status's (the silence bound: {bound_periods:g} periods, driver.expire_sec)"
+    )
+
+
+@register_jitable
+def clock_verdict(clock: int, previous: int, anchor: int, period_us: int, bound_periods: float) -> int:
+    """:func:`clock_problem`'s rules as a code (0: taken; 1 repeats, 2 goes back, 3 the same
+    period, 4 beyond the bound), in Python and in the compiled tick (nsdrake/driver/tick.py)."""
+    gap = clock - previous
+    if gap == 0:
+        return 1
+    if gap < 0:
+        return 2
+    if elapsed_periods(clock, anchor, period_us) <= elapsed_periods(previous, anchor, period_us):
+        return 3
     if gap > bound_periods * period_us:
-        return (
-            f"its {name} jumped {gap * 1e-3:.3f} ms ({gap / period_us:.1f} periods) from the previous "
-            f"status's (the silence bound: {bound_periods:g} periods, driver.expire_sec)"
-        )
-    return None
+        return 4
+    return 0
 
 
 ANCHOR_GAIN = 16  # the anchor follows the stream's phase: at most 1/16 of a status's offset
 
 
+@register_jitable
 def anchor_step(clock: int, anchor: int, period_us: int, accepted: int) -> int:
     """How far [µs] the anchor moves toward the phase of ``clock``, the ``accepted``-th
     status taken after the first: its offset from the nearest period on the anchor, over
@@ -109,6 +128,7 @@ def anchor_step(clock: int, anchor: int, period_us: int, accepted: int) -> int:
     return int(offset / min(accepted + 1, ANCHOR_GAIN))
 
 
+@register_jitable
 def elapsed_periods(clock: int, anchor: int, period_us: int) -> int:
     """Control periods from the first status's clock ``anchor`` to ``clock`` [µs], to the
     nearest: the controller's time is this many periods, re-anchored at every status on

@@ -32,6 +32,14 @@ A status two periods or more after the one answered before, within the bound, is
 glitch: counted by its length (``gap_counts``, :data:`nsdrake.driver.timing.GAP_BINS`).
 A fault (:class:`DriveFaultError`) or Ctrl-C (:mod:`nsdrake.driver.stop`) stops
 commanding at once: nothing is sent after it.
+
+Every tick's rules run in compiled code (:mod:`nsdrake.driver.tick`: the statuses' and the
+sensor's bytes decoded and checked, the torques, the last gate, the command's bytes), the
+Python loop doing the socket, the clock, the reference and the step's call; whatever the
+compiled path refuses (or cannot tell: over :data:`COMPILED_INBOX` statuses at once, a gap
+over :data:`COMPILED_GAP` periods) goes through the same rules in Python, which say why
+in words (``ControllerLoop.compiled = False``: all of it in Python, the reference the
+compiled path is tested against).
 """
 
 from __future__ import annotations
@@ -61,12 +69,46 @@ from nsdrake.driver.panda import (
     velocity_mismatch_allowance,
 )
 from nsdrake.driver.stop import StopRequest
+from nsdrake.driver.tick import (
+    F_BOUND,
+    F_LAST,
+    F_MEASURED,
+    F_PERIOD,
+    F_SUCCESS_MIN,
+    FLOATS,
+    I_ACCEPTED,
+    I_ANCHOR,
+    I_COMMANDS,
+    I_GAPS,
+    I_LAST_CLOCK,
+    I_LONG_GAPS,
+    I_LONGEST_GAP,
+    I_PERIOD_US,
+    I_PERIODS,
+    I_ROBOT_CLOCK,
+    I_UTIME,
+    INTS,
+    SCRATCH,
+    decode_force_torque,
+    finish_tick,
+    gate_bounds,
+    limit_table,
+    motion_table,
+    robot_torques,
+    take_statuses,
+)
 from nsdrake.driver.timing import GAP_BINS, TickTimes, gap_bin
-from nsdrake.driver.wire import CommandBuffer, ForceTorqueBuffer, StatusBuffer
+from nsdrake.driver.wire import STATUS_SIZE, CommandBuffer, ForceTorqueBuffer, StatusBuffer
 from nsdrake.experiment.driver_config import silence_bound_periods
 
 SUCCESS_RATE_WINDOW = 100  # libfranka's control_command_success_rate is over its last 100 cycles
 ROBOT_MODE_MOVE = 2  # lcmt_panda_status.kMove: the only mode in which a Panda takes torque commands
+# Statuses a tick's compiled path takes at once (more queued: the Python path, the same rules)
+COMPILED_INBOX = 64
+# Periods between two statuses answered up to which the compiled path holds the motion
+# allowances (nsdrake/driver/tick.py's motion_table); a longer gap within the silence
+# bound goes through the Python path
+COMPILED_GAP = 100
 ROBOT_MODES = {0: "kOther", 1: "kIdle", 2: "kMove", 3: "kGuiding", 4: "kReflex", 5: "kUserStopped",
                6: "kAutomaticErrorRecovery"}  # fmt: skip
 
@@ -100,6 +142,15 @@ def warm_up(side: ControllerSide) -> None:
     side.reset()
 
 
+def _state(index: int, kind=int):
+    """An attribute of the loop kept in its compiled state (``_ints`` or ``_floats``)."""
+    array = "_ints" if kind is int else "_floats"
+    return property(
+        lambda self: kind(getattr(self, array)[index]),
+        lambda self, value: getattr(self, array).__setitem__(index, value),
+    )
+
+
 class ControllerLoop:
     """Runs a :class:`nsdrake.driver.controller_side.ControllerSide` on ``bus`` (module
     docstring).
@@ -116,8 +167,19 @@ class ControllerLoop:
     clock's.
     """
 
+    compiled = True  # False: every tick in Python, step by step (the compiled path's reference)
+    # the state the compiled tick (nsdrake/driver/tick.py) reads and moves on
+    commands = _state(I_COMMANDS)
+    periods = _state(I_PERIODS)  # control periods since the first status, on the robot's clock
+    longest_gap = _state(I_LONGEST_GAP)  # [periods] the longest glitch (0: none)
+    success_rate_min = _state(F_SUCCESS_MIN, float)
+    _last_clock, _anchor = _state(I_LAST_CLOCK), _state(I_ANCHOR)
+    _accepted = _state(I_ACCEPTED)  # statuses taken after the first (faults.anchor_step)
+    _long_gaps = _state(I_LONG_GAPS)  # statuses in a row two periods or more after the previous
+
     def __init__(self, side: ControllerSide, bus: Bus, *, capacity: int = 0, clock=time.perf_counter):
         self.side = self.drive = side
+        self._ints, self._floats = np.zeros(INTS, dtype=np.int64), np.zeros(FLOATS)
         self.bus = bus
         scenario = side.scenario
         self.config = c = scenario.driver
@@ -125,9 +187,10 @@ class ControllerLoop:
         self.period_us = round(self.period * 1e6)
         self.bound_periods = silence_bound_periods(c, self.period)  # the silence bound, in periods
         self.bound = self.bound_periods * self.period  # [s]
-        self.commands = 0
-        self.periods = 0  # control periods since the first status, on the robot's clock
+        self._ints[I_PERIOD_US] = self.period_us
+        self._floats[[F_PERIOD, F_BOUND]] = self.period, self.bound_periods
         self.skipped = 0
+        self.compiled_ticks = 0  # ticks whose statuses the compiled path took (the others: Python's)
         capacity = capacity or int(round(scenario.duration / self.period)) + 2
         self.times = TickTimes(capacity)
         self.recorder = Recorder(side, capacity)
@@ -149,19 +212,17 @@ class ControllerLoop:
             ForceTorqueBuffer(),
             CommandBuffer(),
         )
-        self._measured = np.zeros((3, NUM_JOINTS))
+        self._compiled_buffers()
+        f = self._floats
+        self._measured = f[F_MEASURED : F_MEASURED + 3 * NUM_JOINTS].reshape(3, NUM_JOINTS)  # a view
         self._q, self._v, self._tau_ext = self._measured
-        self._q_last, self._v_last = np.zeros(NUM_JOINTS), np.zeros(NUM_JOINTS)
+        self._q_last, self._v_last = f[F_LAST : F_LAST + NUM_JOINTS], f[F_LAST + NUM_JOINTS : F_LAST + 14]
         # glitches: answered statuses 2, 3-10, 11-50, over 50 periods after the previous one
-        self.gap_counts = np.zeros(len(GAP_BINS), dtype=np.int64)
-        self.longest_gap = 0  # [periods] the longest of them (0: none)
+        self.gap_counts = self._ints[I_GAPS : I_GAPS + len(GAP_BINS)]
         self._deviation = np.zeros((2, NUM_JOINTS))
         self._at_robot = np.zeros(NUM_JOINTS)  # what the last command asked of the robot (the rate check)
 
         self._wrench = np.zeros(6)
-        self._anchor = self._last_clock = 0
-        self._accepted = 0  # statuses taken after the first (faults.anchor_step)
-        self._long_gaps = 0  # statuses in a row two periods or more after the previous
         self._last_arrival = 0.0
         # the longest silence the silence rule measured once started [s]: from the answered
         # status's arrival to the next arrival, when the loop had to wait for it (statuses that
@@ -173,6 +234,17 @@ class ControllerLoop:
         if side.sensor:
             bus.subscribe(c.force_torque_channel, self._on_force_torque)
         warm_up(side)
+
+    def _compiled_buffers(self) -> None:
+        """The compiled tick's arrays (nsdrake/driver/tick.py) beside its state."""
+        self._raw = np.zeros((COMPILED_INBOX, STATUS_SIZE), dtype=np.uint8)  # the statuses' bytes
+        self._lengths = np.zeros(COMPILED_INBOX, dtype=np.int64)
+        self._scratch = np.zeros(SCRATCH)
+        self._limits, self._gate = limit_table(), gate_bounds()
+        self._motion_config = self._motion = None  # the allowances' table, and the config it is of
+        self._fingerprint = np.frombuffer(self._status._fingerprint, dtype=np.uint8).copy()
+        self._ft_fingerprint = np.frombuffer(self._wrench_message._fingerprint, dtype=np.uint8).copy()
+        self._command_bytes = np.frombuffer(self._command.buffer, dtype=np.uint8)  # a view: set in place
 
     def _on_status(self, data: bytes) -> None:
         self._inbox.append((self._clock(), time.perf_counter(), time.thread_time(), data))
@@ -231,21 +303,33 @@ class ControllerLoop:
             self.gap_counts[gap_bin(periods)] += 1
             self.longest_gap = max(self.longest_gap, periods)
         elapsed = periods * self.period
-        step = self.config.max_joint_step
-        if step > 0:
-            allowance = np.full(NUM_JOINTS, step * periods)
-            why = f"of driver.max_joint_step {step:g} rad per period"
-        else:
-            allowance = joint_step_allowance(elapsed)
-            why = "its velocity limit allows (nsdrake/driver/panda.py)"
+        (allowance, why), (mismatch, _) = self._allowances(periods)
         problem = jump_problem(self._q, self._q_last, allowance, periods, self._names, why)
         if problem is None:
             problem = velocity_mismatch_problem(
-                self._q, self._q_last, self._v, self._v_last, elapsed, velocity_mismatch_allowance(elapsed),
-                self._names,
-            )  # fmt: skip
+                self._q, self._q_last, self._v, self._v_last, elapsed, mismatch, self._names
+            )
         if problem:
             raise self._fault(f"status refused: {problem}")
+
+    def _allowances(self, periods: int) -> tuple[tuple[np.ndarray, str], tuple[np.ndarray, str]]:
+        """How far each joint may move from the status answered before, ``periods`` apart,
+        and where that comes from; how far its move may differ from its reported velocities'
+        (nsdrake/driver/panda.py): the Python path's and the compiled tick's
+        (:func:`nsdrake.driver.tick.motion_table`) alike."""
+        elapsed = periods * self.period
+        step = self.config.max_joint_step
+        if step > 0:
+            jump = (np.full(NUM_JOINTS, step * periods), f"of driver.max_joint_step {step:g} rad per period")
+        else:
+            jump = (joint_step_allowance(elapsed), "its velocity limit allows (nsdrake/driver/panda.py)")
+        return jump, (velocity_mismatch_allowance(elapsed), "")
+
+    def _motion_table(self) -> np.ndarray:
+        """The allowances of :meth:`_allowances` for the compiled path, up to COMPILED_GAP
+        periods (or the silence bound): :func:`nsdrake.driver.tick.motion_table`."""
+        longest = int(min(COMPILED_GAP, self.bound_periods))
+        return motion_table(lambda k: [allowance for allowance, _ in self._allowances(k)], longest)
 
     def _bound_words(self) -> str:
         expire = self.config.expire_sec
@@ -272,6 +356,7 @@ class ControllerLoop:
         self._load(data, "first status refused: ")
         clock = self._status.robot_utime(data)
         self.clock_name = "robot_utime" if clock else "utime"
+        self._ints[I_ROBOT_CLOCK] = bool(clock)
         self._anchor = self._last_clock = clock or self._status.utime(data)
         self._accepted = 0
         problem = start_problem(self._q, self.side.station.q0, c.start_tolerance, self._names)
@@ -307,9 +392,36 @@ class ControllerLoop:
             self.longest_silence = max(self.longest_silence, self._inbox[0][0] - self._last_arrival)
 
     def tick(self) -> None:
-        """Waits for the next status and answers the newest (module docstring)."""
+        """Waits for the next status and answers the newest (module docstring): its rules in
+        compiled code (:func:`nsdrake.driver.tick.take_statuses`), or, where that refuses or
+        cannot tell, in Python (:meth:`_take_in_python`), which says why in words."""
         self._wait_for_a_status()
         self._check_stop()
+        inbox = self._inbox
+        count = len(inbox)
+        if self.compiled and count <= COMPILED_INBOX:
+            if self._motion_config is not self.config:  # driver.max_joint_step sets the allowances
+                self._motion, self._motion_config = self._motion_table(), self.config
+            raw, lengths = self._raw, self._lengths
+            for k, (_, _, _, data) in enumerate(inbox):
+                size = lengths[k] = len(data)
+                raw[k, : min(size, STATUS_SIZE)] = np.frombuffer(data, np.uint8, min(size, STATUS_SIZE))
+            if not take_statuses(
+                raw, lengths, count, self._fingerprint, self._ints, self._floats, self._limits, self._motion,
+                self._scratch,
+            ):  # fmt: skip
+                arrival, wall, cpu, data = inbox[-1]
+                self.compiled_ticks += 1
+                self.skipped += count - 1
+                inbox.clear()
+                self.time = self.periods * self.period
+                self._answer(data, arrival, wall, cpu)
+                return
+        self._take_in_python()
+
+    def _take_in_python(self) -> None:
+        """:meth:`tick`'s rules on the inbox, step by step in Python: the same rules as the
+        compiled path's, each refusal in words."""
         inbox = self._inbox
         for _, _, _, data in inbox:  # every status received, in order: their clocks, whatever the inbox holds
             problem = self._status.problem(data)
@@ -369,6 +481,7 @@ class ControllerLoop:
         if problem:
             raise self._fault(refused + problem)
         status.load(data)
+        self._ints[I_UTIME] = status.utime(data)  # the command's stamp (tick.finish_tick)
         measured = self._measured  # rows q, q̇, τ_ext: one finiteness test, one limit test
         measured[0], measured[1], measured[2] = status.q, status.v, status.tau_ext
         if not np.isfinite(measured.sum()):
@@ -404,40 +517,45 @@ class ControllerLoop:
         side = self.side
         if not side.sensor:
             return side.estimated_wrench(self._q, self._tau_ext)
+        message = self._wrench_message
         if self._force_torque is not None:
             self._force_torque_arrival, data = self._force_torque
             self._force_torque = None
-            problem = self._wrench_message.problem(data)
-            if problem:
-                raise self._fault(
-                    f"force-torque message refused on {self.config.force_torque_channel}: {problem}"
-                )
-            self._wrench_message.load(data)
+            if not self.compiled or decode_force_torque(  # compiled: into message.wrench, else
+                np.frombuffer(data, np.uint8), self._ft_fingerprint, self._scratch, message.wrench
+            ):  # the Python path, which says why it refuses  # fmt: skip
+                problem = message.problem(data)
+                if problem:
+                    raise self._fault(
+                        f"force-torque message refused on {self.config.force_torque_channel}: {problem}"
+                    )
+                message.load(data)
         silent = arrival - self._force_torque_arrival
         if silent > self.bound:
             raise self._fault(
                 f"no lcmt_force_torque on {self.config.force_torque_channel} for {silent * 1e3:.1f} ms "
                 f"({self._bound_words()})"
             )
-        return self._wrench_message.wrench
+        return message.wrench
 
     def _answer(self, data: bytes, arrival: float, wall: float, cpu: float) -> None:
-        """The controller side's tick for the loaded status, its command sent and recorded."""
+        """The controller side's tick for the loaded status, its command sent and recorded:
+        the torques, the last gate and the command's bytes in compiled code
+        (:func:`nsdrake.driver.tick.finish_tick`), the gate's refusal in words from
+        :func:`nsdrake.driver.panda.command_problem`."""
         wrench = self._measured_wrench(arrival)
         np.copyto(self._wrench, wrench)
         side = self.side
-        desired, result = side.tick(self.time, self._q, self._v, self._wrench)
-        # what the robot's torque interface is asked for: the command, or τ − g(q) when the
-        # driver subtracts its g(q) (driver.robot_adds_gravity false)
-        problem = command_problem(side.at_robot, self._at_robot if self.commands else None, self._names)
-        if problem and not side.adds_gravity:
-            problem = f"with the driver's g(q) subtracted (driver.robot_adds_gravity false): {problem}"
-        if problem:  # the last gate: nothing beyond the robot's published limits leaves
-            raise self._fault(f"command refused, not sent: {problem}")
-        self.bus.publish(
-            self.config.command_channel, self._command.set(self._status.utime(data), side.command)
-        )
-        self._at_robot[:] = side.at_robot
+        desired, result = side.compute(self.time, self._q, self._v, self._wrench)
+        if not self.compiled:
+            robot_torques(result.tau, side.step.gravity, side.adds_gravity, side.at_robot, side.command)
+            self._gate_in_python(data)
+        elif finish_tick(
+            result.tau, side.step.gravity, side.adds_gravity, side.at_robot, side.command, self._at_robot,
+            self._gate, self._ints, self._command_bytes, self._scratch,
+        ):  # fmt: skip
+            self._gate_in_python(data)
+        self.bus.publish(self.config.command_channel, self._command.buffer)
         self.commands += 1
         self._last_arrival = arrival
         self.times.record(time.perf_counter() - wall, time.thread_time() - cpu)
@@ -451,6 +569,19 @@ class ControllerLoop:
             side.command,
             side.reference.in_contact,
         )
+
+    def _gate_in_python(self, data: bytes) -> None:
+        """The last gate in words (what the robot's torque interface is asked for, the
+        command or τ − g(q) when the driver subtracts its g(q): driver.robot_adds_gravity
+        false); a command it passes is encoded here."""
+        side = self.side
+        problem = command_problem(side.at_robot, self._at_robot if self.commands else None, self._names)
+        if problem and not side.adds_gravity:
+            problem = f"with the driver's g(q) subtracted (driver.robot_adds_gravity false): {problem}"
+        if problem:  # the last gate: nothing beyond the robot's published limits leaves
+            raise self._fault(f"command refused, not sent: {problem}")
+        self._command.set(self._status.utime(data), side.command)
+        self._at_robot[:] = side.at_robot
 
     def _silence_at_start(self) -> str:
         c = self.config

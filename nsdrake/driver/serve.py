@@ -54,6 +54,7 @@ from pydrake.lcm import DrakeLcm, DrakeLcmInterface
 from nsdrake.driver.panda import NUM_JOINTS, TORQUE_RATE_LIMIT
 from nsdrake.driver.realtime import RealtimeSettings, realtime_mode
 from nsdrake.driver.simulated_driver import SimulatedDriver
+from nsdrake.driver.wire import stamp_status
 from nsdrake.experiment.driver_config import driver_problems
 from nsdrake.experiment.scenario import Scenario
 
@@ -67,6 +68,7 @@ ROBOT_UP_US = 60_000_000
 # the fraction of the period after the status at which the simulated plant steps (module
 # docstring): the first half is the controller's to answer in
 PHYSICS_AT = 0.5
+_thread_time = time.thread_time  # the serving thread's CPU clock (a test may replace the module's time)
 
 
 @dataclass
@@ -88,11 +90,18 @@ class ServeResult:
     answered_robot_us: list[int | None] = field(default_factory=lambda: [None, None])
     # the serving thread's scheduling and locked memory, read back (nsdrake.driver.realtime.Applied)
     realtime: dict = field(default_factory=dict)
+    cpu_seconds: float = 0.0  # the serving thread's CPU time over its periods [s]
+    served: int = 0  # periods served (the first command's wait included)
 
     @property
     def fresh_fraction(self) -> float:
         """Of the periods up to the last command received, those that applied a fresh one."""
         return self.commanded_fresh / self.commanded_periods if self.commanded_periods else math.nan
+
+    @property
+    def cpu_per_period_us(self) -> float:
+        """The serving thread's CPU time per period served [µs] (the plant's step, the bus)."""
+        return 1e6 * self.cpu_seconds / self.served if self.served else math.nan
 
     def line(self) -> str:
         return (
@@ -103,6 +112,7 @@ class ServeResult:
             f"{self.expired} fell back to damping; the driver itself started {self.behind} periods late"
             + self._answered()
             + _realtime_note(self.realtime)
+            + (f"; its own CPU {self.cpu_per_period_us:.0f} µs per period" if self.served else "")
             + (f"; {self.undecodable} undecodable command messages dropped" if self.undecodable else "")
         )
 
@@ -214,8 +224,9 @@ def serve_simulated_driver(
     gc.freeze()
     with idle_cpus_polling(), realtime_mode(realtime) as applied:
         server.result.realtime = applied.as_dict()
+        cpu, k = _thread_time(), 0
         try:
-            start, k = clock(), 0  # deadlines start + k periods: no rounding drift
+            start = clock()  # deadlines start + k periods: no rounding drift
             while server.first is None or server.driver.time < server.first + duration - 0.5 * period:
                 if stop is not None and stop.requested:
                     break
@@ -228,6 +239,7 @@ def serve_simulated_driver(
                 if progress is not None and server.first is not None and server.result.periods % 1000 == 0:
                     progress((server.driver.time - server.first) / duration)
         finally:
+            server.result.cpu_seconds, server.result.served = _thread_time() - cpu, k
             gc.unfreeze()
     return server.result
 
@@ -299,15 +311,12 @@ class _Server:
         d = self.channels
         self.inner.HandleSubscriptions(0)
         for channel, data in self.outgoing:
-            if channel == d.status_channel:
-                status = lcmt_panda_status.decode(data)
-                status.robot_utime = ROBOT_UP_US + round(self.driver.time * 1e6)
-                status.utime = self.wall_utime()
-                status.robot_mode = ROBOT_MODE_MOVE
-                status.control_command_success_rate = float(np.mean(self.recent)) if self.recent else 1.0
-                self.published.append(status.utime)
-                self.published_robot.append(status.robot_utime)
-                data = status.encode()
+            if channel == d.status_channel:  # stamped in place (wire.stamp_status: no decode, no encode)
+                robot_utime, utime = ROBOT_UP_US + round(self.driver.time * 1e6), self.wall_utime()
+                rate = float(np.mean(self.recent)) if self.recent else 1.0
+                data = stamp_status(data, utime, robot_utime, ROBOT_MODE_MOVE, rate)
+                self.published.append(utime)
+                self.published_robot.append(robot_utime)
             self.lcm.Publish(channel, data)
         self.outgoing.clear()
 

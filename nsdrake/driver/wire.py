@@ -86,6 +86,24 @@ class StatusBuffer:
         return struct.unpack_from(">b", self.buffer, _TAIL + 8)[0]
 
 
+def stamp_status(data: bytes, utime: int, robot_utime: int, robot_mode: int, success_rate: float) -> bytes:
+    """``data``, an ``lcmt_panda_status`` of 7 joints, with its utime, robot_utime,
+    robot_mode and control_command_success_rate replaced, written in place in a copy (what
+    decoding it, setting the four fields and encoding it again gives, without the ``lcm``
+    package's Python: tests/driver/test_compiled_wire.py); other bytes (another joint count,
+    not a status) go through that decode and encode."""
+    if len(data) != STATUS_SIZE or data[:8] != _STATUS_FINGERPRINT:
+        status = lcmt_panda_status.decode(data)
+        status.utime, status.robot_utime, status.robot_mode = utime, robot_utime, robot_mode
+        status.control_command_success_rate = success_rate
+        return status.encode()
+    stamped = bytearray(data)
+    struct.pack_into(">q", stamped, 8, utime)
+    struct.pack_into(">dbq", stamped, _TAIL, success_rate, robot_mode, robot_utime)
+    return bytes(stamped)
+
+
+_STATUS_FINGERPRINT = _fingerprint(lcmt_panda_status)
 FORCE_TORQUE_FIELDS = ("fx", "fy", "fz", "tx", "ty", "tz")  # lcmt_force_torque's values, in order
 
 
@@ -97,7 +115,7 @@ class ForceTorqueBuffer:
         self.buffer = bytearray(FORCE_TORQUE_SIZE)
         self._fingerprint = _fingerprint(lcmt_force_torque)
         values = np.ndarray((6,), ">f8", buffer=self.buffer, offset=16)
-        self.wrench = values[[3, 4, 5, 0, 1, 2]]  # refreshed by load()
+        self.wrench = values[[3, 4, 5, 0, 1, 2]].astype(np.float64)  # native order; refreshed by load()
         self._values = values
 
     def problem(self, data: bytes) -> str | None:

@@ -173,6 +173,14 @@ state = update_switch_state(SwitchState.from_array(np.array([0.0, 0.0, -np.inf])
 blend_weight(state, 2, 1)
 orientation_error_angle(np.eye(3), np.asfortranarray(np.eye(3)))
 orientation_error_angle([[1, 0, 0], [0, 1, 0], [0, 0, 1]], np.eye(3))
+# the drive's compiled tick (nsdrake.driver.tick): panda_wipe in lockstep, the wrench from the
+# sensor's messages and from the external torques, the robot adding g and not
+from nsdrake.driver.run import run_simulated
+for source, adds in (("sensor", True), ("external_torque", False)):
+    s = load_scenario("panda_wipe", duration=0.005)
+    driver = dataclasses.replace(s.driver, force_source=source, robot_adds_gravity=adds)
+    s = dataclasses.replace(s, driver=driver)
+    assert run_simulated(s, realtime_rate=0.0, robot_adds_gravity=adds).failure is None
 print("COMPILED", compiled)
 # no kernel specialised twice: every nsdrake kernel this process holds has one list of types
 import numba, sys as _sys
@@ -192,7 +200,8 @@ def test_every_shipped_scenario_and_way_to_run_it_needs_no_further_compile():
     system and a plain ControllerStep (its first t an int), the Panda with Drake's
     terms, a vendor's arm with OBJ meshes on its links near a ball (the obstacle row from
     Drake's queries; Pinocchio's and Drake's terms), the model's own terms and the
-    selector's and orientation error's API with ints, compile nothing; and the process
+    selector's and orientation error's API with ints, a drive's compiled tick (both force
+    sources, both gravity setups), compile nothing; and the process
     then holds each nsdrake kernel for one list of argument types only. Catches a
     configuration that specialises the compiled code (run_stages compiled per pose task,
     sweep, limits and obstacles: up to 16 versions), a time passed on as an int, a kernel

@@ -5,6 +5,7 @@ with the reason where one cannot be made, required in CI)."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import random
 import sys
@@ -146,6 +147,21 @@ def test_a_drive_over_udp_between_two_processes(tmp_path):
 
 
 ACCEPTANCE = "NSDRAKE_ACCEPTANCE"  # =1: run the 20 s acceptance (alone, on a quiet machine, as root)
+# [%] the fresh share the acceptance asserts: issue 27's goal, 99 (bench/bench_drive.py keeps
+# it); .ci/run sets a bound its machine holds in every run (the comment there gives the runs)
+ACCEPTANCE_FRESH = "NSDRAKE_ACCEPTANCE_FRESH"
+
+
+def acceptance_fresh() -> float:
+    """The fresh share [%] the acceptance asserts (ACCEPTANCE_FRESH, default 99)."""
+    text = os.environ.get(ACCEPTANCE_FRESH, "99")
+    try:
+        bound = float(text)
+    except ValueError:
+        bound = math.nan
+    if not 0.0 < bound <= 100.0:
+        pytest.fail(f"{ACCEPTANCE_FRESH}={text!r}: must be a share in percent, above 0 and at most 100")
+    return bound
 
 
 @pytest.mark.slow
@@ -155,15 +171,16 @@ def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
     the driver's expiry, 50 ms): the drive exits 0 (no fault, every bound met), the
     controller's clock on the robot's (20 000 periods), and at least 99% of the simulated
     driver's periods between the first and the last command applied the answer to the
-    previous status. Both processes must keep real time, so it runs alone on a quiet
-    machine (NSDRAKE_ACCEPTANCE=1), not beside the suite's workers: elsewhere it is
-    skipped, saying how to run it. (Not a step of .ci/run: on this project's VM its fresh
-    share straddles 99% from run to run; .ci/run says the figures.)
+    previous status (NSDRAKE_ACCEPTANCE_FRESH: another share; .ci/run runs it at a bound
+    its machine holds, from ten runs its comment gives). Both processes must keep real
+    time, so it runs alone on a quiet machine (NSDRAKE_ACCEPTANCE=1), not beside the
+    suite's workers: elsewhere it is skipped, saying how to run it.
     Catches a controller that answers late (a tick that costs a period, a wait that
     sleeps past the status), a silence bound that stops an ordinary PC's drive, and a
     drive that loses the robot's clock."""
     if os.environ.get(ACCEPTANCE) != "1":
         pytest.skip(f"the 20 s real-time acceptance runs alone, on a quiet machine: {ACCEPTANCE}=1")
+    bound = acceptance_fresh()
     require_namespace()
     result = run_in_namespace(pair_script(20.0, "out"), cwd=tmp_path, timeout=900)
     assert result.returncode == 0, result.stderr
@@ -177,7 +194,7 @@ def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
     line = (tmp_path / "driver.out").read_text().splitlines()[-1]
     fresh = float(line.split("of them applied a fresh command (")[1].split("%")[0])
     print(f"acceptance: {line}; drive {json.dumps(timing)}")
-    assert fresh >= 99.0, line
+    assert fresh >= bound, line
 
 
 def test_a_command_beyond_the_limits_never_reaches_the_robot_over_udp(tmp_path):
