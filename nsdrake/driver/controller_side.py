@@ -138,7 +138,9 @@ def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
     if problem:
         raise ScenarioError(f"{scenario.source or 'scenario'}: arm.payload.mass: {problem}")
     try:
-        limits = panda_actuator_limits(scenario.actuator_limits, station.arm_model.joint_names)
+        limits = panda_actuator_limits(
+            scenario.actuator_limits, station.arm_model.joint_names, period=scenario.control_period
+        )
     except PandaLimitError as e:
         raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
     return dataclasses.replace(scenario, actuator_limits=limits)

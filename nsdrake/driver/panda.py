@@ -43,26 +43,45 @@ class PandaLimitError(ValueError):
     """Limits or a model that do not fit the Panda; the message is one line."""
 
 
-def panda_actuator_limits(limits: ActuatorLimitsConfig, joint_names: tuple[str, ...]) -> ActuatorLimitsConfig:
+def command_rate_limit(period: float) -> float:
+    """The largest |dτ/dt| [N m/s] a limiter sampled every ``period`` [s] may allow on the
+    Panda: the robot applies each new command at its next :data:`ROBOT_CYCLE`, so
+    consecutive commands may differ by TORQUE_RATE_LIMIT × ROBOT_CYCLE at most (the gate's
+    bound, :func:`command_problem`), whatever the period: 1000 N m/s at 1 ms, 500 at 2 ms."""
+    return float(TORQUE_RATE_LIMIT) * min(1.0, ROBOT_CYCLE / period)
+
+
+def panda_actuator_limits(
+    limits: ActuatorLimitsConfig, joint_names: tuple[str, ...], *, period: float
+) -> ActuatorLimitsConfig:
     """The scenario's actuator limits with the Panda's published ones wherever the scenario
-    gives none, joint k of the model being the Panda's joint k + 1. A scenario limit above
-    the published one is refused (never clamped silently): PandaLimitError naming it."""
+    gives none, joint k of the model being the Panda's joint k + 1; the torque rate at the
+    control period ``period`` [s] (:func:`command_rate_limit`). A scenario limit above those
+    is refused (never clamped silently): PandaLimitError naming it."""
     if len(joint_names) != NUM_JOINTS:
         raise PandaLimitError(
             f"the Panda driver speaks {NUM_JOINTS} joints; the scenario's arm has {len(joint_names)}"
         )
     torque, rate = dict(limits.torque), dict(limits.torque_rate)
+    rate_limit = command_rate_limit(period)
+    at_period = (
+        ""
+        if rate_limit == TORQUE_RATE_LIMIT
+        else f" over its {ROBOT_CYCLE * 1e3:g} ms cycle, {rate_limit:g} N m/s at a {period * 1e3:g} ms "
+        "control period (each command reaches the robot within one cycle)"
+    )
     for k, name in enumerate(joint_names):
-        for kind, table, published, unit in (
-            ("torque", torque, TORQUE_LIMITS[k], "N m"),
-            ("torque_rate", rate, TORQUE_RATE_LIMIT, "N m/s"),
+        for kind, table, published, unit, why in (
+            ("torque", torque, TORQUE_LIMITS[k], "N m", ""),
+            ("torque_rate", rate, rate_limit, "N m/s", at_period),
         ):
             if name not in table:
                 table[name] = float(published)
             elif table[name] > published:
+                quoted = TORQUE_RATE_LIMIT if kind == "torque_rate" else published
                 raise PandaLimitError(
                     f"actuator_limits.{kind}.{name}: {table[name]:g} {unit} is above the Panda's "
-                    f"published limit {published:g} {unit} for joint {k + 1}"
+                    f"published limit {quoted:g} {unit} for joint {k + 1}{why}"
                 )
     return dataclasses.replace(limits, torque=torque, torque_rate=rate)
 

@@ -11,14 +11,14 @@ from nsdrake.control.actuator_limits import limited_torque
 from nsdrake.control.config import ActuatorLimitsConfig
 from nsdrake.control.controller import torque_limits
 from nsdrake.driver.controller_side import build_controller_side
-from nsdrake.driver.panda import PandaLimitError, panda_actuator_limits
+from nsdrake.driver.panda import PandaLimitError, command_problem, panda_actuator_limits
 from nsdrake.experiment.scenario import ScenarioError, load_scenario
 
 NAMES = tuple(f"panda_joint{k}" for k in range(1, 8))
 
 
 def test_published_limits_fill_what_the_scenario_leaves_out():
-    limits = panda_actuator_limits(ActuatorLimitsConfig(torque={"panda_joint2": 50.0}), NAMES)
+    limits = panda_actuator_limits(ActuatorLimitsConfig(torque={"panda_joint2": 50.0}), NAMES, period=1e-3)
     assert [limits.torque[n] for n in NAMES] == [87.0, 50.0, 87.0, 87.0, 12.0, 12.0, 12.0]
     assert [limits.torque_rate[n] for n in NAMES] == [1000.0] * 7
 
@@ -38,13 +38,13 @@ def test_published_limits_fill_what_the_scenario_leaves_out():
 )
 def test_limits_above_the_published_ones_are_refused(kind, joint, value, words):
     with pytest.raises(PandaLimitError) as info:
-        panda_actuator_limits(ActuatorLimitsConfig(**{kind: {joint: value}}), NAMES)
+        panda_actuator_limits(ActuatorLimitsConfig(**{kind: {joint: value}}), NAMES, period=1e-3)
     assert words in str(info.value)
 
 
 def test_an_arm_that_is_not_a_panda_is_refused():
     with pytest.raises(PandaLimitError, match="the Panda driver speaks 7 joints; the scenario's arm has 4"):
-        panda_actuator_limits(ActuatorLimitsConfig(), NAMES[:4])
+        panda_actuator_limits(ActuatorLimitsConfig(), NAMES[:4], period=1e-3)
     with pytest.raises(ScenarioError, match="speaks 7 joints"):
         build_controller_side(load_scenario("fig3"))
 
@@ -73,6 +73,36 @@ def test_the_drive_controller_applies_the_published_limits():
         np.zeros(7),
     )
     np.testing.assert_allclose(out[:7], 1.0)  # from rest: one period of 1000 N m/s
+
+
+@pytest.mark.parametrize("period", [1e-3, 2e-3, 4e-3], ids=["1 ms", "2 ms", "4 ms"])
+def test_at_any_control_period_the_limiter_keeps_each_command_within_the_gate(period):
+    """The robot applies each command at its next 1 ms cycle, so consecutive commands may
+    differ by 1000 N m/s × 1 ms whatever the control period: the drive's controller at 2 ms
+    limits the rate to 500 N m/s, and a saturating request from rest then, two commands on,
+    passes the last gate (command_problem, built on Franka's cycle, not nsdrake's limiter).
+    Catches the limiter's step taken as the published rate × the period (2 N m a command at
+    2 ms: the gate stopped the drive)."""
+    scenario = dataclasses.replace(load_scenario("panda_wipe"), control_period=period)
+    scenario = dataclasses.replace(scenario, actuator_limits=ActuatorLimitsConfig())
+    controller = build_controller_side(scenario).controller
+    rates = np.array([controller.config.actuator_limits.torque_rate[n] for n in NAMES])
+    np.testing.assert_allclose(rates, 1000.0 * min(1.0, 1e-3 / period))
+    limits = torque_limits(controller.config, controller.model)
+    previous, sent = np.zeros(7), []
+    for request in (np.full(7, 200.0), np.full(7, -200.0)):
+        out = limited_torque(request, np.zeros(7), limits, rates, period, previous, True, np.zeros(7))[:7]
+        assert command_problem(out, previous, NAMES) is None
+        np.testing.assert_allclose(np.abs(out - previous), 1.0)  # the whole allowance, no more
+        previous = out.copy()
+        sent.append(out)
+    with pytest.raises(PandaLimitError) as info:
+        panda_actuator_limits(ActuatorLimitsConfig(torque_rate={"panda_joint1": 800.0}), NAMES, period=2e-3)
+    assert str(info.value) == (
+        "actuator_limits.torque_rate.panda_joint1: 800 N m/s is above the Panda's published limit "
+        "1000 N m/s for joint 1 over its 1 ms cycle, 500 N m/s at a 2 ms control period (each "
+        "command reaches the robot within one cycle)"
+    )
 
 
 @pytest.mark.parametrize("period", [1e-3, 2e-3], ids=["1 ms", "2 ms"])
