@@ -51,7 +51,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -343,9 +342,15 @@ def _share(kernels, missing: list[int], claims: Path) -> None:
 
 def _start_helper(claims: str) -> subprocess.Popen | None:
     """Starts the helper process sharing the compile (:func:`_share`) through the folder
-    ``claims``. It ends when this process ends (it reads its stdin until it closes)
-    and at a Ctrl-C in the terminal (SIGINT ends it: nothing to keep but whole cache files)."""
-    code = "from nsdrake.control.kernels import _helper; _helper()"
+    ``claims``. It ends when this process ends (a thread of its own, started before it
+    imports nsdrake, reads its stdin until it closes) and at a Ctrl-C in the terminal
+    (SIGINT ends it: nothing to keep but whole cache files)."""
+    code = (  # the watch first: importing nsdrake takes seconds on a busy machine
+        "import os, sys, threading\n"
+        "threading.Thread(target=lambda: (sys.stdin.buffer.read(), os._exit(1)), daemon=True).start()\n"
+        "from nsdrake.control.kernels import _helper\n"
+        "_helper()"
+    )
     try:
         return subprocess.Popen(
             [sys.executable, "-c", code, claims],
@@ -378,12 +383,6 @@ def _helper() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-    def orphaned():  # the parent ended: so does the helper, wherever its compile is
-        sys.stdin.buffer.read()
-        os._exit(1)
-
-    threading.Thread(target=orphaned, daemon=True).start()
     _notice.printed = True  # the parent printed the notice
     kernels = _dispatchers()
     with _saves_locked():
