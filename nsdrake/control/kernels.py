@@ -204,12 +204,10 @@ def _entry_points() -> list[tuple[str, str, tuple]]:
     return [
         # the controller's stages (nsdrake.control.stages.run_stages and terms_stage), the largest
         # first (each process takes the next free kernel: the last to end ends the compile)
-        ("nsdrake.control.stages", "torque_stage", (i64, f64, f1, i1, f1, f2, f1, f1, f1)),
-        ("nsdrake.control.stages", "criteria_stage", (f1, i1, i1, f1, f2)),
-        ("nsdrake.control.stages", "selection_stage", (i64, f64, f64, f1, i1, i1, f1, f2, f1, f1)),
+        ("nsdrake.control.stages", "front_stage", (i64, f64, f64, f1, i1, i1, f1, f2, f1, f1)),
+        ("nsdrake.control.stages", "torque_stage", (i64, f64, f1, i1, i1, f1, f2, f1, f1, f1, f1)),
         ("nsdrake.control.stages", "pinocchio_terms",
          (f2F, f1, f1, f2F, f2F, A("float64", 3, "A", readonly=True), f2F, f1, f1, f1, f1, i1, i1, f1)),
-        ("nsdrake.control.stages", "task_stage", (f1, i1, i1, f1, f1, f1)),
         ("nsdrake.control.stages", "complete_terms", (f1, f1, i1, i1)),  # both terms' paths
         ("nsdrake.control.layout", "terms_size", (i1,)),
         ("nsdrake.control.layout", "tick_size", (i1,)),

@@ -215,38 +215,34 @@ def run_stages(
     C-contiguous), so that numba compiles its kernels once per install
     (:mod:`nsdrake.control.kernels`).
 
-    Each stage is a kernel of its own over the same flat arrays, called in turn from here:
-    numba compiles and caches each on its own, so that the first run's two processes
-    compile them at once (:func:`nsdrake.control.kernels.compile_kernels`). One kernel
-    calling the four would compile their code a second time (numba links a callee's code
-    into its caller and optimises and emits it again), for a few calls' dispatch
-    (about a microsecond each) less per tick. The body stays numba's subset: ``njit``
-    compiles it as it is for a kernel that needs the whole tick inside compiled code."""
-    if stages & CRITERIA and criteria_stage(plan, index, dims, terms, criteria):
+    The stages are two kernels over the same flat arrays, stages 2–3 (:func:`front_stage`)
+    and 4–6 (:func:`torque_stage`), called in turn from here: numba compiles and caches
+    each on its own, so that the first run's two processes compile them at once
+    (:func:`nsdrake.control.kernels.compile_kernels`). One kernel calling the two would
+    compile their code a second time (numba links a callee's code into its caller, then
+    optimises and emits it again), for one call's dispatch less per tick. The body stays
+    numba's subset: ``njit`` compiles it as it is for a kernel that needs the whole tick
+    inside compiled code."""
+    front = stages & (CRITERIA | COMMIT | SELECTION | SWEEP | DESIRED)
+    if front and front_stage(stages, t, t_previous, plan, index, dims, terms, criteria, switch, tick):
         return True
-    if stages & (COMMIT | SELECTION | SWEEP | DESIRED):
-        selection_stage(stages, t, t_previous, plan, index, dims, terms, criteria, switch, tick)
-    if stages & TASK:
-        task_stage(plan, index, dims, terms, commands, tick)
-    if stages & (NULL_SPACE | LIMITS | COPY | STORE):
-        torque_stage(stages, t, plan, dims, terms, criteria, previous_qdot, previous_tau, tick)
+    if stages & (TASK | NULL_SPACE | LIMITS | COPY | STORE):
+        torque_stage(
+            stages, t, plan, index, dims, terms, criteria, previous_qdot, previous_tau, commands, tick
+        )
     return False
 
 
 @njit(cache=True)
-def criteria_stage(plan, index, dims, terms, criteria) -> bool:
-    """CRITERIA: stage 2 into ``criteria`` (:func:`_criteria_rows`)."""
-    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
-    return _criteria_rows(T, P, ix, criteria)
-
-
-@njit(cache=True)
-def selection_stage(stages, t, t_previous, plan, index, dims, terms, criteria, switch, tick):
-    """COMMIT (the selector's discrete update at ``t_previous``), SELECTION (stage 3's
-    selector into tick.selection), then DESIRED or SWEEP: q̇_dⁿ into tick.qdot, the posture
-    criterion's, the sweep's or the selector's."""
+def front_stage(stages, t, t_previous, plan, index, dims, terms, criteria, switch, tick) -> bool:
+    """CRITERIA (stage 2 into ``criteria``; True, and nothing more, when its obstacle row
+    needs Drake's queries), COMMIT (the selector's discrete update at ``t_previous``),
+    SELECTION (stage 3's selector into tick.selection), then DESIRED or SWEEP: q̇_dⁿ into
+    tick.qdot, the posture criterion's, the sweep's or the selector's."""
     T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
     out = tick_views(tick, dims)
+    if stages & CRITERIA and _criteria_rows(T, P, ix, criteria):
+        return True
     if stages & COMMIT:
         _commit_switch(P, criteria, switch, t_previous)
     if stages & SELECTION:
@@ -259,27 +255,23 @@ def selection_stage(stages, t, t_previous, plan, index, dims, terms, criteria, s
             out.qdot[:] = sweep_velocity(T.N, P.direction, sweep_amplitude(t, w[0], w[1], w[2], w[3]))
         else:
             out.qdot[:] = out.selection[: T.q.shape[0]]
+    return False
 
 
 @njit(cache=True)
-def task_stage(plan, index, dims, terms, commands, tick):
-    """TASK: stage 4 into tick.task, a pose or a position task."""
+def torque_stage(stages, t, plan, index, dims, terms, criteria, previous_qdot, previous_tau, commands, tick):
+    """TASK (stage 4 into tick.task, a pose or a position task), NULL_SPACE (stage 5, q̇_dⁿ
+    from tick.qdot, into tick.null_space: the paper's law or a posture law), LIMITS (stage 6,
+    from tick.task and tick.null_space, into tick.limited), COPY (the criteria and x into
+    the tick) and STORE (tick.qdot and tick.limited's τ as the previous values)."""
     T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
     out = tick_views(tick, dims)
-    if ix.rot_rows.shape[0]:
-        _pose_task(T, P, ix, commands, out.task)
-    else:
-        _position_task(T, P, ix, commands, out.task)
-
-
-@njit(cache=True)
-def torque_stage(stages, t, plan, dims, terms, criteria, previous_qdot, previous_tau, tick):
-    """NULL_SPACE (stage 5, q̇_dⁿ from tick.qdot, into tick.null_space: the paper's law or a
-    posture law), LIMITS (stage 6, from tick.task and tick.null_space, into tick.limited),
-    COPY (the criteria and x into the tick) and STORE (tick.qdot and tick.limited's τ as the
-    previous values)."""
-    T, P, out = terms_views(terms, dims), plan_views(plan, dims), tick_views(tick, dims)
     n = T.q.shape[0]
+    if stages & TASK:
+        if ix.rot_rows.shape[0]:
+            _pose_task(T, P, ix, commands, out.task)
+        else:
+            _position_task(T, P, ix, commands, out.task)
     if stages & NULL_SPACE:
         if P.law == PAPER:
             _null_space(T, P, out.qdot, previous_qdot, out.null_space)

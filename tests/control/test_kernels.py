@@ -283,7 +283,7 @@ def test_on_a_fresh_cache_a_user_s_commands_print_the_compile_notice_once(tmp_pa
     )
     assert done.returncode == 0, done.stderr[-3000:]
     cached = done.stdout.splitlines()
-    for kernel in ("criteria_stage", "selection_stage", "task_stage", "torque_stage", "pinocchio_terms"):
+    for kernel in ("front_stage", "torque_stage", "pinocchio_terms", "complete_terms"):
         assert any(line.startswith(f"nsdrake.control.stages.{kernel} 1 ") for line in cached), cached
     assert [line for line in cached if line.split()[1] != "1"] == []
 
