@@ -60,9 +60,11 @@ from numba.core.caching import _CacheLocator
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
 # The one line a first run prints; the time is compile_kernels' wall time on 2 idle cores of
-# the project's machine kind: about the helper's CPU time (bench/bench_kernels.py --compile:
-# 74 CPU-s under load 11-16, the same chain 50 CPU-s at load 5-7; docs/architecture.md).
-NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about a minute on 2 cores)…"
+# the project's machine kind: about the CPU time of the busier of its two processes. The
+# first fig3 run took 55.8 s wall idle when that process had 80-93 CPU-s under load (the
+# helper compiling run_stages whole); now it has 0.77-0.79 of that in the same runs
+# (docs/architecture.md): under a minute, the idle figure still to be measured.
+NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (under a minute on 2 cores)…"
 
 
 def kernel_sources(package: Path = PACKAGE) -> list[Path]:
