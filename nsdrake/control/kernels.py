@@ -59,11 +59,9 @@ from numba.core.caching import _CacheLocator
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
-# The one line a first run prints; the time is compile_kernels' wall time on 2 idle cores of
-# the project's machine kind: about the CPU time of the busier of its two processes. The
-# first fig3 run took 55.8 s wall idle when that process had 80-93 CPU-s under load (the
-# helper compiling run_stages whole); now it has 0.77-0.79 of that in the same runs
-# (docs/architecture.md): under a minute, the idle figure still to be measured.
+# The one line a first run prints; the time is compile_kernels' wall time on 2 quiet cores of
+# the project's machine kind: about the CPU time of the busier of its two processes, 49 and
+# 54 CPU-s in a first fig3 run of 67.2 s wall on a quiet machine (docs/architecture.md).
 NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (under a minute on 2 cores)…"
 
 
