@@ -2,7 +2,7 @@
 against another (issue 36: "compiled once per install, whatever the configuration").
 
     python bench/bench_kernels.py --old /tmp/kernels-old [--duration S] [--rounds N] [--calls N]
-    python bench/bench_kernels.py --compile [--old /tmp/kernels-old]
+    python bench/bench_kernels.py --compile [--no-profile] [--old /tmp/kernels-old]
 
 ``--compile`` (issue 44, item 4) profiles ``compile_kernels()`` alone on an empty cache, each
 tree in a child process of its own: the CPU time of each kernel's compile, exclusive of the
@@ -10,9 +10,11 @@ kernels it compiles on the way (numba compiles a kernel's callees inside its com
 by stage (numba's passes: typing, lowering, ...; LLVM: function passes, module passes,
 machine code), from numba's compile and pass events and timers around LLVM's calls; the
 kernels sorted by CPU time, each with the CPU time of the other tree's same kernel and
-their ratio; then the compile as a run does it (with this tree's helper process on the
-second core): its wall time and the CPU time of both processes. On a loaded machine, read
-the CPU times and the ratios; the wall time counts only on an idle one (the load is printed).
+their ratio; then the compile as a run does it (with each tree's helper process on the
+second core), the trees at once so that they see the same load (``--no-profile``: this
+alone): its wall time and the CPU time of both processes. On a loaded machine, read the
+CPU times and the ratios (the busier process's CPU time is what an idle machine's wall
+time follows); the wall time counts only on an idle one (the load is printed).
 
 ``--old`` is a checkout of the code to compare with (``git worktree add --detach
 /tmp/kernels-old main``); both trees run with this interpreter, each from its own folder
@@ -46,6 +48,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -231,13 +234,37 @@ def first_run(tree: Path, scenario: str, cache: Path, out: Path, duration: float
     return row
 
 
-def compile_profile(trees: dict[str, Path]) -> dict:
+def as_a_run(trees: dict[str, Path], scratch: Path) -> dict:
+    """compile_kernels as a run calls it (COMPILE), every tree at once on an empty cache
+    of its own, so that all see the same load: {tree: figures}."""
+    runs: dict[str, dict] = {}
+
+    def run(name: str, tree: Path) -> None:
+        cache = {"NUMBA_CACHE_DIR": str(scratch / name / "run-cache")}
+        done, _, cpu = child(tree, ["-c", COMPILE], cache)
+        if done.returncode != 0:
+            print(done.stderr[-3000:], file=sys.stderr)
+            return
+        compile_wall, own, helpers = map(float, done.stdout.split()[-3:])
+        runs[name] = {"compile_wall": compile_wall, "own_cpu": own, "helpers_cpu": helpers, "cpu": cpu}
+
+    workers = [threading.Thread(target=run, args=item) for item in trees.items()]
+    for worker in workers:
+        worker.start()
+    for worker in workers:
+        worker.join()
+    if set(runs) != set(trees):
+        raise SystemExit(f"the compile of {sorted(set(trees) - set(runs))} failed")
+    return runs
+
+
+def compile_profile(trees: dict[str, Path], profile: bool = True) -> dict:
     """The ``--compile`` figures (module docstring), printed; returned for the JSON line."""
     load_before = os.getloadavg()
     print(f"load before: {load_before[0]:.1f} {load_before[1]:.1f} {load_before[2]:.1f}", flush=True)
-    profiles, runs = {}, {}
+    profiles = {}
     with tempfile.TemporaryDirectory(prefix="bench-kernels-") as scratch:
-        for name, tree in trees.items():
+        for name, tree in trees.items() if profile else ():
             out = Path(scratch) / f"{name}.json"
             cache = {"NUMBA_CACHE_DIR": str(Path(scratch) / name / "profile-cache")}
             done, wall, cpu = child(tree, ["-c", PROFILE, str(out)], cache)
@@ -245,24 +272,19 @@ def compile_profile(trees: dict[str, Path]) -> dict:
                 print(done.stderr[-3000:], file=sys.stderr)
                 raise SystemExit(f"the compile profile of {name} failed")
             profiles[name] = json.loads(out.read_text()) | {"process_cpu": cpu, "process_wall": wall}
-            cache = {"NUMBA_CACHE_DIR": str(Path(scratch) / name / "run-cache")}
-            done, wall, cpu = child(tree, ["-c", COMPILE], cache)
-            if done.returncode != 0:
-                print(done.stderr[-3000:], file=sys.stderr)
-                raise SystemExit(f"the compile of {name} failed")
-            compile_wall, own, helpers = map(float, done.stdout.split()[-3:])
-            runs[name] = {"compile_wall": compile_wall, "own_cpu": own, "helpers_cpu": helpers, "cpu": cpu}
-            print(f"  {name}: profiled and compiled", flush=True)
+            print(f"  {name}: profiled", flush=True)
+        runs = as_a_run(trees, Path(scratch))
     load_after = os.getloadavg()
 
     def exclusive(stages: dict) -> float:
         return sum(v for s, v in stages.items() if s != "inclusive")
 
-    new = profiles["new"]["kernels"]
+    new = profiles.get("new", {}).get("kernels", {})
     other = {n: p["kernels"] for n, p in profiles.items() if n != "new"}
-    print("per kernel, CPU s of its own compile (exclusive of the kernels compiled inside it), new tree:")
-    header = "  ".join(f"{s[:12]:>12s}" for s in STAGES)
-    print(f"  {'own':>6s} {'incl.':>6s}  {'old':>6s} {'new/old':>7s}  {header}  kernel(argument types)")
+    if new:
+        print("per kernel, CPU s of its own compile (exclusive of the kernels compiled inside it), new tree:")
+        header = "  ".join(f"{s[:12]:>12s}" for s in STAGES)
+        print(f"  {'own':>6s} {'incl.':>6s}  {'old':>6s} {'new/old':>7s}  {header}  kernel(argument types)")
     for key, stages in sorted(new.items(), key=lambda kv: -exclusive(kv[1])):
         old = other.get("old", {}).get(key)
         mine = exclusive(stages)
@@ -276,7 +298,7 @@ def compile_profile(trees: dict[str, Path]) -> dict:
             print(f"kernels the {name} tree compiles and the new one does not (CPU s):")
             for key in sorted(gone, key=lambda k: -exclusive(kernels[k])):
                 print(f"  {exclusive(kernels[key]):6.2f}  {key[:160]}")
-    print("in all (CPU s; compiles; by stage):")
+    print("in all (CPU s; compiles; by stage):" if profiles else "in all (CPU s):")
     for name, profile in profiles.items():
         totals = {s: sum(k.get(s, 0.0) for k in profile["kernels"].values()) for s in STAGES}
         stages = ", ".join(f"{s} {v:.1f}" for s, v in totals.items())
@@ -288,8 +310,11 @@ def compile_profile(trees: dict[str, Path]) -> dict:
               f"{run['own_cpu']:.1f} s CPU in its process, {run['helpers_cpu']:.1f} s in its helper "
               f"(idle, the wall time would be about {idle:.1f} s)")  # fmt: skip
     if "old" in profiles:
-        print(f"  new/old: CPU {profiles['new']['cpu'] / profiles['old']['cpu']:.2f}, wall as a run "
-              f"{runs['new']['compile_wall'] / runs['old']['compile_wall']:.2f}")  # fmt: skip
+        print(f"  new/old: CPU in one process {profiles['new']['cpu'] / profiles['old']['cpu']:.2f}")
+    if "old" in runs:
+        busier = {name: max(run["own_cpu"], run["helpers_cpu"]) for name, run in runs.items()}
+        print(f"  new/old as a run: the busier process's CPU {busier['new'] / busier['old']:.2f}, "
+              f"wall {runs['new']['compile_wall'] / runs['old']['compile_wall']:.2f}")  # fmt: skip
     print(f"load after: {load_after[0]:.1f} {load_after[1]:.1f} {load_after[2]:.1f}")
     return {"profiles": profiles, "runs": runs, "load": [load_before, load_after]}
 
@@ -298,6 +323,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--old", type=Path, help="checkout of the code to compare with")
     parser.add_argument("--compile", action="store_true", help="profile the compile alone, per kernel")
+    parser.add_argument(
+        "--no-profile", action="store_true", help="with --compile: only the compile as a run calls it"
+    )
     parser.add_argument(
         "--duration", type=float, help="simulated time of each first run [s] (default: the scenario's)"
     )
@@ -309,7 +337,7 @@ def main():
     args = parser.parse_args()
     if args.compile:
         trees = {"new": HERE} | ({"old": args.old.resolve()} if args.old else {})
-        print(json.dumps(compile_profile(trees)))
+        print(json.dumps(compile_profile(trees, profile=not args.no_profile)))
         return
     if args.old is None:
         parser.error("--old is needed (but for --compile)")

@@ -17,14 +17,19 @@ Three things numba leaves to its user:
   compiles for one list of argument types only (the callers convert their arrays): no
   kernel is specialised twice.
 - **Both cores.** numba compiles in one thread, and one process compiles one kernel at a
-  time. :func:`compile_kernels` therefore has a second process (:func:`_helper`) compile
-  the largest kernel, :func:`nsdrake.control.stages.run_stages`, into numba's on-disk
-  cache while this one compiles the others, then loads it. numba writes each cache file
-  whole (by rename), but it saves a kernel by reading that kernel's index, adding the new
-  entry and writing the index back: two processes saving two versions of one kernel (a
-  callee both compile, e.g. for two literal arguments) could lose one, or file one's
-  machine code under the other's types. So while :func:`compile_kernels` runs, every save
-  holds a lock shared by the processes (:func:`_saves_locked`).
+  time. :func:`compile_kernels` therefore has a second process (:func:`_helper`) share
+  the work: both walk one list of the kernels missing from the cache, the largest first,
+  and each compiles the kernels it is the first to claim (:func:`_share`), into numba's
+  on-disk cache; this process then loads the helper's. For this the controller's stages
+  are kernels of their own, called in turn from Python (:func:`nsdrake.control.stages.run_stages`):
+  numba compiles a kernel's callees into it (it links their code in, then optimises and
+  emits it again), so one kernel for the whole tick was one process's work, twice. numba
+  writes each cache file whole (by rename), but it saves a kernel by reading that
+  kernel's index, adding the new entry and writing the index back: two processes saving
+  two versions of one kernel (a callee both compile, e.g. for two literal arguments)
+  could lose one, or file one's machine code under the other's types. So while
+  :func:`compile_kernels` runs, every save holds a lock shared by the processes
+  (:func:`_saves_locked`).
 
 - **A notice.** Compiling takes tens of seconds, during which a run prints nothing.
   :func:`announce_compiling` listens to numba's compile events and prints one line, once
@@ -45,7 +50,7 @@ import hashlib
 import os
 import subprocess
 import sys
-import threading
+import tempfile
 import time
 from pathlib import Path
 
@@ -54,13 +59,10 @@ from numba.core.caching import _CacheLocator
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
-# The one line a first run prints; the time is compile_kernels' wall time on 2 idle cores of
-# the project's machine kind: about the helper's CPU time (bench/bench_kernels.py --compile:
-# 74 CPU-s under load 11-16, the same chain 50 CPU-s at load 5-7; docs/architecture.md).
-NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (about a minute on 2 cores)…"
-# The kernels the helper process compiles (module docstring): the longest chain, run_stages
-# and its callees, about two thirds of the CPU time (the run's process compiles the rest).
-HELPER_SHARE = ("run_stages", "segments_box", "segments_sphere")
+# The one line a first run prints; the time is compile_kernels' wall time on 2 quiet cores of
+# the project's machine kind: about the CPU time of the busier of its two processes, 49 and
+# 54 CPU-s in a first fig3 run of 67.2 s wall on a quiet machine (docs/architecture.md).
+NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (under a minute on 2 cores)…"
 
 
 def kernel_sources(package: Path = PACKAGE) -> list[Path]:
@@ -206,11 +208,13 @@ def _entry_points() -> list[tuple[str, str, tuple]]:
     f2F, b2 = A("float64", 2, "F"), A("bool_", 2)
     u1, u2 = A("uint8", 1), A("uint8", 2)
     return [
-        # the controller's stages (nsdrake.control.plan): Pinocchio's arrays, then the plan's
-        ("nsdrake.control.stages", "run_stages", (i64, f64, f64, f1, i1, i1, f1, f2, f1, f1, f1, f1, f1)),
-        ("nsdrake.control.stages", "terms_stage",
+        # the controller's stages (nsdrake.control.stages.run_stages and terms_stage), the largest
+        # first (each process takes the next free kernel: the last to end ends the compile)
+        ("nsdrake.control.stages", "front_stage", (i64, f64, f64, f1, i1, i1, f1, f2, f1, f1)),
+        ("nsdrake.control.stages", "torque_stage", (i64, f64, f1, i1, i1, f1, f2, f1, f1, f1, f1)),
+        ("nsdrake.control.stages", "pinocchio_terms",
          (f2F, f1, f1, f2F, f2F, A("float64", 3, "A", readonly=True), f2F, f1, f1, f1, f1, i1, i1, f1)),
-        ("nsdrake.control.stages", "complete_terms", (f1, f1, i1, i1)),  # the Drake terms' path
+        ("nsdrake.control.stages", "complete_terms", (f1, f1, i1, i1)),  # both terms' paths
         ("nsdrake.control.layout", "terms_size", (i1,)),
         ("nsdrake.control.layout", "tick_size", (i1,)),
         ("nsdrake.control.layout", "_take", (f1, i64, i64)),
@@ -302,9 +306,10 @@ def compile_kernels(helper: bool = True) -> None:
     later run of any scenario finds them all in the cache (issue 36). Called where a
     controller is built (:class:`nsdrake.control.plan.ControllerPlan`).
 
-    When kernels are missing from the cache, a second process compiles
-    :data:`HELPER_SHARE` meanwhile (``helper``; module docstring); this one then loads
-    them, or compiles them itself if the helper could not."""
+    When kernels are missing from the cache, a second process (``helper``) and this one
+    share the work (:func:`_share`): each takes the next kernel of :func:`_entry_points`
+    that neither has taken, until none is left; this one then waits for the helper and
+    loads what it compiled."""
     if getattr(compile_kernels, "done", False):
         return
     with _saves_locked():
@@ -314,18 +319,16 @@ def compile_kernels(helper: bool = True) -> None:
 
 def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
     if helper and (os.cpu_count() or 1) > 1:
-        missing = [d.py_func.__name__ for d, a in kernels if not _cached(d, a)]
-        theirs = [k for k, (d, _) in enumerate(kernels) if d.py_func.__name__ in HELPER_SHARE]
-        if set(missing) & set(HELPER_SHARE) and len(missing) > len(theirs):
+        missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
+        if len(missing) > 1:
             # A compile from the notice on (compiling(): a Ctrl-C then ends the run at once),
             # waiting for the helper included.
-            with _notice.waiting():
+            with _notice.waiting(), tempfile.TemporaryDirectory(prefix="nsdrake-kernels-") as claims:
                 _notice.announce()
-                started, compiled = _start_helper(theirs), False
+                started, compiled = _start_helper(claims), False
                 try:
-                    for k, (dispatcher, arguments) in enumerate(kernels):
-                        if started is None or k not in theirs:
-                            dispatcher.compile(arguments)
+                    if started is not None:
+                        _share(kernels, missing, Path(claims))
                     compiled = True
                 finally:
                     if started is not None:
@@ -334,14 +337,33 @@ def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
         dispatcher.compile(arguments)
 
 
-def _start_helper(indices: list[int]) -> subprocess.Popen | None:
-    """Starts the helper process compiling the kernels ``indices`` of :func:`_entry_points`
-    into the cache. It ends when this process ends (it reads its stdin until it closes)
-    and at a Ctrl-C in the terminal (SIGINT ends it: nothing to keep but whole cache files)."""
-    code = "from nsdrake.control.kernels import _helper; _helper()"
+def _share(kernels, missing: list[int], claims: Path) -> None:
+    """Compiles, in :func:`_entry_points`' order, each kernel of ``missing`` that this
+    process is the first to claim: a file created in ``claims``, a folder shared with the
+    other process (creation is atomic: one of two processes creating it gets an error)."""
+    for k in missing:
+        try:
+            os.close(os.open(claims / f"{k}", os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            continue
+        dispatcher, arguments = kernels[k]
+        dispatcher.compile(arguments)
+
+
+def _start_helper(claims: str) -> subprocess.Popen | None:
+    """Starts the helper process sharing the compile (:func:`_share`) through the folder
+    ``claims``. It ends when this process ends (a thread of its own, started before it
+    imports nsdrake, reads its stdin until it closes) and at a Ctrl-C in the terminal
+    (SIGINT ends it: nothing to keep but whole cache files)."""
+    code = (  # the watch first: importing nsdrake takes seconds on a busy machine
+        "import os, sys, threading\n"
+        "threading.Thread(target=lambda: (sys.stdin.buffer.read(), os._exit(1)), daemon=True).start()\n"
+        "from nsdrake.control.kernels import _helper\n"
+        "_helper()"
+    )
     try:
         return subprocess.Popen(
-            [sys.executable, "-c", code, *map(str, indices)],
+            [sys.executable, "-c", code, claims],
             stdin=subprocess.PIPE,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
@@ -366,20 +388,13 @@ def _wait(process: subprocess.Popen, wait: bool) -> None:
 
 
 def _helper() -> None:
-    """The helper process (:func:`compile_kernels`): compiles the kernels whose indices are
-    its arguments into numba's cache, silently."""
+    """The helper process (:func:`compile_kernels`): compiles its share of the missing
+    kernels (:func:`_share`, the claims folder its argument) into numba's cache, silently."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-    def orphaned():  # the parent ended: so does the helper, wherever its compile is
-        sys.stdin.buffer.read()
-        os._exit(1)
-
-    threading.Thread(target=orphaned, daemon=True).start()
     _notice.printed = True  # the parent printed the notice
     kernels = _dispatchers()
     with _saves_locked():
-        for k in sys.argv[1:]:
-            dispatcher, arguments = kernels[int(k)]
-            dispatcher.compile(arguments)
+        missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
+        _share(kernels, missing, Path(sys.argv[1]))

@@ -341,7 +341,7 @@ class ControllerPlan:
     ) -> None:
         """:meth:`run` with each array given (views of a system's ports and state). The times
         and the stages go as a float and an int whatever the caller's numbers, so that
-        :func:`run_stages` keeps its one compiled signature."""
+        :func:`run_stages`' kernels keep their one compiled signature."""
         if run_stages(
             int(stages), float(t), float(t_previous), self.plan, self.index, self.dims, terms, criteria,
             switch, previous_qdot, previous_tau, commands, tick,

@@ -23,10 +23,10 @@ the math inside each stage is the math of its own module, called, never restated
    (:mod:`actuator_limits`), from the stored previous τ; the torque window about g(q) of
    stage 1 for a robot that adds g itself (the plan's ``limits_about_gravity``).
 
-Stages 2–6 and the two discrete updates are one compiled function, :func:`run_stages`,
-which runs the stages it is asked for (a bit set) in this order; each named system asks
-for its own stage, the fused system and :class:`nsdrake.ControllerStep` for all of them.
-One function compiled once, for every way of running the controller.
+Stages 2–6 and the two discrete updates are one function, :func:`run_stages`, which runs
+the stages it is asked for (a bit set) in this order; each named system asks for its own
+stage, the fused system and :class:`nsdrake.ControllerStep` for all of them. One function,
+its four stage kernels each compiled once, for every way of running the controller.
 
 **The discrete state** is three arrays, never hidden in a stage: the selector's switch
 state [mode, mode blended from, switch time], the previous q̇_dⁿ [q̇_dⁿ (n); 1 if it
@@ -119,12 +119,23 @@ PLAIN_STEP = CRITERIA | COMMIT | TICK | STORE  # a plain loop's tick after stage
 # ---------------------------------------------------------------- 1. model terms
 
 
-@njit(cache=True)
 def terms_stage(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms):
     """Stage 1 from Pinocchio's arrays, read in place after ``computeAllTerms`` (M, nle, g,
     the world joint Jacobians J_pin, the joint poses X_pin (nj, 3, 4)),
     ``computeCoriolisMatrix`` (C, when the plan wants it) and ``updateFramePlacement``
-    (the tool's R_tool, p_tool), all in Pinocchio's joint order; q, v in the model's."""
+    (the tool's R_tool, p_tool), all in Pinocchio's joint order; q, v in the model's:
+    :func:`pinocchio_terms`, then :func:`complete_terms`, which the Drake terms' path calls
+    too: two kernels, since one kernel calling both would compile complete_terms' code a
+    second time (:func:`run_stages`)."""
+    pinocchio_terms(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms)
+    complete_terms(terms, plan, index, dims)
+
+
+@njit(cache=True)
+def pinocchio_terms(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, dims, terms):
+    """Stage 1's first part from Pinocchio's arrays (:func:`terms_stage`): q, v, H, H⁻¹,
+    C q̇, g, C (when the plan wants it), the joint Jacobians and poses, the tool's pose and
+    its Jacobian J_spatial, in the model's joint order."""
     T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
     n, o = T.q.shape[0], ix.order
     H, H_inv = symmetric_and_inverse(M)
@@ -139,7 +150,6 @@ def terms_stage(M, nle, g, C, J_pin, X_pin, R_tool, p_tool, q, v, plan, index, d
     T.p_WT[:], T.R_WT[:] = p_tool, R_tool
     T.X_joints[:] = X_pin
     _tool_jacobian(T.J_joints, p_tool, ix.tool_support, T.J_spatial)
-    _complete_terms(T, P, ix)
 
 
 @njit(cache=True, inline="always")
@@ -185,7 +195,6 @@ def _complete_terms(T, P, ix):
 # ---------------------------------------------------------------- stages 2–6 and the updates
 
 
-@njit(cache=True)
 def run_stages(
     stages, t, t_previous, plan, index, dims, terms, criteria, switch, previous_qdot, previous_tau,
     commands, tick,
@@ -203,14 +212,35 @@ def run_stages(
     obstacles in closed form) is read from the plan and the index at run time, never
     specialised at compile time: one compiled version serves every controller, and the
     arguments' types never change (an int, two floats, float64 and int64 arrays,
-    C-contiguous), so that numba compiles it once per install (:mod:`nsdrake.control.kernels`)."""
-    T, P, ix, out = (
-        terms_views(terms, dims),
-        plan_views(plan, dims),
-        index_views(index, dims),
-        tick_views(tick, dims),
-    )
-    n = T.q.shape[0]
+    C-contiguous), so that numba compiles its kernels once per install
+    (:mod:`nsdrake.control.kernels`).
+
+    The stages are two kernels over the same flat arrays, stages 2–3 (:func:`front_stage`)
+    and 4–6 (:func:`torque_stage`), called in turn from here: numba compiles and caches
+    each on its own, so that the first run's two processes compile them at once
+    (:func:`nsdrake.control.kernels.compile_kernels`). One kernel calling the two would
+    compile their code a second time (numba links a callee's code into its caller, then
+    optimises and emits it again), for one call's dispatch less per tick. The body stays
+    numba's subset: ``njit`` compiles it as it is for a kernel that needs the whole tick
+    inside compiled code."""
+    front = stages & (CRITERIA | COMMIT | SELECTION | SWEEP | DESIRED)
+    if front and front_stage(stages, t, t_previous, plan, index, dims, terms, criteria, switch, tick):
+        return True
+    if stages & (TASK | NULL_SPACE | LIMITS | COPY | STORE):
+        torque_stage(
+            stages, t, plan, index, dims, terms, criteria, previous_qdot, previous_tau, commands, tick
+        )
+    return False
+
+
+@njit(cache=True)
+def front_stage(stages, t, t_previous, plan, index, dims, terms, criteria, switch, tick) -> bool:
+    """CRITERIA (stage 2 into ``criteria``; True, and nothing more, when its obstacle row
+    needs Drake's queries), COMMIT (the selector's discrete update at ``t_previous``),
+    SELECTION (stage 3's selector into tick.selection), then DESIRED or SWEEP: q̇_dⁿ into
+    tick.qdot, the posture criterion's, the sweep's or the selector's."""
+    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
+    out = tick_views(tick, dims)
     if stages & CRITERIA and _criteria_rows(T, P, ix, criteria):
         return True
     if stages & COMMIT:
@@ -224,7 +254,19 @@ def run_stages(
             w = P.sweep_wave
             out.qdot[:] = sweep_velocity(T.N, P.direction, sweep_amplitude(t, w[0], w[1], w[2], w[3]))
         else:
-            out.qdot[:] = out.selection[:n]
+            out.qdot[:] = out.selection[: T.q.shape[0]]
+    return False
+
+
+@njit(cache=True)
+def torque_stage(stages, t, plan, index, dims, terms, criteria, previous_qdot, previous_tau, commands, tick):
+    """TASK (stage 4 into tick.task, a pose or a position task), NULL_SPACE (stage 5, q̇_dⁿ
+    from tick.qdot, into tick.null_space: the paper's law or a posture law), LIMITS (stage 6,
+    from tick.task and tick.null_space, into tick.limited), COPY (the criteria and x into
+    the tick) and STORE (tick.qdot and tick.limited's τ as the previous values)."""
+    T, P, ix = terms_views(terms, dims), plan_views(plan, dims), index_views(index, dims)
+    out = tick_views(tick, dims)
+    n = T.q.shape[0]
     if stages & TASK:
         if ix.rot_rows.shape[0]:
             _pose_task(T, P, ix, commands, out.task)
@@ -242,7 +284,6 @@ def run_stages(
     if stages & STORE:
         previous_qdot[:n], previous_qdot[n] = out.qdot, 1.0
         previous_tau[:n], previous_tau[n] = out.limited[:n], 1.0
-    return False
 
 
 # ---------------------------------------------------------------- 2. criteria

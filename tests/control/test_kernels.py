@@ -292,7 +292,8 @@ def test_on_a_fresh_cache_a_user_s_commands_print_the_compile_notice_once(tmp_pa
     )
     assert done.returncode == 0, done.stderr[-3000:]
     cached = done.stdout.splitlines()
-    assert any(line.startswith("nsdrake.control.stages.run_stages 1 ") for line in cached), cached
+    for kernel in ("front_stage", "torque_stage", "pinocchio_terms", "complete_terms"):
+        assert any(line.startswith(f"nsdrake.control.stages.{kernel} 1 ") for line in cached), cached
     assert [line for line in cached if line.split()[1] != "1"] == []
 
 
@@ -311,10 +312,11 @@ def _children(pid: int) -> list[int]:
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux's /proc")
 def test_the_helper_compiling_for_a_killed_run_ends_with_it(tmp_path):
-    """compile_kernels on an empty cache has a helper process compile run_stages on the
-    second core. A run killed meanwhile (SIGKILL: no handler, no cleanup) must not leave
+    """compile_kernels on an empty cache has a helper process compile half the kernels on
+    the second core. A run killed meanwhile (SIGKILL: no handler, no cleanup) must not leave
     the helper compiling for a minute on a core of its own. Catches a helper that does not
-    watch its parent (its stdin closing)."""
+    watch its parent (its stdin closing), or watches it only once it has imported nsdrake
+    (seconds on a busy machine: at load 17 it outlived the test's 10 s)."""
     import signal
     import time
 
@@ -349,3 +351,45 @@ def _state(pid: int) -> str:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
     except OSError:
         return "Z"
+
+
+class _Kernel:
+    """A stand-in for a numba dispatcher: compiling it takes a while and is logged."""
+
+    def __init__(self, name: str, log: list):
+        self.py_func, self.log = SimpleNamespace(__name__=name), log
+
+    def compile(self, arguments):
+        import threading
+        import time
+
+        self.log.append((threading.current_thread().name, self.py_func.__name__))
+        time.sleep(0.02)
+
+
+def test_the_two_processes_compile_each_missing_kernel_once(tmp_path):
+    """compile_kernels' two processes take the missing kernels from one list
+    (kernels._share, here in two threads over one claims folder): each kernel is compiled
+    by one of them, and both get a share. Catches a claim that is not exclusive (both
+    compile every kernel: twice the CPU time, no wall time saved) and a helper that takes
+    nothing (the compile on one core)."""
+    import threading
+
+    from nsdrake.control.kernels import _share
+
+    names = [f"kernel{k}" for k in range(16)]
+    log: list = []
+    workers = [
+        threading.Thread(
+            target=_share,
+            args=([(_Kernel(n, log), ()) for n in names], list(range(16)), tmp_path),
+            name=name,
+        )
+        for name in ("run", "helper")
+    ]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    assert sorted(what for _, what in log) == sorted(names)
+    assert {who for who, _ in log} == {"run", "helper"}
