@@ -322,12 +322,11 @@ class ArmModel:
         # and T_D D, the inertia it adds over a held command, is on H's diagonal (class docstring).
         self.damping = np.array([j.default_damping() for j in self.joints], dtype=float)
         self._damped = bool(np.any(self.damping))
-        from nsdrake.control.validation import damping_time_problem  # validation imports this module
-
-        problem = damping_time_problem(damping_time)
-        if problem:
-            raise ValueError(f"damping_time: {problem}")
+        # ControllerModel refuses a bad damping_time in one line (validation.damping_time_problem,
+        # which imports this module); here only what makes the term meaningless is stopped
         self.damping_time = float(damping_time)
+        if not (math.isfinite(self.damping_time) and self.damping_time >= 0.0):
+            raise ValueError(f"damping_time: must be a finite time >= 0 [s], got {damping_time!r}")
         self.damping_inertia = self.damping_time * self.damping  # (n,) T_D D [kg m² or kg]
         self._damping_inertia = bool(np.any(self.damping_inertia))
         self.inboard = self._inboard_matrix()

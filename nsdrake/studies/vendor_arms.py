@@ -238,6 +238,25 @@ def simulated_plant(arm: VendorArm, model, damping: bool = True):
     )
 
 
+def held_model(arm: VendorArm, compensate: bool, damping_time: float):
+    """The controller's model of ``arm`` for :func:`hold` and its task axes: the file's damping
+    with ``damping_time`` (``compensate``), or the damping zeroed in the model."""
+    model, axes = load(arm, damping_time=damping_time if compensate else 0.0)
+    if not compensate:
+        model.arm.damping[:] = 0.0
+        model.arm._damped = False
+        if model.pinocchio is not None:
+            model.pinocchio._damping = None
+    return model, axes
+
+
+def tool_errors(X, p_d, R_d) -> tuple[float, float]:
+    """The tool's position error ‖p − p_d‖ [m] at pose ``X`` and the rotation angle of
+    R_dᵀ R [rad] (0 where ``R_d`` is None: a position task)."""
+    angle = 0.0 if R_d is None else abs(float(R_d.inverse().multiply(X.rotation()).ToAngleAxis().angle()))
+    return float(np.linalg.norm(X.translation() - p_d)), angle
+
+
 def hold(
     arm: VendorArm,
     duration: float = DURATION,
@@ -252,12 +271,7 @@ def hold(
     from nsdrake.control import ControllerStep
     from nsdrake.control.controller import torque_limits
 
-    model, axes = load(arm, damping_time=damping_time if compensate else 0.0)
-    if not compensate:
-        model.arm.damping[:] = 0.0
-        model.arm._damped = False
-        if model.pinocchio is not None:
-            model.pinocchio._damping = None
+    model, axes = held_model(arm, compensate, damping_time)
     config = hold_config()
     step = ControllerStep(controller_model=model, config=config, task_axes=axes)
     limits = torque_limits(config, model)
@@ -290,11 +304,8 @@ def hold(
         worst_effort = max(worst_effort, float(np.max(np.abs(result.tau) / limits)))
         force.GetMutableData().set_value(tau)
         simulator.AdvanceTo((k + 1) * PERIOD)
-        X = tool.CalcPoseInWorld(plant.GetMyContextFromRoot(context))
-        worst_p = max(worst_p, float(np.linalg.norm(X.translation() - p_d)))
-        if len(axes) == 6:
-            angle = R_d.inverse().multiply(X.rotation()).ToAngleAxis().angle()
-            worst_angle = max(worst_angle, abs(float(angle)))
+        errors = tool_errors(tool.CalcPoseInWorld(context), p_d, R_d if len(axes) == 6 else None)
+        worst_p, worst_angle = max(worst_p, errors[0]), max(worst_angle, errors[1])
         motion = max(motion, float(np.max(np.abs(plant.GetPositions(context)[q_index] - q0))))
     return Hold(
         n=model.n,
