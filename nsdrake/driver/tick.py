@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
 from nsdrake.driver.faults import SLOW_STREAM, anchor_step, clock_verdict, elapsed_periods
 
@@ -51,7 +52,7 @@ SCRATCH = 136  # the tick's scratch: a status's 57 doubles, its 4 integers, 64 d
 STATUS_NOT, STATUS_JOINTS, STATUS_SIZE_WRONG = 1, 2, 3  # decode_status's verdicts (0: a status)
 
 
-@njit(cache=True)
+@register_jitable  # compiled inside each kernel that reads the bytes: no dispatcher of its own
 def _u64(data, at):
     value = np.uint64(0)
     for k in range(8):
@@ -59,12 +60,12 @@ def _u64(data, at):
     return value
 
 
-@njit(cache=True)
+@register_jitable  # compiled inside each kernel that reads the bytes: no dispatcher of its own
 def _i64(data, at):
     return np.int64(_u64(data, at))  # two's complement: the bits as they are
 
 
-@njit(cache=True)
+@register_jitable  # compiled inside each kernel that reads the bytes: no dispatcher of its own
 def _doubles(data, at, count, bits, out):
     """``count`` big-endian doubles from ``data[at:]`` into ``out`` (``bits``: a float64
     scratch array of at least ``count``, read through its uint64 view)."""
