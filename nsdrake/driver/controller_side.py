@@ -47,6 +47,7 @@ from nsdrake.driver.panda import (
     panda_actuator_limits,
     panda_driver_problems,
     payload_rating_problem,
+    robot_gravity_problem,
 )
 from nsdrake.driver.tick import robot_torques
 from nsdrake.driver.wrench import wrench_from_external_torques
@@ -54,7 +55,7 @@ from nsdrake.experiment.checks import check_with_model
 from nsdrake.experiment.diagram import build_controller, surface_path
 from nsdrake.experiment.reference import PlainSurfaceReference
 from nsdrake.experiment.scenario import Scenario, ScenarioError
-from nsdrake.experiment.scenario_station import add_scenario_station
+from nsdrake.experiment.scenario_station import add_scenario_station, gravity_vector
 from nsdrake.station.plant import Station, desired_tool_orientation, has_joint_limits
 
 
@@ -130,13 +131,17 @@ def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
     """``scenario`` with the Panda's published torque and torque-rate limits wherever it
     gives none (:func:`nsdrake.driver.panda.panda_actuator_limits`); one-line ScenarioError
     for limits above them, an arm that is not a 7-joint one, a payload heavier than the
-    Panda is rated for (declared or not: the arm carries it either way), or ``driver``
+    Panda is rated for (declared or not: the arm carries it either way), a gravity no robot
+    on Earth has (:func:`nsdrake.driver.panda.robot_gravity_problem`), or ``driver``
     settings beyond what the Panda allows (:func:`nsdrake.driver.panda.panda_driver_problems`)."""
     for where, problem in panda_driver_problems(scenario.driver, scenario.control_period):
         raise ScenarioError(f"{scenario.source or 'scenario'}: driver.{where}: {problem}")
     problem = payload_rating_problem(scenario.arm.payload.mass)
     if problem:
         raise ScenarioError(f"{scenario.source or 'scenario'}: arm.payload.mass: {problem}")
+    problem = robot_gravity_problem(gravity_vector(scenario))
+    if problem:
+        raise ScenarioError(f"{scenario.source or 'scenario'}: gravity: {problem}")
     try:
         limits = panda_actuator_limits(
             scenario.actuator_limits, station.arm_model.joint_names, period=scenario.control_period

@@ -16,7 +16,8 @@ specifications": joint torque limits 87 N m for joints 1–4 and 12 N m for join
   stops the drive before such a command leaves.
 
 A payload heavier than the Panda's published rating (:data:`RATED_PAYLOAD`) is refused
-before anything is built (:func:`payload_rating_problem`).
+before anything is built (:func:`payload_rating_problem`), and so is a world gravity no
+robot on Earth has (:func:`robot_gravity_problem`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,12 @@ ROBOT_CYCLE = 1e-3  # [s] the Panda's control cycle (1 kHz): a new command acts 
 # Franka's published payload (datasheet, "Payload 3 kg"): everything the flange carries, a
 # Franka Hand (about 0.7 kg) included, so a payload beside a hand may weigh that much less.
 RATED_PAYLOAD = 3.0  # [kg]
+# The size of gravity anywhere a robot stands on Earth's surface: from 9.7639 m/s² (the top
+# of Nevado Huascarán) to 9.8337 m/s² (the Arctic Ocean's surface) (C. Hirt et al., "New
+# ultrahigh-resolution picture of Earth's gravity field", Geophys. Res. Lett. 40 (2013)
+# 4279–4283), rounded outward. The robot adds g(q) of its own model on Earth; a controller
+# whose model has another gravity subtracts something else, and the difference drives the arm.
+EARTH_GRAVITY = (9.76, 9.84)  # [m/s²]
 # What the gate forgives beyond a limit: the rounding of τ − g and of the limiter's clip
 # (a few units of the last place of 100 N m), far below any torque the robot resolves.
 COMMAND_ROUNDING = 1e-9  # [N m]
@@ -205,6 +212,21 @@ def panda_driver_problems(driver, period: float):
             f"must be at most {step:.4g} rad (a period at the slowest joint's velocity limit, with the "
             f"margins of nsdrake/driver/panda.py), got {driver.max_joint_step!r}",
         )
+
+
+def robot_gravity_problem(gravity) -> str | None:
+    """A world gravity [gx, gy, gz] [m/s²] no robot on Earth's surface has: its size outside
+    :data:`EARTH_GRAVITY` (None: within it). Its direction is the robot's mounting, which
+    only the user knows (docs/real_arm.md, "Gravity")."""
+    size = float(np.linalg.norm(np.asarray(gravity, dtype=float)))
+    low, high = EARTH_GRAVITY
+    if not low <= size <= high:
+        return (
+            f"{size:.4g} m/s² is not the gravity of a robot on Earth ({low:g}-{high:g} m/s² anywhere on its "
+            "surface): the robot adds g(q) of its own model on Earth, and the controller would subtract "
+            "another g(q)"
+        )
+    return None
 
 
 def payload_rating_problem(mass) -> str | None:

@@ -307,24 +307,25 @@ def drive_joint6(side, ticks: int, speed: float = 2.0, after_ready=None):
 
 
 @pytest.mark.parametrize(
-    "scale", [1.0, 2.0], ids=["earth", "twice earth's gravity"]
-)  # fmt: skip
-def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(scale):
-    """panda_wipe with a declared 3 kg payload (the Panda's rating; its centre of mass
-    at (0.1, 0, 0.1) m in the tool frame) under earth's gravity, or twice it: joint 6 carries g(q) of 6-7 N m
-    (13-14 N m, beyond its 12 N m), and moving it at 2 rad/s (every status consistent) drives
-    the law to joint 6's limit. Every status is answered, nothing stops the drive, every
-    command is within the published limits and rate; and τ − g(q), g from plain Drake calls
-    (urdf/panda.urdf with the point load, at each status's q), is within ±τ_max at every
-    tick and at −12 N m exactly on joint 6 while it is at its limit: the limiter's window
-    sits on the model's g(q). Catches the window about 0 (the gate stops the drive at
-    13 ms: −13 N m on joint 6), about −g(q) (its sign flipped), or a step that is not told
-    the robot adds g (the drive's controller side)."""
-    com = np.array([0.1, 0.0, 0.1])
+    "com, carried",
+    [((0.1, 0.0, 0.1), 6.0), ((0.45, 0.0, 0.1), 12.0)],
+    ids=["near the tool", "beyond joint 6"],
+)
+def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(com, carried):
+    """panda_wipe with a declared 3 kg payload (the Panda's rating; its centre of mass at (0.1, 0,
+    0.1) m in the tool frame, or at (0.45, 0, 0.1) m): joint 6 carries g(q) of 6-7 N m
+    (above 12 N m, beyond its limit: no command can hold it), and moving it at 2 rad/s
+    (every status consistent) drives the law to joint 6's limit. Every status is answered,
+    nothing stops the drive, every command is within the published limits and rate; and τ −
+    g(q), g from plain Drake calls (urdf/panda.urdf with the point load, at each status's
+    q), is within ±τ_max at every tick and at −12 N m exactly on joint 6 while it is at its
+    limit: the limiter's window sits on the model's g(q). Catches the window about 0 (the
+    gate stops the drive at 13 ms: −13 N m on joint 6), about −g(q) (its sign flipped), or a
+    step that is not told the robot adds g (the drive's controller side)."""
+    com = np.array(com)
     s = load_scenario("panda_wipe", duration=0.1)
     s = dataclasses.replace(
         s,
-        gravity=[0.0, 0.0, -9.81 * scale],
         arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=3.0, com=list(com))),
         driver=dataclasses.replace(s.driver, first_status_timeout=0.3),
     )
@@ -345,8 +346,8 @@ def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(scale)
     for command in sent:
         assert not beyond(command, previous), command
         previous = command
-    g = np.array([payload_gravity(qk, 3.0, com, [0.0, 0.0, -9.81 * scale]) for qk in qs])
-    assert g[:, 5].min() > 6.0 * scale  # joint 6 carries 6-7 N m: half its 12 N m left (twice: none)
+    g = np.array([payload_gravity(qk, 3.0, com, [0.0, 0.0, -9.81]) for qk in qs])
+    assert g[:, 5].min() > carried  # joint 6 carries 6-7 N m: half its 12 N m left (or above 12: none)
     on_command = np.array(taus) - g
     assert np.all(np.abs(on_command) <= PUBLISHED_TORQUE + 1e-9)
     np.testing.assert_allclose(sent, on_command, rtol=0, atol=1e-9)  # the robot adds what it subtracts
@@ -372,6 +373,41 @@ def test_a_payload_the_panda_is_not_rated_for_is_refused_before_anything_is_sent
         assert err.count("\n") == 1 and "arm.payload.mass: " in err, err
         assert "above the Panda's published payload of 3 kg" in err
         assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["drive", "sim-driver"])
+def test_a_gravity_no_robot_on_earth_has_is_refused_before_anything_is_sent(tmp_path, capsys, command):
+    """The robot adds g(q) of its own model on Earth; a scenario whose gravity is another
+    size (ten times Earth's, none at all, just below and above the range anywhere on Earth's
+    surface, 9.7639-9.8337 m/s²) has the controller subtract another g(q): one line naming
+    gravity, exit 2, no run folder, nothing built that listens or sends."""
+    for gravity, size in (
+        ("[0, 0, -98.1]", "98.1"),
+        ("[0, 0, 0]", "0"),
+        ("[0, 0, -9.75]", "9.75"),
+        ("[0, 0, -9.85]", "9.85"),
+    ):
+        config = tmp_path / "c.yaml"
+        config.write_text(f"gravity: {gravity}\n")
+        out = tmp_path / "out"
+        bus = ["--simulated-driver", "--out", str(out)] if command == "drive" else ["--lcm", "bogus://x"]
+        code = main([command, "panda_wipe", "--config", str(config), *bus])
+        err = capsys.readouterr().err
+        assert code == 2, err
+        assert err.count("\n") == 1 and ": gravity: " in err, err
+        assert f"{size} m/s² is not the gravity of a robot on Earth (9.76-9.84 m/s²" in err, err
+        assert not out.exists()
+
+
+@pytest.mark.parametrize("size", [9.76, 9.81, 9.84])
+def test_earth_s_gravity_in_any_direction_is_taken(size):
+    """Both ends of Earth's range and the standard 9.81, along −z or along a tilted mounting
+    (catches a refusal one step early, or a rule on the direction the user alone knows)."""
+    from nsdrake.driver.controller_side import check_drive_scenario
+
+    s = load_scenario("panda_wipe", duration=0.01)
+    for direction in ([0.0, 0.0, -1.0], [0.6, 0.0, -0.8]):
+        check_drive_scenario(dataclasses.replace(s, gravity=[size * x for x in direction]))
 
 
 def test_the_rated_payload_itself_is_taken():
