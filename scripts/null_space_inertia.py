@@ -12,11 +12,10 @@ docs/results/null_space_inertia/.
 
 from __future__ import annotations
 
-import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
+from results_table import table_main
 
 from nsdrake.experiment.diagram import build_diagram
 from nsdrake.experiment.scenario import load_scenario
@@ -37,11 +36,9 @@ def row(name: str, scenario_name: str) -> str:
     )
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, required=True, help="the folder to write table.md into")
-    args = parser.parse_args()
-    text = (
+def table() -> str:
+    """The table.md this script writes."""
+    return (
         "# null_space_inertia\n\n"
         "The null-space inertia at the start posture the tuning rule of the null_space_laws "
         "families uses (scripts/write_null_space_families.py): the eigenvalues mu_i of "
@@ -49,10 +46,10 @@ def main() -> int:
         "| arm | start posture of | null-space directions | mu_min [kg m²] | mu_max [kg m²] | h_n [kg m²] |\n"
         "|---|---|---|---|---|---|\n" + "\n".join(row(*arm) for arm in SCENARIOS) + "\n"
     )
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "table.md").write_text(text)
-    print(f"wrote {args.out / 'table.md'}")
-    return 0
+
+
+def main() -> int:
+    return table_main(__doc__, table)
 
 
 if __name__ == "__main__":

@@ -12,11 +12,10 @@ runs it into runs/results/task_loops and copies the table to docs/results/task_l
 
 from __future__ import annotations
 
-import argparse
 import sys
-from pathlib import Path
 
 from pydrake.systems.framework import DiagramBuilder
+from results_table import table_main
 
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.scenario_station import add_scenario_station
@@ -40,11 +39,9 @@ def rows(name: str) -> list[str]:
     ]
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, required=True, help="the folder to write table.md into")
-    args = parser.parse_args()
-    text = (
+def table() -> str:
+    """The table.md this script writes."""
+    return (
         "# task_loops\n\n"
         "The loops of the shipped scenarios as their reports show them (nsdrake/reporting/loops.py): "
         "each task direction under the impedance law with an exact model is a unit mass (normal to "
@@ -57,10 +54,10 @@ def main() -> int:
         + "\n".join(row for name in SCENARIOS for row in rows(name))
         + "\n"
     )
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "table.md").write_text(text)
-    print(f"wrote {args.out / 'table.md'}")
-    return 0
+
+
+def main() -> int:
+    return table_main(__doc__, table)
 
 
 if __name__ == "__main__":
