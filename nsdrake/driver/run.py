@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 from pydrake.lcm import DrakeLcm
 
+from nsdrake.control.model_files import MODEL_WARNINGS
 from nsdrake.control.validation import ControllerInputError
 from nsdrake.driver.bus import Bus, DrakeBus
 from nsdrake.driver.controller_side import _Log, build_controller_side
@@ -51,6 +52,7 @@ from nsdrake.reporting.run_folder import (
     controller_loops,
     scenario_name,
     scenario_yaml,
+    write_model_warnings,
     write_plots,
 )
 
@@ -284,6 +286,7 @@ DRIVE_FILES = (
     "priority.png",
     "report.html",
     "timing.json",
+    MODEL_WARNINGS,
 )
 
 
@@ -317,6 +320,7 @@ def _write_drive_folder(run: DriveRun, out: Path) -> RunResult:
     scenario = run.scenario
     declare(out, DRIVE_FILES)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
+    write_model_warnings(out, run.loop.drive.station)
     status = "interrupted" if run.interrupted else "failed" if run.failure else "ok"
     write_timing(
         out / "timing.json", run.timing | ({"failure": run.failure, "status": status} if run.failure else {})

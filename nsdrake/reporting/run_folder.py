@@ -120,6 +120,13 @@ def run_to_folder(
 
 
 # Every file a run may write into its folder, declared in the manifest before any is written.
+def write_model_warnings(out: Path, station) -> None:
+    """The folder's model_warnings.txt: every warning Drake's parser gave on the arm's model
+    files, in full (the log said one line per file); none written without warnings."""
+    if station.model_warnings:
+        (out / MODEL_WARNINGS).write_text(warnings_text(station.model_warnings))
+
+
 RUN_FILES = (
     "scenario.yaml",
     "traces.csv",
@@ -145,8 +152,7 @@ def _run_to_folder(scenario: Scenario, out: Path, *, progress, replay: bool, mes
     # after the simulation: until its first step (where the kernels compile), the folder
     # stays empty, so that a Ctrl-C there undoes the claim (nsdrake/ctrl_c.py)
     (out / "scenario.yaml").write_text(scenario_yaml(scenario))
-    if sim.built.station.model_warnings:  # the log said one line per file: here is every line
-        (out / MODEL_WARNINGS).write_text(warnings_text(sim.built.station.model_warnings))
+    write_model_warnings(out, sim.built.station)
     replay_path = write_replay(meshcat, out / "replay.html") if replay else None
     picture = write_diagram_picture(sim.built.diagram, out)
     traces = Traces.read_csv(out / "traces.csv")

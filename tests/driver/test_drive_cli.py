@@ -9,6 +9,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,8 @@ from nsdrake.cli import main
 from nsdrake.driver.serve import serve_simulated_driver
 from nsdrake.experiment.scenario import load_scenario
 from nsdrake.experiment.traces import Traces
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def exit_code(argv) -> int:
@@ -391,3 +394,25 @@ def test_the_simulated_driver_s_own_call_bounds_its_options(option, words):
     assert str(info.value).startswith(words) and "\n" not in str(info.value)
     lcm.HandleSubscriptions(0)
     assert heard == []
+
+
+def test_a_drive_keeps_every_parser_warning_in_full_in_its_folder(tmp_path, capsys):
+    """As a run's (tests/control/test_model_sources.py), a drive's folder keeps every warning
+    Drake's parser gave on the arm's file in model_warnings.txt: panda_wipe's arm with a
+    friction Drake ignores on each of its seven joints gives seven, under the file's name.
+    A drive that writes only its log's one line per file (the file missing) fails this."""
+    text = (ROOT / "urdf" / "panda.urdf").read_text()
+    for k in range(1, 8):
+        joint = f'<joint name="panda_joint{k}" type="revolute">'
+        assert joint in text
+        text = text.replace(joint, f'{joint}<dynamics friction="0.5"/>')
+    (tmp_path / "panda.urdf").write_text(text)
+    config = tmp_path / "c.yaml"
+    config.write_text(f"arm: {{urdf: {tmp_path / 'panda.urdf'}}}\n")
+    out = tmp_path / "drive"
+    argv = ["drive", "panda_wipe", "--config", str(config), "--simulated-driver", "--duration", "0.005"]
+    main([*argv, "--realtime-rate", "0", "--out", str(out)])
+    lines = (out / "model_warnings.txt").read_text().splitlines()
+    assert lines[0] == "# panda.urdf: 7 warning(s) of Drake's parser", lines
+    assert len(lines) == 8 and all("warning:" in line and "'friction'" in line for line in lines[1:])
+    assert "model_warnings.txt" in (out / ".nsdrake-run").read_text()  # --overwrite knows it as nsdrake's
