@@ -44,6 +44,7 @@ from nsdrake.control.step import ControllerStep
 from nsdrake.driver.panda import (
     NUM_JOINTS,
     PandaLimitError,
+    flange_load,
     panda_actuator_limits,
     panda_driver_problems,
     payload_rating_problem,
@@ -136,7 +137,7 @@ def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
     settings beyond what the Panda allows (:func:`nsdrake.driver.panda.panda_driver_problems`)."""
     for where, problem in panda_driver_problems(scenario.driver, scenario.control_period):
         raise ScenarioError(f"{scenario.source or 'scenario'}: driver.{where}: {problem}")
-    problem = payload_rating_problem(scenario.arm.payload.mass)
+    problem = payload_rating_problem(scenario.arm.payload.mass, *_model_flange_load(station))
     if problem:
         raise ScenarioError(f"{scenario.source or 'scenario'}: arm.payload.mass: {problem}")
     problem = robot_gravity_problem(gravity_vector(scenario))
@@ -149,6 +150,15 @@ def drive_scenario(scenario: Scenario, station: Station) -> Scenario:
     except PandaLimitError as e:
         raise ScenarioError(f"{scenario.source or 'scenario'}: {e}") from None
     return dataclasses.replace(scenario, actuator_limits=limits)
+
+
+def _model_flange_load(station: Station) -> tuple[float, tuple[str, ...]]:
+    """What the arm's model file welds beyond its flange (:func:`nsdrake.driver.panda.flange_load`),
+    the scenario's own ``arm.payload`` left out (the station welds it to the tool as the arm's
+    body "payload", a name the file cannot also use)."""
+    plant, arm = station.plant, station.arm_model
+    own = None if station.payload is None else plant.GetBodyByName("payload", station.arm)
+    return flange_load(plant, plant.GetJointByName(arm.joint_names[-1], station.arm), own)
 
 
 def check_drive_scenario(scenario: Scenario) -> Scenario:

@@ -35,6 +35,7 @@ ROBOT_CYCLE = 1e-3  # [s] the Panda's control cycle (1 kHz): a new command acts 
 # Franka's published payload (datasheet, "Payload 3 kg"): everything the flange carries, a
 # Franka Hand (about 0.7 kg) included, so a payload beside a hand may weigh that much less.
 RATED_PAYLOAD = 3.0  # [kg]
+MASS_ROUNDING = 1e-9  # [kg] what the rating forgives: the rounding of a sum of the model's masses
 # The size of gravity anywhere a robot stands on Earth's surface: from 9.7639 m/s² (the top
 # of Nevado Huascarán) to 9.8337 m/s² (the Arctic Ocean's surface) (C. Hirt et al., "New
 # ultrahigh-resolution picture of Earth's gravity field", Geophys. Res. Lett. 40 (2013)
@@ -229,12 +230,27 @@ def robot_gravity_problem(gravity) -> str | None:
     return None
 
 
-def payload_rating_problem(mass) -> str | None:
-    """A payload heavier than the Panda's published rating, :data:`RATED_PAYLOAD` (None: within it)."""
-    if mass > RATED_PAYLOAD:
+def flange_load(plant, last_joint, leave_out=None) -> tuple[float, tuple[str, ...]]:
+    """What the arm's flange carries in ``plant``'s model, as Franka's rating counts it
+    (:data:`RATED_PAYLOAD`): the mass [kg] of every body that ``last_joint`` moves but its
+    own child link and ``leave_out`` (a body, or None) — a tool, a hand, fingers locked to
+    it, a welded payload — and their names. Plain Drake calls on the finalized plant."""
+    moved = plant.GetBodiesKinematicallyAffectedBy([last_joint.index()])
+    skip = {last_joint.child_body().index()} | ({leave_out.index()} if leave_out is not None else set())
+    bodies = [plant.get_body(b) for b in moved if b not in skip]
+    carried = [b for b in bodies if b.default_mass() > 0.0]
+    return float(sum(b.default_mass() for b in carried)), tuple(b.name() for b in carried)
+
+
+def payload_rating_problem(mass, carried: float = 0.0, names: tuple[str, ...] = ()) -> str | None:
+    """A payload of ``mass`` [kg] on top of the ``carried`` kg the model's flange already
+    holds (:func:`flange_load`: the bodies ``names``) heavier than the Panda's published
+    rating, :data:`RATED_PAYLOAD` (None: within it)."""
+    if mass + carried > RATED_PAYLOAD + MASS_ROUNDING:
+        model = f" and the model's {carried:g} kg beyond the flange ({', '.join(names)})" if carried else ""
         return (
-            f"{mass:g} kg is above the Panda's published payload of {RATED_PAYLOAD:g} kg (a Franka Hand's "
-            "mass counts too): the arm is not rated to carry it"
+            f"{mass:g} kg{model} is above the Panda's published payload of {RATED_PAYLOAD:g} kg (everything "
+            "the flange carries counts, a Franka Hand's mass too): the arm is not rated to carry it"
         )
     return None
 

@@ -36,6 +36,9 @@ PUBLISHED_TORQUE = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])  # [N m]
 PUBLISHED_RATE = 1000.0  # [N m/s]
 CYCLE = 1e-3  # [s] the Panda's control cycle
 ROUNDING = 1e-9  # [N m] what the gate may forgive (the rounding of τ − g)
+# [kg] the heaviest payload panda_wipe's arm may carry: Franka's published 3 kg counts everything
+# the flange carries, and urdf/panda.urdf's tool weighs 0.1 kg (urdf/README.md)
+RATED = 2.9
 NAMES = tuple(f"panda_joint{k}" for k in range(1, 8))
 UTIME0 = 1_700_000_000_000_000
 
@@ -312,21 +315,22 @@ def drive_joint6(side, ticks: int, speed: float = 2.0, after_ready=None):
     ids=["near the tool", "beyond joint 6"],
 )
 def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(com, carried):
-    """panda_wipe with a declared 3 kg payload (the Panda's rating; its centre of mass at (0.1, 0,
-    0.1) m in the tool frame, or at (0.45, 0, 0.1) m): joint 6 carries g(q) of 6-7 N m
-    (above 12 N m, beyond its limit: no command can hold it), and moving it at 2 rad/s
-    (every status consistent) drives the law to joint 6's limit. Every status is answered,
-    nothing stops the drive, every command is within the published limits and rate; and τ −
-    g(q), g from plain Drake calls (urdf/panda.urdf with the point load, at each status's
-    q), is within ±τ_max at every tick and at −12 N m exactly on joint 6 while it is at its
-    limit: the limiter's window sits on the model's g(q). Catches the window about 0 (the
-    gate stops the drive at 13 ms: −13 N m on joint 6), about −g(q) (its sign flipped), or a
-    step that is not told the robot adds g (the drive's controller side)."""
+    """panda_wipe with a declared 2.9 kg payload (with the tool's 0.1 kg, the Panda's
+    rating; its centre of mass at (0.1, 0, 0.1) m in the tool frame, or at (0.45, 0, 0.1)
+    m): joint 6 carries g(q) of 6-7 N m (above 12 N m, beyond its limit: no command can hold
+    it), and moving it at 2 rad/s (every status consistent) drives the law to joint 6's
+    limit. Every status is answered, nothing stops the drive, every command is within the
+    published limits and rate; and τ − g(q), g from plain Drake calls (urdf/panda.urdf with
+    the point load, at each status's q), is within ±τ_max at every tick and at −12 N m
+    exactly on joint 6 while it is at its limit: the limiter's window sits on the model's
+    g(q). Catches the window about 0 (the gate stops the drive at 13 ms: −13 N m on joint
+    6), about −g(q) (its sign flipped), or a step that is not told the robot adds g (the
+    drive's controller side)."""
     com = np.array(com)
     s = load_scenario("panda_wipe", duration=0.1)
     s = dataclasses.replace(
         s,
-        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=3.0, com=list(com))),
+        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=RATED, com=list(com))),
         driver=dataclasses.replace(s.driver, first_status_timeout=0.3),
     )
     side = build_controller_side(s)
@@ -346,7 +350,7 @@ def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(com, c
     for command in sent:
         assert not beyond(command, previous), command
         previous = command
-    g = np.array([payload_gravity(qk, 3.0, com, [0.0, 0.0, -9.81]) for qk in qs])
+    g = np.array([payload_gravity(qk, RATED, com, [0.0, 0.0, -9.81]) for qk in qs])
     assert g[:, 5].min() > carried  # joint 6 carries 6-7 N m: half its 12 N m left (or above 12: none)
     on_command = np.array(taus) - g
     assert np.all(np.abs(on_command) <= PUBLISHED_TORQUE + 1e-9)
@@ -360,10 +364,11 @@ def test_a_rated_payload_at_a_joint_s_limit_is_kept_inside_by_the_limiter(com, c
 
 @pytest.mark.parametrize("command", ["drive", "sim-driver"])
 def test_a_payload_the_panda_is_not_rated_for_is_refused_before_anything_is_sent(tmp_path, capsys, command):
-    """Issue 43's 100 kg payload (and 3.01 kg, just over Franka's published 3 kg; declared or
-    not: the arm carries it either way): one line naming arm.payload.mass, exit 2, no run
-    folder, nothing built that listens or sends. Catches a drive that sends 431 N m."""
-    for payload in ("{mass: 100.0, com: [0, 0, 0.05]}", "{mass: 3.01, declared: false}"):
+    """Issue 43's 100 kg payload (and 2.91 kg, with the tool's 0.1 kg just over Franka's
+    published 3 kg; declared or not: the arm carries it either way): one line naming
+    arm.payload.mass, exit 2, no run folder, nothing built that listens or sends. Catches a
+    drive that sends 431 N m."""
+    for payload in ("{mass: 100.0, com: [0, 0, 0.05]}", "{mass: 2.91, declared: false}"):
         config = tmp_path / "c.yaml"
         config.write_text(f"arm: {{payload: {payload}}}\n")
         out = tmp_path / "out"
@@ -410,28 +415,73 @@ def test_earth_s_gravity_in_any_direction_is_taken(size):
         check_drive_scenario(dataclasses.replace(s, gravity=[size * x for x in direction]))
 
 
+def test_what_the_model_file_welds_beyond_the_flange_counts_against_the_rating(tmp_path, capsys):
+    """A vendor's Panda file with a Franka Hand (0.73 kg welded to the flange) and two
+    fingers (0.015 kg each, locked): the rating's 3 kg holds the hand, the fingers and the
+    tool, so a payload of 2.9 kg is refused in one line naming them all and their mass
+    (0.1 + 0.73 + 2 × 0.015 = 0.86 kg, by hand), and 2.14 kg (3 − 0.86) is taken. A rating
+    that counts the scenario's payload alone (a hand's mass ignored) fails this."""
+    text = (models_dir() / "panda.urdf").read_text()
+    hand = """
+  <link name="hand"><inertial><mass value="0.73"/><inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0"
+   izz="1e-3"/></inertial></link>
+  <joint name="hand_weld" type="fixed"><parent link="panda_link8"/><child link="hand"/></joint>
+"""
+    for k in (1, 2):
+        hand += f"""
+  <link name="finger{k}"><inertial><mass value="0.015"/><inertia ixx="1e-6" ixy="0" ixz="0" iyy="1e-6"
+   iyz="0" izz="1e-6"/></inertial></link>
+  <joint name="finger{k}_joint" type="prismatic"><parent link="hand"/><child link="finger{k}"/>
+   <axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="20" velocity="0.2"/></joint>
+"""
+    (tmp_path / "panda.urdf").write_text(text.replace("</robot>", hand + "</robot>"))
+    s = load_scenario("panda_wipe", duration=0.01)
+    arm = dataclasses.replace(
+        s.arm,
+        urdf=str(tmp_path / "panda.urdf"),
+        joints=list(NAMES),
+        locked={"finger1_joint": 0.02, "finger2_joint": 0.02},
+    )
+    from nsdrake.driver.controller_side import check_drive_scenario
+    from nsdrake.experiment.scenario import ScenarioError
+
+    with pytest.raises(ScenarioError) as info:
+        check_drive_scenario(
+            dataclasses.replace(s, arm=dataclasses.replace(arm, payload=PayloadConfig(mass=2.9)))
+        )
+    line = str(info.value)
+    assert (
+        "\n" not in line and "arm.payload.mass: 2.9 kg and the model's 0.86 kg beyond the flange (" in line
+    ), line
+    assert all(name in line for name in ("tool", "hand", "finger1", "finger2")), line
+    check_drive_scenario(
+        dataclasses.replace(s, arm=dataclasses.replace(arm, payload=PayloadConfig(mass=2.14)))
+    )
+
+
 def test_the_rated_payload_itself_is_taken():
-    """3 kg exactly is within the rating (catches a refusal one step early)."""
+    """2.9 kg, which with panda_wipe's 0.1 kg tool makes the Panda's 3 kg exactly, is within
+    the rating (catches a refusal one step early)."""
     from nsdrake.driver.controller_side import check_drive_scenario
 
     s = load_scenario("panda_wipe", duration=0.01)
     check_drive_scenario(
-        dataclasses.replace(s, arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=3.0)))
+        dataclasses.replace(s, arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=RATED)))
     )
 
 
 def test_a_command_beyond_the_limits_stops_the_drive_before_it_is_sent(side):
-    """A rated 3 kg payload whose centre of mass lies 6 m off the tool (its gravity at
-    panda_wipe's start beyond what joint 6 may be sent) and a fault planted: the step not
-    told that the robot adds g, its limiter bounding τ and not the command τ − g (the
-    drive's own limiter keeps the command inside). On a fake bus the drive stops at its
-    first status with one line naming the joint and its command, and the bus carries no
-    command. Catches the gate missing (the command is sent: today's main sent all 32 of
-    issue 43's)."""
+    """A rated payload (RATED: 2.9 kg, with the tool's 0.1 kg the Panda's 3 kg) whose centre
+    of mass lies 6 m off the tool (its gravity at panda_wipe's start beyond what joint 6 may
+    be sent) and a fault planted: the step not told that the robot adds g, its limiter
+    bounding τ and not the command τ − g (the drive's own limiter keeps the command inside).
+    On a fake bus the drive stops at its first status with one line naming the joint and its
+    command, and the bus carries no command. Catches the gate missing (the command is sent:
+    today's main sent all 32 of issue 43's)."""
     s = load_scenario("panda_wipe", duration=0.05)
     s = dataclasses.replace(
         s,
-        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=3.0, com=[6.0, 0.0, 0.0])),
+        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=RATED, com=[6.0, 0.0, 0.0])),
         driver=dataclasses.replace(s.driver, first_status_timeout=0.3),
     )
     hostile = build_controller_side(s)
@@ -473,19 +523,20 @@ def test_robot_adds_gravity_is_a_boolean(side):
 
 def test_a_driver_that_subtracts_its_gravity_is_never_asked_beyond_the_limits():
     """driver.robot_adds_gravity false (drake-franka-driver's --remove_gravity_compensation:
-    the command is τ, g included, and the driver subtracts its g(q) before the robot adds
-    it back): the robot's torque interface is still asked for τ − g(q), so the limiter acts
-    on that. A rated 3 kg payload drives joint 6 to its limit while it carries 6-7 N m of
-    gravity (the rated-payload test above): every status is answered, each command sent is
-    τ, and τ − g(q) (g from plain Drake calls) stays within the published limits and rate,
-    at −12 N m exactly on joint 6 while it is held there. Catches the limiter left about 0
-    in this setup (τ − g = −18 N m asked of joint 6: the gate then stops the drive) and a
-    gate that checks only the wire's τ (it would send that −18 N m on)."""
+    the command is τ, g included, and the driver subtracts its g(q) before the robot adds it
+    back): the robot's torque interface is still asked for τ − g(q), so the limiter acts on
+    that. A rated payload (RATED: 2.9 kg, with the tool's 0.1 kg the Panda's 3 kg) drives
+    joint 6 to its limit while it carries 6-7 N m of gravity (the rated-payload test above):
+    every status is answered, each command sent is τ, and τ − g(q) (g from plain Drake
+    calls) stays within the published limits and rate, at −12 N m exactly on joint 6 while
+    it is held there. Catches the limiter left about 0 in this setup (τ − g = −18 N m asked
+    of joint 6: the gate then stops the drive) and a gate that checks only the wire's τ (it
+    would send that −18 N m on)."""
     com = np.array([0.1, 0.0, 0.1])
     s = load_scenario("panda_wipe", duration=0.1)
     s = dataclasses.replace(
         s,
-        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=3.0, com=list(com))),
+        arm=dataclasses.replace(s.arm, payload=PayloadConfig(mass=RATED, com=list(com))),
         driver=dataclasses.replace(s.driver, first_status_timeout=0.3, robot_adds_gravity=False),
     )
     side = build_controller_side(s)
@@ -493,7 +544,7 @@ def test_a_driver_that_subtracts_its_gravity_is_never_asked_beyond_the_limits():
     ticks = 40
     sent, qs = drive_joint6(side, ticks)
     assert len(sent) == ticks + 1
-    g = np.array([payload_gravity(qk, 3.0, com, [0.0, 0.0, -9.81]) for qk in qs])
+    g = np.array([payload_gravity(qk, RATED, com, [0.0, 0.0, -9.81]) for qk in qs])
     at_robot = sent - g  # what the driver leaves once it has subtracted its g(q)
     previous = None
     for asked in at_robot:
