@@ -198,14 +198,14 @@ def test_panda_wipe_free_running_over_udp_for_20_s(tmp_path):
 
 
 def test_a_command_beyond_the_limits_never_reaches_the_robot_over_udp(tmp_path):
-    """Issue 43, item 1 over a real socket: `nsdrake drive` with a rated 2.9 kg payload (the tool 0.1 kg) whose
-    centre of mass lies 6 m off the tool (its gravity beyond what joint 6 may be sent) and
-    a fault planted, the limiter bounding τ rather than what is sent
+    """Issue 43, item 1 over a real socket: `nsdrake drive` with a rated 2.9 kg payload (the
+    tool 0.1 kg) whose centre of mass lies 6 m off the tool (its gravity beyond what joint 6
+    may be sent) and a fault planted, the limiter bounding τ rather than what is sent
     (tests/driver/limiter_on_tau_drive.py: the drive's own limiter keeps every command
     inside), against a driver process that publishes a Panda at rest at the start pose and
     counts every command it receives: the drive stops at its first status with one line
-    naming the joint, exit 1, and the robot received no command at all. Catches a gate
-    that only a fake bus meets, and the command sent before it is checked."""
+    naming the joint, exit 1, and the robot received no command at all. Catches a gate that
+    only a fake bus meets, and the command sent before it is checked."""
     require_namespace()
     (tmp_path / "hostile.yaml").write_text("arm: {payload: {mass: 2.9, com: [6.0, 0.0, 0.0]}}\n")
     q0 = load_scenario("panda_wipe").arm.initial_positions
