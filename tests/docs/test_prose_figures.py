@@ -180,12 +180,13 @@ def checked_pages() -> dict[str, str]:
     a family's description, a benchmark's set-up), which the site renders too."""
     out = pages()
     for table in sorted((ROOT / "docs" / "results").glob("**/table.md")):
-        out[table.relative_to(ROOT).as_posix()] = table.read_text()
+        lines = table.read_text().splitlines()  # its rows are the command's figures: the prose alone
+        out[table.relative_to(ROOT).as_posix()] = "\n".join(x for x in lines if not x.startswith("|"))
     return out
 
 
 # A decimal figure with two significant digits or more, or one in e-notation, outside a
-# role, code, a table row and a math span: what a measurement looks like ('0.0114', '2.18',
+# role, code, a results table's copy and a math span: what a measurement looks like ('0.0114', '2.18',
 # '9.7e-7'). Set-up values are mostly single digits or integers ('10 N', '0.5 rad', '125 Hz',
 # '1000 N m/s'); a measured integer ('30 Hz') is therefore not caught.
 NUMBER = re.compile(r"(?<![\w.\-/^])[−+-]?\d+(?:\.\d+)?(?:e[−-]?\d+)?(?![\w])")
@@ -223,6 +224,14 @@ NOT_MEASURED: dict[str, dict[str, str]] = {
     "docs/claims.md": {
         "0.066": "σ √((1 − a)/(1 + a)) of the sensor's configured noise (a closed form)",
         "0.108": "the belt rung's configured rotor inertia per joint (an input)",
+        # the realism rungs' table: each rung's defaults and the source of each
+        "0.25": "the issue's 0.25–0.5 ms plant step, the physics rung's source (an input)",
+        "1.6": "the press's torque on joints 1–3 along fig3's path, Jᵀ of 10 N: the friction "
+        "rung's reason for τ_c (the set-up's statics)",
+        "2.9": "the press's torque on joints 1–3 along fig3's path, Jᵀ of 10 N: the friction "
+        "rung's reason for τ_c (the set-up's statics)",
+        "3e-3": "the belt rung's rotor inertia I_m [kg m²] (its default)",
+        "1e-4": "the lightest rotor inertia [kg m²] tried for the belt rung, a real servo's order (an input)",
         "1.94": FIRST_STEP,
         "1.96": FIRST_STEP,
     },
@@ -234,6 +243,13 @@ NOT_MEASURED: dict[str, dict[str, str]] = {
         "1.2": "YAML 1.2, a version of the format",
         "62.91": "an example of how the report writes a figure (µm, not e-notation)",
         "1e-3": "the start tests/control/test_singular.py runs the controller from (its input)",
+        # the tables of settings nsdrake refuses and of the sweeps
+        "2.175": "the Panda's published velocity limit of its slowest joints [rad/s]",
+        "4.35e-3": "2 × 2.175 rad/s × 1 ms, the start tolerance's bound (a closed form)",
+        "3.5": "the robustness sweep's duration [s] (its input)",
+        "2.5": "CONTACT_OMEGA_T, the ω T a period is refused above (nsdrake/experiment/checks.py)",
+        "2.2": "ω T of fig3's force loop at 10 ms, ω = √(K_p,n + K_f k_c) (a closed form)",
+        "2.7": "ω T of fig3's force loop at 12 ms (a closed form)",
     },
     "docs/open_choices.md": {
         "1.5": "the tool sphere's radius [cm], urdf/panda.urdf and urdf/arm4.urdf (the set-up)",
@@ -307,10 +323,15 @@ MATH = re.compile(r"\$(?:[^$\n]|\n(?![ \t]*\n))*\$")
 CITATION = re.compile(r"(?:Sections?|Eqs?\.) [\d.]+")
 
 
+COPY = re.compile(r"^<!-- table: docs/results/[^ ]+/table\.md -->$")  # tests/test_results_tables.py's marker
+
+
 def prose_lines(text: str, logs=()) -> list[str]:
-    """The page's lines with fenced blocks, table rows and the sections headed by one of
-    ``logs`` blanked (the line count kept)."""
-    out, fenced, log_level = [], False, 0
+    """The page's lines with fenced blocks, the sections headed by one of ``logs`` and the
+    rows of a results table's copy (the table right after a ``<!-- table: … -->`` marker,
+    which tests/test_results_tables.py holds equal to its file) blanked, the line count
+    kept. A table written by hand is prose: its cells are checked like a sentence."""
+    out, fenced, log_level, copy = [], False, 0, ""
     for line in text.splitlines():
         if line.lstrip().startswith(("```", "~~~")):
             fenced = not fenced
@@ -321,7 +342,14 @@ def prose_lines(text: str, logs=()) -> list[str]:
             log_level = 0
         if heading and line.strip() in logs:
             log_level = len(heading.group(1))
-        out.append("" if fenced or log_level or line.startswith("|") else line)
+        row = line.startswith("|")
+        if COPY.match(line.strip()):
+            copy = "marked"  # the next table is a copy
+        elif row and copy:
+            copy = "rows"
+        elif copy == "rows" or (line.strip() and not row):
+            copy = ""  # the copy ended (or the marker had no table)
+        out.append("" if fenced or log_level or (row and copy) else line.replace("|", " | "))
     return out
 
 
@@ -362,13 +390,14 @@ def test_every_allowance_is_used_on_its_page():
 
 def test_a_bare_figure_is_found():
     """The check finds a measured figure written bare, in e-notation and as a ratio, and
-    leaves roles, code (wrapped too), tables, math, single-digit set-up values, a page's
-    allowed figures and its log sections alone; a log section ends at the next heading
-    of its level."""
+    leaves roles, code (wrapped too), a results table's copy, math, single-digit set-up
+    values, a page's allowed figures and its log sections alone; a table by hand is prose;
+    a log section ends at the next heading of its level."""
     text = (
         "the error is 0.0048 rad (`0.0047`), 9.7e-7 predicted, × 2.2 the clean run's; "
         "{nsdrake-figure}`0.0114 <a | b | c>` and $0.25$ at 10 N, 0.5 rad, 1000 N m/s\n"
-        "| 0.31 | a row |\n```\n0.77\n```\nSection 3.4 and Eq. 2.1, `a code span\n"
+        "<!-- table: docs/results/a/table.md -->\n\n| 0.31 | a copy's row |\n```\n0.77\n```\n"
+        "Section 3.4 and Eq. 2.1, `a code span\n"
         "wrapped: 8174.4`, Python 3.10\n\n## Log\n\n47.1 CPU-s\n\n### an entry\n\n79.0 s\n\n"
         "## Next\n\n64.1 CPU-s"
     )
@@ -380,3 +409,7 @@ def test_a_bare_figure_is_found():
         "64.1",
     ]
     assert bare_figures("`an odd backtick\n\n0.0048 rad`") == ["0.0048"]  # no span across a paragraph
+    # a table by hand is prose; a copy's marker covers the one table after it, not the next
+    copy = "<!-- table: docs/results/a/table.md -->\n| a |\n|---|\n| 0.31 |\n\n| b |\n|---|\n| 0.42|\n"
+    assert bare_figures(copy) == ["0.42"]
+    assert bare_figures("<!-- table: docs/results/a/table.md -->\ntext\n\n| 0.31 |") == ["0.31"]
