@@ -241,7 +241,6 @@ NOT_MEASURED: dict[str, dict[str, str]] = {
     "docs/command_line.md": {
         "1.1": "YAML 1.1, a version of the format",
         "1.2": "YAML 1.2, a version of the format",
-        "62.91": "an example of how the report writes a figure (µm, not e-notation)",
         "1e-3": "the start tests/control/test_singular.py runs the controller from (its input)",
         # the tables of settings nsdrake refuses and of the sweeps
         "2.175": "the Panda's published velocity limit of its slowest joints [rad/s]",
