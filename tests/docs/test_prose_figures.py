@@ -272,9 +272,9 @@ NOT_MEASURED: dict[str, dict[str, str]] = {
     },
     "docs/real_arm.md": {
         "1e-9": "two tests' tolerances: the drive against the direct run, the payload's torque",
-        "37.5": "drake-franka-driver's damping gain k_d [N m s/rad] after an expired command",
-        "3.75": "drake-franka-driver's damping gain k_d [N m s/rad] after an expired command",
-        "2.5": "drake-franka-driver's damping gain k_d [N m s/rad] after an expired command",
+        "37.5": "drake-franka-driver's k_d [N m s/rad], nsdrake/driver/serve.py's DAMPING",
+        "3.75": "drake-franka-driver's k_d [N m s/rad], nsdrake/driver/serve.py's DAMPING",
+        "2.5": "drake-franka-driver's k_d [N m s/rad], nsdrake/driver/serve.py's DAMPING",
         "1.9": "an example gap [periods] of the clock rule",
         "1e-4": "POSITION_NOISE [rad], the sensing noise the joint-step bound allows (a setting)",
         "2.48e-3": "(2.175 rad/s · 1.05) · 1 ms + 2 · 1e-4 rad, the joint-step bound (a closed form)",
