@@ -226,10 +226,10 @@ NOT_MEASURED: dict[str, dict[str, str]] = {
         "0.108": "the belt rung's configured rotor inertia per joint (an input)",
         # the realism rungs' table: each rung's defaults and the source of each
         "0.25": "the issue's 0.25–0.5 ms plant step, the physics rung's source (an input)",
-        "1.6": "the press's torque on joints 1–3 along fig3's path, Jᵀ of 10 N: the friction "
-        "rung's reason for τ_c (the set-up's statics)",
-        "2.9": "the press's torque on joints 1–3 along fig3's path, Jᵀ of 10 N: the friction "
-        "rung's reason for τ_c (the set-up's statics)",
+        "1.6": "the torque joints 1–3 carry in fig3 pressing 10 N: the basis of the friction "
+        "default τ_c, as nsdrake/realism/config.py states its choice",
+        "2.9": "the torque joints 1–3 carry in fig3 pressing 10 N: the basis of the friction "
+        "default τ_c, as nsdrake/realism/config.py states its choice",
         "3e-3": "the belt rung's rotor inertia I_m [kg m²] (its default)",
         "1e-4": "the lightest rotor inertia [kg m²] tried for the belt rung, a real servo's order (an input)",
         "1.94": FIRST_STEP,
