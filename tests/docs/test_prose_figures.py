@@ -290,6 +290,10 @@ NOT_MEASURED: dict[str, dict[str, str]] = {
         "4.35e-3": "2 × 2.175 rad/s × 1 ms, the start tolerance's bound (a closed form)",
         "5.3": "1/(2π · 30 Hz), the 30 Hz low-pass's time constant [ms] (a closed form)",
         "1.75": "the UDP test's drive duration [s] (its input)",
+        "9.76": "the lower end of EARTH_GRAVITY [m/s²], nsdrake/driver/panda.py (Hirt et al. 2013, rounded)",
+        "9.84": "the upper end of EARTH_GRAVITY [m/s²], nsdrake/driver/panda.py (Hirt et al. 2013, rounded)",
+        "2.9": "3 kg less urdf/panda.urdf's 0.1 kg tool: the payload left under the rating (a closed form)",
+        "0.73": "the Franka Hand's mass in example-robot-data's panda.urdf [kg] (the vendor's file)",
     },
     "docs/results/gradient_projection/table.md": {"1.94": FIRST_STEP},
     "docs/results/null_space_bandwidth/table.md": {
