@@ -53,6 +53,7 @@ class StatusBuffer:
         self._fingerprint = _fingerprint(lcmt_panda_status)
         arrays = np.ndarray((8, _N), ">f8", buffer=self.buffer, offset=20)
         self.q, self.v, self.tau_ext = arrays[0], arrays[2], arrays[7]
+        self.tau_desired = arrays[6]  # joint_torque_desired: what the robot's torque interface applies
 
     def problem(self, data: bytes) -> str | None:
         """Why ``data`` is not an lcmt_panda_status of 7 joints (None: it is one)."""
