@@ -29,7 +29,11 @@ of its own, labelled with the settings each side read back.
 
 Then ``--loop-runs`` runs of the loop alone (``--profile``'s measurement, unprofiled),
 their medians. Writes ``table.md`` under ``--out``, one row per run (docs/results/drive/
-keeps the one the docs show).
+keeps the one the docs show). Each UDP run prints every bounded metric of panda_wipe with
+its bound and verdict (its metrics.json); after the table, one line per UDP run with issue
+44's figures: tick / step at p50 and p99.9 (the plain step measured in the same bench
+run, with ``--loop-runs``), the driver's fresh share and its own CPU per period, and how
+the run ended (its bounds, or the fault that stopped it).
 
 ``--filter``: panda_wipe (``--filter-duration``, default the whole scenario) over UDP with
 the simulated driver's torque low-pass at 30 Hz (drake-franka-driver's default
@@ -162,9 +166,23 @@ def udp(
     result = {key: timing.get(key) for key in (*KEYS, "load_average_1min", "bounds_met")}
     result["silence_bound_periods"] = silence_bound(config)
     result["metrics"] = {name: float(m["value"]) for name, m in (metrics.get("metrics") or {}).items()}
+    result["bounds"] = bounds(metrics)
+    print(f"{folder.name}: every bound: " + ("; ".join(result["bounds"]) or "none (the run stopped)"))
     result["realtime"] = timing.get("realtime")
     result["driver"] = driver_figures(driver_line)
     return result
+
+
+def bounds(metrics: dict) -> list[str]:
+    """Each of the run's metrics that has a bound: its value, the bound, met or not (metrics.json)."""
+    lines = []
+    for name, m in (metrics.get("metrics") or {}).items():
+        if m.get("passed") is None:
+            continue
+        lines.append(
+            f"{name} {m['value']:.4g} {m['unit']} ({m['bound']}): {'met' if m['passed'] else 'NOT met'}"
+        )
+    return lines
 
 
 def driver_figures(driver_line: str) -> dict:
@@ -255,6 +273,25 @@ def table(results: dict) -> str:
         "replay (issue 44's targets: 1.5 and 2). This machine's figures, with its load.\n\n"
     )
     return title + header + "\n".join(rows) + "\n"
+
+
+def summary(r: dict) -> str:
+    """One UDP run's issue 44 figures in a line: tick / step (p50, p99.9, the plain step measured
+    in the same bench run), the driver's fresh share and its own CPU per period, the bounds."""
+    driver, load = r.get("driver") or {}, r.get("load_average_1min")
+    ratio = (
+        f"tick / step {r['tick_over_step_p50']:.2f} (p50), {r['tick_over_step_p999']:.2f} (p99.9)"
+        if r.get("tick_over_step_p50") is not None
+        else "tick / step not measured (--loop-runs 0)"
+    )
+    ended = f"bounds {'met' if r.get('bounds_met') else 'NOT met'}"
+    if r.get("failure"):  # no metrics were computed: "bounds met" would be vacuous
+        ended = f"stopped: {r['failure']}"
+    return (
+        f"{udp_label(r)}: {ratio}; driver: fresh {percent(driver.get('fresh_fraction'))}, "
+        f"its own CPU {cell(driver.get('cpu_per_period_us'))} per period; "
+        f"{ended} (load {cell(load[0] if load else None, '', 2)})"
+    )
 
 
 def ratio_cells(r: dict) -> str:
@@ -674,6 +711,8 @@ def main():
                 run.update(ratios(run, results["loop_alone"]))
     (args.out / "table.md").write_text(table(results))
     print(table(results), end="")
+    for run in results.get("udp_runs", []):
+        print(summary(run))
     if args.filter:
         duration = args.filter_duration or load_scenario("panda_wipe", config=args.settings).duration
         results["filter"] = filter_runs(duration, args.out, args.settings, args.realtime)

@@ -41,7 +41,7 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from nsdrake.control.config import ControllerConfig
 from nsdrake.control.model import ControllerModel
-from nsdrake.control.plan import ControllerPlan, StageBuffers
+from nsdrake.control.plan import ControllerPlan, StageBuffers, torque_limits
 from nsdrake.control.stages import (
     COMMIT,
     CRITERIA,
@@ -205,6 +205,36 @@ class ControllerStep:
         self._t_previous = None
         self._rotation_needed = self.plan.m_r > 0  # R_d, ω_d, ω̇_d: given again after a reset
         self._thread = None  # the next call's thread owns the step (class docstring)
+
+    def hold_torque(self, torque: np.ndarray) -> None:
+        """The torque the actuators apply before the first call (n) [N m], in the convention
+        the limits act on (τ − g(q) when ``robot_adds_gravity``: what a Panda reports as
+        ``joint_torque_desired``; else τ): the first call's torque-rate limit is centred on
+        it, as every later call's is on the previous τ (without it the first call's change is
+        unbounded). Only before the first call (since construction or :meth:`reset`, which
+        forgets it); refused with ControllerInputError, the state unchanged, for a torque
+        that is not n finite numbers within the torque limits (no actuator applies it)."""
+        problem = vector_size_problem(torque, self._n, f"{self._n} joint torques [N m]")
+        problem = problem and f"torque {problem}"
+        if problem is None:
+            torque = np.asarray(torque, dtype=float)
+            problem = inputs_problem(torque, entry_names([("torque", list(self.model.joint_names))]))
+        if problem is None and self._t_previous is not None:
+            problem = "called after the first step: the rate limit already has the previous τ"
+        limits = torque_limits(self.config, self.model)
+        if problem is None and not (np.abs(torque) <= limits).all():
+            k = int(np.argmax(np.abs(torque) - limits))
+            problem = (
+                f"torque[{self.model.joint_names[k]}] {torque[k]:g} N m is beyond the joint's torque limit "
+                f"{limits[k]:g} N m: "
+                "no actuator applies it"
+            )
+        if problem is not None:
+            raise ControllerInputError("ControllerStep.hold_torque", problem)
+        previous = self._buffers.previous_tau
+        previous[: self._n], previous[self._n] = torque, 1.0
+        # the first call moves the reference by g(q) − this: τ_prev = torque + g(q) of its own q
+        self._gravity_previous[:] = 0.0
 
     def _claim(self) -> None:
         """The calling thread takes the step if no thread has it; else refused."""

@@ -6,6 +6,6 @@ A layer between :mod:`nsdrake.reporting` and :mod:`nsdrake.studies`. The control
 :mod:`nsdrake.driver.wire`) answers the newest ``lcmt_panda_status`` with one
 ``lcmt_panda_command`` in torque mode, one ``ControllerStep`` call per status; the
 simulated driver (:mod:`nsdrake.driver.simulated_driver`) is the scenario's station behind
-Drake's ``PandaCommandReceiver`` and ``PandaStatusSender``, free-running as
+the Panda's messages (encoded in place as Drake's ``PandaStatusSender`` fills them), free-running as
 drake-franka-driver in :mod:`nsdrake.driver.serve`; :mod:`nsdrake.driver.run` runs them.
 """

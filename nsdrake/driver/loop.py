@@ -48,6 +48,7 @@ import time
 
 import numpy as np
 
+from nsdrake.control.validation import ControllerInputError
 from nsdrake.driver.bus import Bus
 from nsdrake.driver.controller_side import ControllerSide, Recorder
 from nsdrake.driver.faults import (
@@ -362,8 +363,24 @@ class ControllerLoop:
         problem = start_problem(self._q, self.side.station.q0, c.start_tolerance, self._names)
         if problem:
             raise self._fault(f"first status refused: {problem}")
+        self._hold_applied_torque()
         self._answer(data, arrival, wall, cpu)
         self.started = True
+
+    def _hold_applied_torque(self) -> None:
+        """The first command's rate reference: the first status's ``joint_torque_desired``,
+        the torque the robot's interface applies now (libfranka's τ_J_d, gravity excluded:
+        τ − g(q) in both gravity setups, what the limiter and the gate bound; drake-franka-driver
+        copies it in as it is), so that the first command, like every later one, differs from
+        what the robot applies by at most ρ_max T (1 N m) and the last gate checks that too.
+        Without it the first command's change was unbounded: a drive started on a robot held
+        by another controller stepped its torque at once."""
+        held = np.array(self._status.tau_desired, dtype=float)
+        try:
+            self.side.step.hold_torque(held)
+        except ControllerInputError as e:
+            raise self._fault(f"first status refused: joint_torque_desired: {e.problem}") from None
+        self._at_robot[:] = held
 
     def _wait_for_a_status(self) -> None:
         """Until the inbox holds a status; silence beyond the bound, on the wall clock from
@@ -575,7 +592,7 @@ class ControllerLoop:
         command or τ − g(q) when the driver subtracts its g(q): driver.robot_adds_gravity
         false); a command it passes is encoded here."""
         side = self.side
-        problem = command_problem(side.at_robot, self._at_robot if self.commands else None, self._names)
+        problem = command_problem(side.at_robot, self._at_robot, self._names)  # the first: the status's
         if problem and not side.adds_gravity:
             problem = f"with the driver's g(q) subtracted (driver.robot_adds_gravity false): {problem}"
         if problem:  # the last gate: nothing beyond the robot's published limits leaves

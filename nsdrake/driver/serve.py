@@ -24,8 +24,9 @@ not commands come:
    spinning driver takes the CPU the controller needs).
 
 Where the physics runs in the period is the stand-in's own choice: a real Panda computes
-its physics for free, the simulated one costs the PC 0.2-0.3 ms of CPU a period (measured,
-``step`` below). Run at once after the status, it competed with the controller for the
+its physics for free, the simulated one costs the PC its plant's step every period (issue
+44 cut the rest: ``python bench/bench_stand_in.py`` measures the stand-in's CPU per period
+before and after). Run at once after the status, it competed with the controller for the
 CPU exactly while the controller answers that status (on the project's 2-core VM the
 controller's status-to-command time had a p99.9 of 1.8 ms, 29 answers over 1 ms in 20 s);
 from the middle of the period on, it runs after the answer (p99.9 0.44 ms, 2-9 over 1 ms),
@@ -33,8 +34,9 @@ and the command it steps with was taken at the period's start, as the real drive
 callback takes it.
 
 The station's diagram (:func:`nsdrake.driver.simulated_driver.build_simulated_driver`)
-runs on a private in-process bus; this loop forwards its statuses and sensor messages
-to the real bus, and feeds it the torque it chose.
+gives this loop the messages of each t_k, which it stamps and publishes, and takes the
+torque it chose for the period (no bus of its own, no logs: what the PC pays for the
+stand-in robot is its plant's step and the messages, issue 44).
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from drake import lcmt_panda_command, lcmt_panda_status
-from pydrake.lcm import DrakeLcm, DrakeLcmInterface
+from pydrake.lcm import DrakeLcmInterface
 
 from nsdrake.driver.panda import NUM_JOINTS, TORQUE_RATE_LIMIT
 from nsdrake.driver.realtime import RealtimeSettings, realtime_mode
@@ -274,21 +276,11 @@ class _Server:
         self.period, self.lcm = scenario.control_period, lcm
         self.expire_us, self.low_pass_freq, self.rate_limit = expire_sec * 1e6, low_pass_freq, rate_limit
         self.wall_utime = wall_utime
-        self.inner = DrakeLcm("memq://")  # the station's diagram talks here; this loop forwards
-        self.driver = SimulatedDriver(scenario, self.inner, adds_gravity=d.robot_adds_gravity)
+        self.driver = SimulatedDriver(scenario, None, adds_gravity=d.robot_adds_gravity, record=False)
         self.plant = self.driver.built.station.plant
         self.plant_context = self.plant.GetMyContextFromRoot(self.driver.context)
         self.received: list[lcmt_panda_command] = []
-        self.outgoing: list[tuple[str, bytes]] = []
-        self._subscriptions = [
-            self.inner.Subscribe(
-                d.status_channel, lambda data: self.outgoing.append((d.status_channel, data))
-            ),
-            self.inner.Subscribe(
-                d.force_torque_channel, lambda data: self.outgoing.append((d.force_torque_channel, data))
-            ),
-            lcm.Subscribe(d.command_channel, self._on_command),
-        ]
+        lcm.Subscribe(d.command_channel, self._on_command)
         self.result, self.recent = ServeResult(), []
         self.command, self.applied = None, np.zeros(NUM_JOINTS)
         self.published: list[int] = []  # utime of each status published
@@ -304,21 +296,18 @@ class _Server:
             self.result.undecodable += 1
 
     def publish_status(self) -> None:
-        """The status of t_k (the station's diagram published it on reaching t_k), stamped
-        t_k, sent now: taken off the inner bus first (left there, it went out a period
-        later, stamped t_k+1: two periods from measurement to applied torque, where the
-        real driver takes one)."""
+        """The status of t_k and the sensor's message, stamped t_k, sent now (then the
+        sensor's): a period's status goes out before the command answering the previous one
+        is taken, as the real driver's callback publishes first."""
         d = self.channels
-        self.inner.HandleSubscriptions(0)
-        for channel, data in self.outgoing:
-            if channel == d.status_channel:  # stamped in place (wire.stamp_status: no decode, no encode)
-                robot_utime, utime = ROBOT_UP_US + round(self.driver.time * 1e6), self.wall_utime()
-                rate = float(np.mean(self.recent)) if self.recent else 1.0
-                data = stamp_status(data, utime, robot_utime, ROBOT_MODE_MOVE, rate)
-                self.published.append(utime)
-                self.published_robot.append(robot_utime)
-            self.lcm.Publish(channel, data)
-        self.outgoing.clear()
+        status, force_torque = self.driver.messages()
+        robot_utime, utime = ROBOT_UP_US + round(self.driver.time * 1e6), self.wall_utime()
+        rate = float(np.mean(self.recent)) if self.recent else 1.0
+        # stamped in place (wire.stamp_status: no decode, no encode)
+        self.lcm.Publish(d.status_channel, stamp_status(status, utime, robot_utime, ROBOT_MODE_MOVE, rate))
+        self.published.append(utime)
+        self.published_robot.append(robot_utime)
+        self.lcm.Publish(d.force_torque_channel, force_torque)
 
     def take_command(self) -> None:
         """The newest command unless expired (else damping), filtered and rate limited,

@@ -2,13 +2,13 @@
 
 ::
 
-    command_subscriber ─► command_receiver (PandaCommandReceiver, torque) ─► τ_cmd ─┐
+    command (fixed for the period) ─► τ_cmd ─────────────────────────────────────────┐
     gravity (g(q) of the robot's own model, when the robot adds it) ─────────────────┤
                                                       applied_torque = τ_cmd + g ─► station.actuation
     station: plant, table on its sensor, post
-      state ─► q, q̇ ─► status_sender (PandaStatusSender) ─► status_publisher (every period)
-      generalized contact forces on the arm ─► τ_ext = −(them) ─┘
-      sensor wrench ─► force_torque_sender ─► force_torque_publisher (every period)
+    at each t_k, read off the diagram's ports and encoded in place (nsdrake/driver/wire.py):
+      lcmt_panda_status: q, q̇, τ_cmd, applied, τ_ext = −(generalized contact forces on the arm)
+      lcmt_force_torque: the sensor's wrench
 
 **The robot's gravity** is g(q) of the robot's own model, not of the physics: the arm and
 the payload its load settings declare (Franka's end-effector and load settings in Desk or
@@ -22,8 +22,19 @@ adds (docs/real_arm.md, "Gravity"; ``tests/driver/test_payload_gravity.py``).
 
 The status carries q, q̇, the last command (``joint_torque_desired``), the torque applied
 (``joint_torque``) and τ_ext = Jᵀ W_T, the torque with which the arm holds the contact
-wrench (the exact external torque: a perfect estimator). It publishes at the driver's
-1 kHz (the scenario's control period), and the plant steps once per period.
+wrench (the exact external torque: a perfect estimator), with the fields Drake's
+``PandaStatusSender`` fills (the others zero, ``utime`` the simulation's time). It
+publishes at the driver's 1 kHz (the scenario's control period), and the plant steps once
+per period.
+
+**What it costs the PC** (issue 44): the diagram holds only what the physics needs and the
+systems whose outputs the messages carry; the command is an input port fixed once a period
+(no LCM subscriber, receiver, sender or publisher systems in the diagram, whose events
+ran every period), the messages are encoded in place from the ports' values, and the
+loggers are rows this class records only where a caller reads them (``record``: the
+lockstep drive's ground truth). The physics is the same plant, contact model and step as
+the Drake diagram of LCM systems it replaces: tests/driver/test_stand_in.py drives both
+with the same commands and compares every state and every message bit for bit.
 
 **Lockstep.** Before each plant step the driver takes the command that answers the
 status it published last; the torque computed from the state at t_k acts over
@@ -37,191 +48,252 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
 from pydrake.lcm import DrakeLcmInterface
-from pydrake.manipulation import PandaCommandReceiver, PandaControlMode, PandaStatusSender
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
-from pydrake.systems.primitives import Adder, Demultiplexer, Gain, MatrixGain, VectorLogSink
+from pydrake.systems.primitives import Adder, MatrixGain
 
 from nsdrake.driver.panda import NUM_JOINTS
-from nsdrake.driver.wrench import ForceTorqueSender
-from nsdrake.experiment.diagram import controller_model, log_signals
+from nsdrake.driver.wire import ForceTorqueWriter, StatusWriter, command_torque
+from nsdrake.experiment.diagram import controller_model
 from nsdrake.experiment.scenario import Scenario
 from nsdrake.experiment.scenario_station import add_scenario_station
 from nsdrake.station.plant import Station
+
+LOGS = ("wrench", "forbidden_contacts", "state", "applied")  # what record=True keeps (logs())
 
 
 @dataclass
 class SimulatedDriverDiagram:
     diagram: Diagram
     station: Station
-    command_subscriber: LcmSubscriberSystem
-    # "wrench" (the sensor's), "forbidden_contacts", "state" (the links'), "applied" (the joint
-    # torque the plant applied over the period that ends at the sample; zero at t = 0)
-    loggers: dict[str, VectorLogSink]
+    # the ports each period reads: the commanded torque's input (fixed), and the outputs of
+    # "applied" (the torque the plant applies: τ_cmd, + g(q) when the robot adds it),
+    # "contact" (the generalized contact forces on the arm) and, for the logs,
+    # "net_joint_torque" (B u: the joint torque the plant applied over its last step)
+    command: object
+    outputs: dict
     # the model whose g(q) the robot adds (a ControllerModel: held, its plant is the gravity's)
     robot_model: object | None = None
 
 
-def _robot_torque(builder, station, receiver, robot_model):
-    """The torque the simulated robot applies: the command, plus g(q) of ``robot_model`` (a
-    plant of the arm alone, the robot's own model; None: the robot adds no gravity)."""
-    applied = receiver.get_commanded_torque_output_port()
+def _robot_torque(builder, station, robot_model):
+    """(the command's input port, the torque the simulated robot applies): the command,
+    plus g(q) of ``robot_model`` (a plant of the arm alone, the robot's own model; None:
+    the robot adds no gravity)."""
     if robot_model is None:
-        return applied
+        return station.ports.actuation, None
     gravity = builder.AddNamedSystem(
         "gravity", InverseDynamics(robot_model, InverseDynamics.InverseDynamicsMode.kGravityCompensation)
     )
     builder.Connect(station.ports.state, gravity.get_input_port_estimated_state())
     adder = builder.AddNamedSystem("applied_torque", Adder(2, NUM_JOINTS))
-    builder.Connect(applied, adder.get_input_port(0))
     builder.Connect(gravity.get_output_port_generalized_force(), adder.get_input_port(1))
-    return adder.get_output_port()
+    builder.Connect(adder.get_output_port(), station.ports.actuation)
+    return adder.get_input_port(0), adder.get_output_port()
 
 
-def build_simulated_driver(
-    scenario: Scenario, lcm: DrakeLcmInterface, *, adds_gravity: bool = True
-) -> SimulatedDriverDiagram:
-    """The simulated driver's diagram (module docstring) on ``lcm``, with the channels of
-    ``scenario.driver``. ``adds_gravity``: the robot adds g(q) to every command (Franka's
-    torque interface does, of its own model: the module docstring); False applies the
-    command alone."""
-    d, period = scenario.driver, scenario.control_period
+def build_simulated_driver(scenario: Scenario, *, adds_gravity: bool = True) -> SimulatedDriverDiagram:
+    """The simulated driver's diagram (module docstring). ``adds_gravity``: the robot adds
+    g(q) to every command (Franka's torque interface does, of its own model: the module
+    docstring); False applies the command alone."""
     builder = DiagramBuilder()
     station = add_scenario_station(builder, scenario)
     plant = station.plant
-    state = builder.AddNamedSystem("measured_state", Demultiplexer([NUM_JOINTS, NUM_JOINTS]))
-    builder.Connect(station.ports.state, state.get_input_port())
-    subscriber = builder.AddNamedSystem(
-        "command_subscriber",
-        LcmSubscriberSystem.Make(d.command_channel, lcmt_panda_command, lcm, use_cpp_serializer=True),
-    )
-    receiver = builder.AddNamedSystem(
-        "command_receiver", PandaCommandReceiver(NUM_JOINTS, int(PandaControlMode.kTorque))
-    )
-    builder.Connect(subscriber.get_output_port(), receiver.get_message_input_port())
-    builder.Connect(state.get_output_port(0), receiver.get_position_measured_input_port())
     robot_model = controller_model(scenario, station) if adds_gravity else None
-    applied = _robot_torque(builder, station, receiver, robot_model and robot_model.plant)
-    builder.Connect(applied, station.ports.actuation)
-    external = builder.AddNamedSystem("torque_external", Gain(-1.0, NUM_JOINTS))
-    builder.Connect(plant.get_generalized_contact_forces_output_port(station.arm), external.get_input_port())
-    sender = builder.AddNamedSystem("status_sender", PandaStatusSender(NUM_JOINTS))
-    builder.Connect(state.get_output_port(0), sender.get_position_measured_input_port())
-    builder.Connect(state.get_output_port(1), sender.get_velocity_measured_input_port())
-    builder.Connect(receiver.get_commanded_torque_output_port(), sender.get_torque_commanded_input_port())
-    builder.Connect(applied, sender.get_torque_measured_input_port())
-    builder.Connect(external.get_output_port(), sender.get_torque_external_input_port())
-    status_port = sender.get_output_port()
-    _publish(builder, "status_publisher", status_port, d.status_channel, lcmt_panda_status, lcm, period)
-    ft = builder.AddNamedSystem("force_torque_sender", ForceTorqueSender())
-    builder.Connect(station.ports.wrench, ft.get_input_port())
-    ft_port, ft_channel = ft.get_output_port(), d.force_torque_channel
-    _publish(builder, "force_torque_publisher", ft_port, ft_channel, lcmt_force_torque, lcm, period)
-    loggers = log_signals(
-        builder,
-        {
-            "wrench": station.ports.wrench,
-            "forbidden_contacts": station.monitor.get_output_port(),
-            "state": station.ports.link_state,
-            "applied": _net_joint_torque(builder, plant),
-        },
-        period,
-    )
+    command, applied = _robot_torque(builder, station, robot_model and robot_model.plant)
+    builder.ExportInput(command, "command")
+    joint_torque = builder.AddNamedSystem("net_joint_torque", MatrixGain(plant.MakeActuationMatrix()))
+    builder.Connect(plant.get_net_actuation_output_port(), joint_torque.get_input_port())
     diagram = builder.Build()
     diagram.set_name("simulated_driver")
+    outputs = {
+        "applied": applied,  # None: the command itself
+        "contact": plant.get_generalized_contact_forces_output_port(station.arm),
+        "net_joint_torque": joint_torque.get_output_port(),
+    }
     return SimulatedDriverDiagram(
         diagram=diagram,
         station=station,
-        command_subscriber=subscriber,
-        loggers=loggers,
+        command=diagram.get_input_port(0),
+        outputs=outputs,
         robot_model=robot_model,
     )
 
 
-def _net_joint_torque(builder, plant):
-    """The joint torque B u the plant applied over its last step (its sampled net actuation)."""
-    joint_torque = builder.AddNamedSystem("net_joint_torque", MatrixGain(plant.MakeActuationMatrix()))
-    builder.Connect(plant.get_net_actuation_output_port(), joint_torque.get_input_port())
-    return joint_torque.get_output_port()
+class _Logs:
+    """The record=True rows: (times, each signal's values) per period, preallocated."""
 
+    def __init__(self, sizes: dict[str, int], capacity: int):
+        self.times = np.zeros(capacity)
+        self.rows = {name: np.zeros((size, capacity)) for name, size in sizes.items()}
+        self.count = 0
 
-def _publish(builder, name, port, channel, lcm_type, lcm, period):
-    """``port`` published on ``channel`` once per ``period``."""
-    publisher = LcmPublisherSystem.Make(
-        channel, lcm_type, lcm, publish_period=period, use_cpp_serializer=True
-    )
-    builder.AddNamedSystem(name, publisher)
-    builder.Connect(port, publisher.get_input_port())
+    def add(self, t: float, values: dict) -> None:
+        if self.count == self.times.size:  # longer than planned: grow (rare)
+            self.times = np.concatenate([self.times, np.zeros_like(self.times)])
+            self.rows = {name: np.hstack([rows, np.zeros_like(rows)]) for name, rows in self.rows.items()}
+        self.times[self.count] = t
+        for name, value in values.items():
+            self.rows[name][:, self.count] = value
+        self.count += 1
 
 
 class SimulatedDriver:
     """Runs the simulated driver one period at a time (lockstep, module docstring).
 
-    ``start()`` publishes the status of t = 0; each ``step()`` takes the latest command
-    received on ``lcm`` and advances the plant one period, which publishes the next
+    ``start()`` publishes the status of t = 0 on ``lcm``; each ``step()`` takes the latest
+    command received on ``lcm`` and advances the plant one period, which publishes the next
     status. ``realtime_rate`` > 0 paces the steps against the wall clock (1: the robot's
-    real time); 0 runs as fast as the computer allows.
+    real time); 0 runs as fast as the computer allows. ``lcm`` None: nothing is published or
+    received (``nsdrake sim-driver`` takes :meth:`messages` and gives :meth:`apply_torque`
+    itself). ``record``: each period's wrench, forbidden contacts, state and applied torque
+    kept for :meth:`logs`.
     """
 
     def __init__(
         self,
         scenario: Scenario,
-        lcm: DrakeLcmInterface,
+        lcm: DrakeLcmInterface | None,
         *,
         adds_gravity: bool = True,
         realtime_rate: float = 0.0,
+        record: bool = True,
     ):
         self.scenario = scenario
         self.lcm = lcm
         self.period = scenario.control_period
-        self.built = build_simulated_driver(scenario, lcm, adds_gravity=adds_gravity)
-        self.simulator = Simulator(self.built.diagram)
+        self.built = built = build_simulated_driver(scenario, adds_gravity=adds_gravity)
+        self.simulator = Simulator(built.diagram)
         self.simulator.set_target_realtime_rate(realtime_rate)
         self.context = self.simulator.get_mutable_context()
-        station = self.built.station
+        station = built.station
         plant_context = station.plant.GetMyMutableContextFromRoot(self.context)
         station.plant.SetPositions(plant_context, station.q0)
         station.plant.SetVelocities(plant_context, station.v0)
-        self._subscriber_context = self.built.command_subscriber.GetMyMutableContextFromRoot(self.context)
+        self.torque = np.zeros(NUM_JOINTS)  # the command applied over the current period [N m]
+        self._command = built.command.FixValue(self.context, self.torque)
+        self._ports = self._reading_ports()
+        self._status, self._force_torque = StatusWriter(), ForceTorqueWriter()
+        self._received: bytes | None = None
+        self._logs = None
+        if record:
+            n = station.plant.num_positions() + station.plant.num_velocities()
+            capacity = int(round(scenario.duration / self.period)) + 2
+            self._logs = _Logs(
+                {"wrench": 6, "forbidden_contacts": 1, "state": n, "applied": NUM_JOINTS}, capacity
+            )
+        if lcm is not None:
+            d = scenario.driver
+            self._channels = (d.status_channel, d.force_torque_channel)
+            lcm.Subscribe(d.command_channel, self._on_command)
         self.steps = 0
+
+    def _reading_ports(self) -> list:
+        """(port, its system's context) for each value a period reads: [q; q̇], the applied
+        torque (None: the command), the contact forces on the arm, the sensor's wrench, the
+        contact monitor, the links' state, B u."""
+        station, outputs = self.built.station, self.built.outputs
+        ports = [
+            station.ports.state, outputs["applied"], outputs["contact"], station.ports.wrench,
+            station.monitor.get_output_port(), station.ports.link_state, outputs["net_joint_torque"],
+        ]  # fmt: skip
+        return [
+            None if port is None else (port, port.get_system().GetMyContextFromRoot(self.context))
+            for port in ports
+        ]
+
+    def _on_command(self, data: bytes) -> None:
+        self._received = data
 
     @property
     def time(self) -> float:
         return self.context.get_time()
 
     def start(self) -> None:
-        """Publishes the status (and the sensor's wrench) of t = 0."""
+        """Publishes the status (and the sensor's wrench) of t = 0 (without a bus, computes
+        the sensor's wrench: its first evaluation loads the sensor's compiled kernel, 8.5 ms
+        of CPU here, which must not fall in a period that ``nsdrake sim-driver`` times)."""
         self.simulator.Initialize()
+        wrench, at = self._ports[3]
+        wrench.Eval(at)
+        self._sampled()
+
+    def messages(self) -> tuple[bytes, bytes]:
+        """The status and the sensor's lcmt_force_torque of the current time (module docstring)."""
+        (state, at), applied, (contact, contact_at), (wrench, wrench_at) = self._ports[:4]
+        x = state.Eval(at)
+        torque = self.torque if applied is None else applied[0].Eval(applied[1])
+        t = self.context.get_time()
+        status = self._status.set(
+            int(t * 1e6),
+            x[:NUM_JOINTS],
+            x[NUM_JOINTS:],
+            torque,
+            self.torque,
+            np.negative(contact.Eval(contact_at)),
+        )
+        return status, self._force_torque.set(t, wrench.Eval(wrench_at))
+
+    def _sampled(self) -> None:
+        """The messages of the current time published, its logs recorded."""
+        if self.lcm is not None:
+            status, force_torque = self.messages()
+            self.lcm.Publish(self._channels[0], status)
+            self.lcm.Publish(self._channels[1], force_torque)
+        if self._logs is not None:
+            (wrench, wrench_at), (monitor, monitor_at), (links, links_at), (net, net_at) = (
+                self._ports[3],
+                self._ports[4],
+                self._ports[5],
+                self._ports[6],
+            )
+            self._logs.add(
+                self.context.get_time(),
+                {
+                    "wrench": wrench.Eval(wrench_at),
+                    "forbidden_contacts": monitor.Eval(monitor_at),
+                    "state": links.Eval(links_at),
+                    "applied": net.Eval(net_at),
+                },
+            )
 
     def step(self) -> None:
         """Takes the latest command on the bus, then advances one period (publishing the
         next status)."""
         self.lcm.HandleSubscriptions(0)
-        self.built.command_subscriber.ExecuteForcedEvents(self._subscriber_context, True)
+        if self._received is not None:
+            torque = command_torque(self._received)
+            if torque is None:
+                raise ValueError(f"the simulated driver received {len(self._received)} bytes that are not a "
+                                 f"torque command of {NUM_JOINTS} joints")  # fmt: skip
+            self.apply_torque(torque)
+            self._received = None
         self.advance()
 
     def apply_torque(self, torque: np.ndarray, utime: int = 0) -> None:
         """The torque command for the next period, given directly (``nsdrake sim-driver``
-        chooses it itself: nsdrake/driver/serve.py): a command message on this driver's
-        bus, taken at once."""
-        command = lcmt_panda_command()
-        command.utime, command.control_mode_expected = utime, lcmt_panda_status.CONTROL_MODE_TORQUE
-        command.num_joint_torque, command.joint_torque = NUM_JOINTS, [float(x) for x in torque]
-        self.lcm.Publish(self.scenario.driver.command_channel, command.encode())
-        self.lcm.HandleSubscriptions(0)
-        self.built.command_subscriber.ExecuteForcedEvents(self._subscriber_context, True)
+        chooses it itself: nsdrake/driver/serve.py). ``utime``: unused (the command's stamp)."""
+        self.torque[:] = torque
+        self._command.GetMutableData().get_mutable_value().SetFromVector(self.torque)  # dependents told
 
     def advance(self) -> None:
         """Advances one period (publishing the next status)."""
         self.steps += 1
         self.simulator.AdvanceTo(self.steps * self.period)
+        self._sampled()
 
     def logs(self) -> dict:
-        return {name: logger.FindLog(self.context) for name, logger in self.built.loggers.items()}
+        """{name: log} of :data:`LOGS` (``sample_times()``, ``data()``), one sample per period
+        from t = 0; empty without ``record``."""
+        from nsdrake.driver.controller_side import _Log
+
+        if self._logs is None:
+            return {}
+        count = self._logs.count
+        times = self._logs.times[:count]
+        return {name: _Log(times, rows[:, :count]) for name, rows in self._logs.rows.items()}
 
 
 def wait_for_command(lcm: DrakeLcmInterface, received, deadline: float) -> bool:

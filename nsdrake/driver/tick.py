@@ -248,16 +248,16 @@ def robot_torques(tau, gravity, adds_gravity, at_robot, command) -> None:
 @njit(cache=True)
 def finish_tick(tau, gravity, adds_gravity, at_robot, command, previous, bounds, ints, buffer, bits) -> int:
     """:func:`robot_torques` into ``at_robot`` and ``command``, the last gate on at_robot
-    against ``previous``, the at_robot sent before (``bounds`` rows: |τ| and its change per
-    robot cycle, :func:`gate_bounds`; the change only after a first command), then the
+    against ``previous``, the at_robot sent before (before the first command, the first
+    status's joint_torque_desired: nsdrake/driver/loop.py) (``bounds`` rows: |τ| and its
+    change per robot cycle, :func:`gate_bounds`), then the
     command's bytes into ``buffer``, stamped with the status's utime: 0, ``previous`` now
     this at_robot; or 1, ``buffer`` and ``previous`` unchanged."""
     robot_torques(tau, gravity, adds_gravity, at_robot, command)
-    first = ints[I_COMMANDS] == 0
     for j in range(7):
         if not (np.abs(at_robot[j]) <= bounds[0, j]):
             return 1
-        if not first and not (np.abs(at_robot[j] - previous[j]) <= bounds[1, j]):
+        if not (np.abs(at_robot[j] - previous[j]) <= bounds[1, j]):
             return 1
     encode_command(buffer, ints[I_UTIME], command, bits)
     previous[:] = at_robot

@@ -53,6 +53,7 @@ class StatusBuffer:
         self._fingerprint = _fingerprint(lcmt_panda_status)
         arrays = np.ndarray((8, _N), ">f8", buffer=self.buffer, offset=20)
         self.q, self.v, self.tau_ext = arrays[0], arrays[2], arrays[7]
+        self.tau_desired = arrays[6]  # joint_torque_desired: what the robot's torque interface applies
 
     def problem(self, data: bytes) -> str | None:
         """Why ``data`` is not an lcmt_panda_status of 7 joints (None: it is one)."""
@@ -104,6 +105,8 @@ def stamp_status(data: bytes, utime: int, robot_utime: int, robot_mode: int, suc
 
 
 _STATUS_FINGERPRINT = _fingerprint(lcmt_panda_status)
+_COMMAND_FINGERPRINT = _fingerprint(lcmt_panda_command)
+_TORQUE_COUNTS = struct.pack(">iii", 0, 0, _N)  # a command's joint counts in torque mode
 FORCE_TORQUE_FIELDS = ("fx", "fy", "fz", "tx", "ty", "tz")  # lcmt_force_torque's values, in order
 
 
@@ -131,6 +134,51 @@ class ForceTorqueBuffer:
     def load(self, data: bytes) -> None:
         self.buffer[:] = data
         self.wrench[:3], self.wrench[3:] = self._values[3:], self._values[:3]
+
+
+class StatusWriter:
+    """An ``lcmt_panda_status`` of 7 joints encoded in place (the simulated driver's, as
+    Drake's ``PandaStatusSender`` fills it: the desired position, velocity and acceleration,
+    the success rate, the modes and robot_utime zero); :meth:`set` writes the rest."""
+
+    def __init__(self):
+        self.buffer = bytearray(STATUS_SIZE)
+        self.buffer[:8] = _STATUS_FINGERPRINT
+        struct.pack_into(">i", self.buffer, 16, _N)
+        self._arrays = np.ndarray((8, _N), ">f8", buffer=self.buffer, offset=20)
+
+    def set(self, utime: int, q, v, torque, torque_desired, torque_external) -> bytes:
+        """The status's bytes: ``utime`` [µs], joint_position, joint_velocity, joint_torque,
+        joint_torque_desired, joint_torque_external (7 each)."""
+        struct.pack_into(">q", self.buffer, 8, utime)
+        arrays = self._arrays
+        arrays[0], arrays[2], arrays[5], arrays[6], arrays[7] = q, v, torque, torque_desired, torque_external
+        return bytes(self.buffer)
+
+
+class ForceTorqueWriter:
+    """An ``lcmt_force_torque`` encoded in place (:func:`nsdrake.driver.wrench.force_torque_message`'s)."""
+
+    def __init__(self):
+        self.buffer = bytearray(FORCE_TORQUE_SIZE)
+        self.buffer[:8] = _fingerprint(lcmt_force_torque)
+        self._values = np.ndarray((6,), ">f8", buffer=self.buffer, offset=16)
+
+    def set(self, time: float, wrench: np.ndarray) -> bytes:
+        """The message's bytes: W = [M; f] (6) [N m, N] at ``time`` [s] (its timestamp in ms)."""
+        struct.pack_into(">q", self.buffer, 8, round(time * 1e3))
+        self._values[:3], self._values[3:] = wrench[3:], wrench[:3]
+        return bytes(self.buffer)
+
+
+def command_torque(data: bytes) -> np.ndarray | None:
+    """The 7 torques of ``data`` when it is an ``lcmt_panda_command`` in torque mode of 7
+    joints (:class:`CommandBuffer`'s layout), else None."""
+    if len(data) != COMMAND_SIZE or data[:8] != _COMMAND_FINGERPRINT or data[16:28] != _TORQUE_COUNTS:
+        return None
+    if data[-1] != lcmt_panda_status.CONTROL_MODE_TORQUE:
+        return None
+    return np.frombuffer(data, ">f8", _N, offset=28).astype(np.float64)
 
 
 class CommandBuffer:

@@ -491,3 +491,53 @@ def test_time_must_advance_by_whole_periods_and_skipped_periods_are_taken():
         np.testing.assert_array_equal(tau, reference.step(t, *args[1:]).tau)  # the refusals changed nothing
         assert np.all(np.isfinite(tau))
     step.step(t + T * (1 + 1e-9), *args[1:])  # rounding of t is not a time between periods
+
+
+def limited_step(robot_adds_gravity: bool = False) -> ControllerStep:
+    """The planar force task with |τ| ≤ 30 N m and |dτ/dt| ≤ 500 N m/s (1 N m per period)."""
+    c = config()
+    c.actuator_limits.torque = {f"joint{k}": 30.0 for k in range(1, 5)}
+    c.actuator_limits.torque_rate = {f"joint{k}": 500.0 for k in range(1, 5)}
+    return ControllerStep(
+        controller_model=ARM, config=c, normal=(0.0, -1.0), robot_adds_gravity=robot_adds_gravity
+    )
+
+
+@pytest.mark.parametrize("robot_adds_gravity", [False, True])
+def test_a_held_torque_bounds_the_first_call_s_rate_and_a_bad_one_is_refused(robot_adds_gravity):
+    """hold_torque gives the first call the torque applied before it (τ, or τ − g(q) when the
+    robot adds g): the first τ (τ − g) is within ρ_max T = 1 N m of it on every joint, at
+    exactly 1 N m where the free first call (no held torque) asks for more, towards that;
+    holding the free call's own torque changes nothing, to the bit. A held torque that is
+    not 4 finite numbers within the torque limits, or one given after the first call, is
+    refused in one line naming it, the step as before (its next call's τ that of a step
+    that never saw it). Catches the held torque ignored, taken with g when the robot adds g
+    (or without it when it does not), and a refused one written half-way."""
+    free = limited_step(robot_adds_gravity)
+    tau_free = free.step(*good_call(0)).tau.copy()
+    g = free.gravity.copy() if robot_adds_gravity else np.zeros(N)
+    wanted = tau_free - g
+    held = wanted - 5.0 * np.where(wanted > 0.0, 1.0, -1.0)  # 5 N m off, towards zero: within the limits
+    step = limited_step(robot_adds_gravity)
+    step.hold_torque(held)
+    asked = step.step(*good_call(0)).tau - g
+    np.testing.assert_allclose(np.abs(asked - held), 1.0, rtol=0, atol=1e-12)
+    assert np.all(np.sign(asked - held) == np.sign(wanted - held))
+    same = limited_step(robot_adds_gravity)
+    same.hold_torque(wanted)
+    np.testing.assert_array_equal(same.step(*good_call(0)).tau, tau_free)
+    for torque, expected in (
+        (np.zeros(3), r"torque must be 4 joint torques"),
+        (np.array([0.0, np.nan, 0.0, 0.0]), r"torque\[joint2\] is nan: must be finite"),
+        (np.array([0.0, 0.0, -31.0, 0.0]), r"torque\[joint3\] -31 N m is beyond the joint's torque limit 30"),
+    ):
+        refused, reference = limited_step(robot_adds_gravity), limited_step(robot_adds_gravity)
+        with pytest.raises(ControllerInputError, match=expected) as caught:
+            refused.hold_torque(torque)
+        assert str(caught.value).startswith("ControllerStep.hold_torque: ") and "\n" not in str(caught.value)
+        for k in range(3):
+            np.testing.assert_array_equal(refused.step(*good_call(k)).tau, reference.step(*good_call(k)).tau)
+    with pytest.raises(ControllerInputError, match="called after the first step"):
+        step.hold_torque(held)
+    step.reset()
+    step.hold_torque(held)  # a reset forgets the first call: a torque may be held again

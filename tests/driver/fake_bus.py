@@ -50,7 +50,10 @@ class FakeBus(Bus):
         self.sent.append((self.now, lcmt_panda_command.decode(bytes(data))))
 
 
-def status_bytes(q, *, utime: int, robot_utime: int = 0, v=None, num_joints: int = 7) -> bytes:
+def status_bytes(
+    q, *, utime: int, robot_utime: int = 0, v=None, num_joints: int = 7, tau_desired=None
+) -> bytes:
+    """A status at ``q`` (and ``v``); ``tau_desired``: its joint_torque_desired (zeros)."""
     status = lcmt_panda_status()
     status.utime, status.robot_utime, status.num_joints = utime, robot_utime, num_joints
     zeros = [0.0] * num_joints
@@ -61,6 +64,8 @@ def status_bytes(q, *, utime: int, robot_utime: int = 0, v=None, num_joints: int
         setattr(status, field, zeros)
     status.joint_position = list(np.asarray(q, dtype=float)[:num_joints])
     status.joint_velocity = zeros if v is None else list(v)
+    if tau_desired is not None:
+        status.joint_torque_desired = [float(x) for x in tau_desired]
     status.robot_mode, status.control_command_success_rate = 2, 1.0  # kMove, as a running Panda reports
     return status.encode()
 

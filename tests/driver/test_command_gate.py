@@ -82,8 +82,9 @@ def test_the_gate_takes_each_joint_at_its_published_limit_and_refuses_just_beyon
 
 
 def test_the_first_command_has_no_rate_to_keep_and_a_nan_is_refused():
-    """The first command of a drive is checked for its size only (no command was sent
-    before it: the limiter has no previous torque either); a NaN or an inf never passes."""
+    """Without a previous command the gate checks the size only (the drive gives it the
+    first status's joint_torque_desired as the previous one: the test below); a NaN or an
+    inf never passes."""
     command = np.full(7, 10.0)
     assert command_problem(command, None, NAMES) is None
     assert "would change by" in command_problem(command, np.zeros(7), NAMES)
@@ -111,6 +112,9 @@ class InjectedStep:
 
     def reset(self):
         self.real.reset()
+
+    def hold_torque(self, torque):
+        self.real.hold_torque(torque)
 
     def step(self, *args):
         result = self.real.step(*args)
@@ -141,9 +145,11 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
     """Hypothesis draws what shapes the command: a payload (0-100 kg, its centre of mass
     within 0.5 m of the tool), gravity (any direction, up to 3 g) and a pose, for the g(q)
     the robot adds; the law's torques for τ and the limiter's state (its previous torque,
-    or none); the robot adding g or not; and which limiter made τ (its output at the
-    published limits): the drive's own, on what is sent (its torque window centred on the
-    g(q) the robot adds, 0 when it adds none; its previous torque its own last output), or
+    or none); what the robot applies before the first command (the first status's
+    joint_torque_desired); the robot adding g or not; and which limiter made τ (its output at
+    the published limits): the drive's own, on what is sent (its torque window centred on the
+    g(q) the robot adds, 0 when it adds none; its previous torque its own last output, and
+    before that what the robot applies), or
     a limiter on τ alone, from any state (a fault the gate is there for). Each drive on a
     fake bus answers up to five statuses with those. Every command that reached the bus is
     within the published limits and one cycle's rate of the one before, and is τ − g (τ
@@ -190,11 +196,15 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
         # the command, or the driver subtracts its g from the τ it is sent (robot_adds_gravity
         # false: drake-franka-driver's --remove_gravity_compensation)
         centre = g if on_command else np.zeros(7)
+        # what the robot applies before the first command (the first status's joint_torque_desired)
+        held = np.asarray(ticks[0][2]) * PUBLISHED_TORQUE
         plan, kept = [], False
         for k, (tau_task, tau0, previous, has_previous) in enumerate(ticks):
             tau_task, tau0 = np.asarray(tau_task), np.asarray(tau0)
             if on_command and k:  # the drive's limiter: its own last τ (g held: no shift)
                 previous, has_previous = plan[-1][0], True
+            elif on_command:  # ... and before the first command, what the robot applies (+ g)
+                previous, has_previous = g + held, True
             else:
                 previous = centre + np.asarray(previous) * PUBLISHED_TORQUE
             out = limited_torque(
@@ -219,7 +229,7 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
                 bus.at(
                     (k + 1) * 1e-3,
                     "PANDA_STATUS",
-                    status_bytes(side.station.q0, utime=utime, robot_utime=utime),
+                    status_bytes(side.station.q0, utime=utime, robot_utime=utime, tau_desired=held),
                 )
                 bus.at((k + 1) * 1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
             expected = [tau - g if adds_gravity else tau for tau, _ in plan]  # on the wire
@@ -235,7 +245,7 @@ def test_no_command_beyond_the_published_limits_ever_leaves(side):
         finally:
             side.step, side.adds_gravity = real, side.scenario.driver.robot_adds_gravity
         sent = [np.asarray(message.joint_torque) for _, message in bus.sent]
-        previous = None
+        previous = held  # the first command's rate from what the robot applied
         for k, command in enumerate(sent):
             assert not beyond(at_robot[k], previous), (k, at_robot[k], previous)
             np.testing.assert_allclose(command, expected[k], rtol=0, atol=1e-12)
@@ -284,6 +294,77 @@ def test_the_command_keeps_the_rate_limit_while_gravity_moves(side):
     change = np.abs(np.diff(sent, axis=0))
     assert change.max() <= PUBLISHED_RATE * CYCLE + ROUNDING
     assert change.max() > 0.999 * PUBLISHED_RATE * CYCLE  # the limiter was at its rate limit
+
+
+def first_command(side, held) -> np.ndarray:
+    """The first command a drive sends at panda_wipe's start pose, at rest, with the first
+    status's joint_torque_desired ``held`` (what the robot's torque interface applies)."""
+    bus = FakeBus()
+    side.reset()
+    loop = ControllerLoop(side, bus, clock=bus.clock, capacity=8)
+    loop.ready()
+    q0 = np.array(side.station.q0, dtype=float)
+    bus.at(1e-3, "PANDA_STATUS", status_bytes(q0, utime=UTIME0, robot_utime=UTIME0, tau_desired=held))
+    bus.at(1e-3, "PANDA_FORCE_TORQUE", force_torque_bytes())
+    try:
+        loop.start()
+    finally:
+        assert len(bus.sent) == loop.commands
+    ((_, message),) = bus.sent
+    return np.asarray(message.joint_torque)
+
+
+@pytest.mark.parametrize("adds_gravity", [True, False], ids=["robot adds g", "driver subtracts g"])
+def test_the_first_command_moves_one_cycle_s_rate_from_what_the_robot_applies(adds_gravity):
+    """The first status says what the robot's torque interface applies now
+    (joint_torque_desired: libfranka's τ_J_d, gravity excluded, in both gravity setups). At
+    panda_wipe's start pose the law asks the robot for A = τ − g(q) (the controller side's
+    own tick, no previous torque). A robot applying A gets A (the seed bounds nothing
+    there); a robot applying A ± 5 N m (signs alternating by joint) gets a first command
+    1 N m (one 1 ms cycle at 1000 N m/s) from what it applies on every joint, towards A,
+    and the gate passes it. τ − g(q) with g from plain Drake calls. Catches the seed missing
+    (the first command is A, 5 N m from what the robot applies: the gate then refuses it),
+    held with g added or its sign flipped, or held in one gravity setup only."""
+    s = load_scenario("panda_wipe", duration=0.05)
+    s = dataclasses.replace(
+        s, driver=dataclasses.replace(s.driver, first_status_timeout=0.3, robot_adds_gravity=adds_gravity)
+    )
+    side = build_controller_side(s)
+    q0 = np.array(side.station.q0, dtype=float)
+    g = payload_gravity(q0, 0.0, np.zeros(3), [0.0, 0.0, -9.81])
+    on_the_wire = g if not adds_gravity else np.zeros(7)  # the command is τ − g, or τ
+    side.reset()
+    side.tick(0.0, q0, np.zeros(7), np.zeros(6))
+    wanted = side.step.result.tau - g  # A: what the law asks of the robot's interface
+    side.reset()
+    np.testing.assert_allclose(first_command(side, wanted) - on_the_wire, wanted, rtol=0, atol=1e-9)
+    signs = np.where(np.arange(7) % 2, 1.0, -1.0)
+    held = np.clip(wanted + 5.0 * signs, -PUBLISHED_TORQUE + 0.5, PUBLISHED_TORQUE - 0.5)
+    assert np.all(np.abs(held - wanted) > 2.0)  # every joint's ask is beyond one cycle's rate
+    asked = first_command(side, held) - on_the_wire
+    np.testing.assert_allclose(np.abs(asked - held), PUBLISHED_RATE * CYCLE, rtol=0, atol=1e-9)
+    assert np.all(np.sign(asked - held) == np.sign(wanted - held))
+    assert not beyond(asked, held)
+
+
+@pytest.mark.parametrize(
+    "bad, words",
+    [(np.nan, "torque[panda_joint3] is nan: must be finite"),
+     (90.0, "torque[panda_joint3] 90 N m is beyond the joint's torque limit 87 N m: no actuator applies it")],
+)  # fmt: skip
+def test_a_first_status_whose_applied_torque_no_panda_applies_is_refused(side, bad, words):
+    """A first status whose joint_torque_desired is not finite or beyond the published
+    limits (87 N m on joint 3) stops the drive in one line naming it, before anything is
+    sent. Catches a NaN taken as the rate reference (every window NaN) or a reference the
+    limiter cannot reach within its torque window."""
+    held = np.zeros(7)
+    held[2] = bad
+    with pytest.raises(DriveFaultError) as info:
+        first_command(side, held)
+    assert str(info.value) == (
+        f"before the first command: first status refused: joint_torque_desired: {words}; "
+        "stopped commanding after 0 command(s)"
+    )
 
 
 def drive_joint6(side, ticks: int, speed: float = 2.0, after_ready=None):

@@ -237,21 +237,22 @@ class AnsweringController:
 
 
 def test_each_status_of_the_standalone_driver_carries_the_state_of_its_own_robot_utime(monkeypatch):
-    """nsdrake sim-driver forwards the station's status of t_k at t_k, stamped robot_utime
-    t_k, from the first period on (catches the status left on the station's bus for a
-    period: sent at t_k+1 stamped t_k+1, it made two periods from measurement to applied
-    torque where drake-franka-driver takes one). The station's own status carries its
-    diagram's time in utime, before the driver re-stamps it with the wall clock."""
+    """nsdrake sim-driver sends the station's status of t_k at t_k, stamped robot_utime
+    t_k, from the first period on (catches a status sent a period late: sent at t_k+1
+    stamped t_k+1, it made two periods from measurement to applied torque where
+    drake-franka-driver takes one). The station's own status carries its diagram's time in
+    utime, before the driver re-stamps it with the wall clock."""
     import nsdrake.driver.serve as serve
 
     inner_stamps = []
+    messages = serve.SimulatedDriver.messages
 
-    def drake_lcm(url):
-        bus = DrakeLcm(url)
-        bus.Subscribe("PANDA_STATUS", lambda data: inner_stamps.append(lcmt_panda_status.decode(data).utime))
-        return bus
+    def recorded(driver):
+        status, force_torque = messages(driver)
+        inner_stamps.append(lcmt_panda_status.decode(status).utime)
+        return status, force_torque
 
-    monkeypatch.setattr(serve, "DrakeLcm", drake_lcm)
+    monkeypatch.setattr(serve.SimulatedDriver, "messages", recorded)
     lcm = DrakeLcm("memq://")
     controller = AnsweringController(lcm)
     serve_simulated_driver(load_scenario("panda_wipe"), lcm, duration=0.02, low_pass_freq=1000.0)
