@@ -5,16 +5,25 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")  # files only; never needs a display
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from nsdrake.experiment.traces import Traces  # noqa: E402
-from nsdrake.reporting.metrics import torque_steps  # noqa: E402
+from nsdrake.experiment.traces import Traces
+from nsdrake.reporting.metrics import torque_steps
 
 MODE_NAMES = {0: "none", 1: "obstacle", 2: "joint torque", 3: "manipulability", 4: "joint limits"}
+
+
+def _pyplot():
+    """matplotlib's pyplot on the Agg backend (files only; never needs a display), imported
+    when a figure is drawn, as compare's and sweep's plots do: importing this module (and
+    so the command line, which every variant and sweep process started from the
+    ``nsdrake`` script imports again) does not load matplotlib, 0.4 CPU-s of imports."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def _mode_axis(ax, traces: Traces, fontsize: int) -> None:
@@ -56,6 +65,7 @@ def plot_fig3(
     ``baseline`` (the same run with q̇_dⁿ = 0), when given, is overlaid on the
     criterion panel; ``selector`` (the scenario's limits) draws d_lim and w_lim.
     """
+    plt = _pyplot()
     t = traces["t"]
     rows = 2 + len(task_axes) + 2
     fig, axes = plt.subplots(rows, 1, figsize=(9, 2.3 * rows), sharex=True, constrained_layout=True)
@@ -98,6 +108,7 @@ def plot_fig3(
 def plot_priority(traces: Traces, path: Path, *, title: str = "", selector=None) -> None:
     """The mode timeline and each criterion over time (d_min, w, p_tau), with the
     limits of Fig. 1's tree, and the largest torque step per control period."""
+    plt = _pyplot()
     t = traces["t"]
     fig, axes = plt.subplots(5, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
     mode = traces["mode"]
@@ -156,6 +167,7 @@ def plot_pose(
     ``baseline``, the same run with q̇_dⁿ = 0); every joint's margin to its position,
     speed and torque limits as a fraction of the limit's scale; the elbow's swivel and
     the mode."""
+    plt = _pyplot()
     fig = plt.figure(figsize=(11, 13), constrained_layout=True)
     grid = fig.add_gridspec(5, 2)
     _force_axis(fig.add_subplot(grid[0, 0]), traces)
