@@ -59,6 +59,7 @@ from numba.core.caching import _CacheLocator
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
+CLAIMS = "nsdrake-kernels-"  # the claims folder's prefix in the temporary folder, then "<pid>-"
 # The one line a first run prints; the time is compile_kernels' wall time on 2 quiet cores of
 # the project's machine kind: about the CPU time of the busier of its two processes, 49 and
 # 54 CPU-s in a first fig3 run of 67.2 s wall on a quiet machine (docs/architecture.md).
@@ -323,7 +324,9 @@ def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
         if len(missing) > 1:
             # A compile from the notice on (compiling(): a Ctrl-C then ends the run at once),
             # waiting for the helper included.
-            with _notice.waiting(), tempfile.TemporaryDirectory(prefix="nsdrake-kernels-") as claims:
+            _remove_stale_claims()
+            prefix = f"{CLAIMS}{os.getpid()}-"
+            with _notice.waiting(), tempfile.TemporaryDirectory(prefix=prefix) as claims:
                 _notice.announce()
                 started, compiled = _start_helper(claims), False
                 try:
@@ -335,6 +338,25 @@ def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
                         _wait(started, compiled)
     for dispatcher, arguments in kernels:  # loads what the helper compiled, compiles what it did not
         dispatcher.compile(arguments)
+
+
+def _remove_stale_claims(folder: Path | None = None) -> None:
+    """Deletes the claims folders (:func:`_share`) of compiles whose process is gone: a run
+    killed outright (SIGKILL, no cleanup) leaves its folder behind; the next compile on
+    this machine removes it. A folder's name carries its process's id (``CLAIMS<pid>-``);
+    a folder of a live process (or of another user's: no permission to signal it) stays."""
+    import shutil
+
+    for path in Path(folder or tempfile.gettempdir()).glob(f"{CLAIMS}*-*"):
+        pid = path.name[len(CLAIMS) :].split("-", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(path, ignore_errors=True)
+        except OSError:  # alive, another user's
+            continue
 
 
 def _share(kernels, missing: list[int], claims: Path) -> None:
@@ -353,11 +375,16 @@ def _share(kernels, missing: list[int], claims: Path) -> None:
 def _start_helper(claims: str) -> subprocess.Popen | None:
     """Starts the helper process sharing the compile (:func:`_share`) through the folder
     ``claims``. It ends when this process ends (a thread of its own, started before it
-    imports nsdrake, reads its stdin until it closes) and at a Ctrl-C in the terminal
-    (SIGINT ends it: nothing to keep but whole cache files)."""
+    imports nsdrake, reads its stdin until it closes; it then deletes the claims folder,
+    which a process killed outright leaves behind) and at a Ctrl-C in the terminal (SIGINT
+    ends it: nothing to keep but whole cache files)."""
     code = (  # the watch first: importing nsdrake takes seconds on a busy machine
-        "import os, sys, threading\n"
-        "threading.Thread(target=lambda: (sys.stdin.buffer.read(), os._exit(1)), daemon=True).start()\n"
+        "import os, shutil, sys, threading\n"
+        "def watch():\n"
+        "    sys.stdin.buffer.read()\n"  # the run's process ended: its claims folder is not needed
+        "    shutil.rmtree(sys.argv[1], ignore_errors=True)\n"
+        "    os._exit(1)\n"
+        "threading.Thread(target=watch, daemon=True).start()\n"
         "from nsdrake.control.kernels import _helper\n"
         "_helper()"
     )

@@ -6,13 +6,14 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 from numba.core import config
 
-from nsdrake.control.kernels import NOTICE, STAMP, _CompileNotice, cache_folder, refresh_cache
+from nsdrake.control.kernels import CLAIMS, NOTICE, STAMP, _CompileNotice, cache_folder, refresh_cache
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository: tests.vendor_arm imports from there
 
@@ -344,6 +345,32 @@ def test_the_helper_compiling_for_a_killed_run_ends_with_it(tmp_path):
     for p in alive:  # the test's own cleanup, whatever the verdict
         os.kill(p, signal.SIGKILL)
     assert alive == [], "the helper went on compiling after its run was killed"
+    left = list(Path(tempfile.gettempdir()).glob(f"{CLAIMS}{run.pid}-*"))
+    assert left == [], "the killed run's claims folder was left behind"
+
+
+def test_the_claims_folder_of_a_dead_compile_is_removed_and_a_live_one_s_kept(tmp_path):
+    """A compile killed with its helper (both SIGKILLed, no cleanup) leaves its claims
+    folder; the next compile removes it (kernels._remove_stale_claims). Catches folders
+    left forever in the temporary folder, and a live compile's claims removed under it
+    (both processes would then compile the kernels it had claimed)."""
+    from nsdrake.control.kernels import _remove_stale_claims
+
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()  # reaped: its id names no process
+    folders = {
+        "dead": tmp_path / f"{CLAIMS}{ended.pid}-abc",
+        "this process": tmp_path / f"{CLAIMS}{os.getpid()}-def",
+        "its parent": tmp_path / f"{CLAIMS}{os.getppid()}-ghi",
+        "not ours": tmp_path / f"{CLAIMS}jkl",
+    }
+    for folder in folders.values():
+        folder.mkdir()
+        (folder / "3").touch()  # a claim
+    _remove_stale_claims(tmp_path)
+    assert {name: folder.exists() for name, folder in folders.items()} == {
+        "dead": False, "this process": True, "its parent": True, "not ours": True,
+    }  # fmt: skip
 
 
 def _state(pid: int) -> str:
