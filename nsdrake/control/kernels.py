@@ -310,7 +310,9 @@ def compile_kernels(helper: bool = True) -> None:
     When kernels are missing from the cache, a second process (``helper``) and this one
     share the work (:func:`_share`): each takes the next kernel of :func:`_entry_points`
     that neither has taken, until none is left; this one then waits for the helper and
-    loads what it compiled."""
+    loads what it compiled. When none is missing, nothing is loaded here: a process loads
+    the kernels it calls, at their first call (a run of fig3 calls a third of them; the
+    drive's and the obstacle queries' kernels stay on disk)."""
     if getattr(compile_kernels, "done", False):
         return
     with _saves_locked():
@@ -319,8 +321,10 @@ def compile_kernels(helper: bool = True) -> None:
 
 
 def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
+    missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
+    if not missing:  # all in numba's cache: each loads at its first call, if this process calls it
+        return
     if helper and (os.cpu_count() or 1) > 1:
-        missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
         if len(missing) > 1:
             # A compile from the notice on (compiling(): a Ctrl-C then ends the run at once),
             # waiting for the helper included.
