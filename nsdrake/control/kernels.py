@@ -56,6 +56,7 @@ from pathlib import Path
 
 from numba.core import config, event
 from numba.core.caching import _CacheLocator
+from numba.core.extending import overload
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
@@ -299,6 +300,43 @@ def _saves_locked():
         IndexDataCacheFile.save = original
 
 
+def _slice_mismatch(src_shapes, index_shape):
+    """What a kernel compiled by :func:`compile_kernels` calls when an array assigned to a
+    slice has another shape than the slice (numba's ``raise_with_shape_context``)."""
+    raise NotImplementedError  # compiled only
+
+
+@overload(_slice_mismatch)
+def _slice_mismatch_impl(src_shapes, index_shape):
+    def impl(src_shapes, index_shape):
+        raise ValueError("cannot assign slice from input of different size")
+
+    return impl
+
+
+@contextlib.contextmanager
+def _plain_slice_errors():
+    """A block in which a slice assignment's shape error compiles to numba's plain message
+    (:func:`_slice_mismatch`) instead of its message with both shapes: that one formats
+    strings in compiled code (``str.join``, ``repr`` of ints: 80-odd compiles of numba's
+    unicode functions, one per tuple length), and its code is linked into, re-optimised and
+    emitted again in every kernel that assigns to a slice. The error is never raised by
+    nsdrake's kernels (the layout fixes every shape), so nothing they compute changes; a
+    user's own kernels, compiled outside this block, keep numba's message."""
+    try:
+        from numba.np import arrayobj
+
+        original = arrayobj.raise_with_shape_context
+    except (ImportError, AttributeError):  # numba's internals moved: its own message
+        yield
+        return
+    arrayobj.raise_with_shape_context = _slice_mismatch
+    try:
+        yield
+    finally:
+        arrayobj.raise_with_shape_context = original
+
+
 def compile_kernels(helper: bool = True) -> None:
     """Compiles (or loads from numba's cache) every kernel nsdrake calls from Python, with
     the types of its call sites (:func:`_entry_points`), once per process. A first run
@@ -315,7 +353,7 @@ def compile_kernels(helper: bool = True) -> None:
     drive's and the obstacle queries' kernels stay on disk)."""
     if getattr(compile_kernels, "done", False):
         return
-    with _saves_locked():
+    with _saves_locked(), _plain_slice_errors():
         _compile(_dispatchers(), helper)
     compile_kernels.done = True
 
@@ -426,6 +464,6 @@ def _helper() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     _notice.printed = True  # the parent printed the notice
     kernels = _dispatchers()
-    with _saves_locked():
+    with _saves_locked(), _plain_slice_errors():
         missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
         _share(kernels, missing, Path(sys.argv[1]))

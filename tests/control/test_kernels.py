@@ -420,3 +420,28 @@ def test_the_two_processes_compile_each_missing_kernel_once(tmp_path):
         w.join()
     assert sorted(what for _, what in log) == sorted(names)
     assert {who for who, _ in log} == {"run", "helper"}
+
+
+def test_kernels_compiled_with_plain_slice_errors_still_raise_them_and_only_they():
+    """compile_kernels compiles with numba's plain message for an array assigned to a slice
+    of another shape (kernels._plain_slice_errors: numba's message with both shapes formats
+    strings in compiled code, linked into every kernel). Catches the error lost (a wrong-size
+    write going through silently) and the change leaking out of the block (a user's kernels
+    compiled afterwards must keep numba's message with the shapes)."""
+    import numpy as np
+    from numba import njit
+
+    from nsdrake.control.kernels import _plain_slice_errors
+
+    def assign(a, b):
+        a[1:3] = b
+        return a
+
+    with _plain_slice_errors():
+        inside = njit(assign)
+        assert list(inside(np.zeros(4), np.ones(2))) == [0.0, 1.0, 1.0, 0.0]  # compiled here
+    outside = njit(assign)
+    with pytest.raises(ValueError, match="^cannot assign slice from input of different size$"):
+        inside(np.zeros(4), np.ones(3))
+    with pytest.raises(ValueError, match=r"of shape \(2,\) from input of shape \(3,\)"):
+        outside(np.zeros(4), np.ones(3))
