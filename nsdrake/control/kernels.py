@@ -63,7 +63,8 @@ STAMP = "nsdrake-kernels.stamp"
 CLAIMS = "nsdrake-kernels-"  # the claims folder's prefix in the temporary folder, then "<pid>-"
 # The one line a first run prints; the time is compile_kernels' wall time on 2 quiet cores of
 # the project's machine kind: about the CPU time of the busier of its two processes, 49 and
-# 54 CPU-s in a first fig3 run of 67.2 s wall on a quiet machine (docs/architecture.md).
+# 54 CPU-s in a first fig3 run of 67.2 s wall on a quiet machine (docs/architecture.md);
+# a whole first fig3 run took 38.9 s wall on 2026-12-02's idle host (main 6395e08).
 NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (under a minute on 2 cores)…"
 
 
@@ -318,9 +319,10 @@ def _slice_mismatch_impl(src_shapes, index_shape):
 def _plain_slice_errors():
     """A block in which a slice assignment's shape error compiles to numba's plain message
     (:func:`_slice_mismatch`) instead of its message with both shapes: that one formats
-    strings in compiled code (``str.join``, ``repr`` of ints: 80-odd compiles of numba's
-    unicode functions, one per tuple length), and its code is linked into, re-optimised and
-    emitted again in every kernel that assigns to a slice. The error is never raised by
+    strings in compiled code (``str.join``, ``str`` of ints, for each tuple length: 41 of
+    the 231 compiles of :func:`compile_kernels`), and its code is linked into, re-optimised
+    and emitted again in every kernel that assigns to a slice: without it, 0.92 of the
+    compile's CPU time in one process (docs/architecture.md). The error is never raised by
     nsdrake's kernels (the layout fixes every shape), so nothing they compute changes; a
     user's own kernels, compiled outside this block, keep numba's message."""
     try:
