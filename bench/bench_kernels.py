@@ -3,6 +3,7 @@ against another (issue 36: "compiled once per install, whatever the configuratio
 
     python bench/bench_kernels.py --old /tmp/kernels-old [--duration S] [--rounds N] [--calls N]
     python bench/bench_kernels.py --compile [--no-profile] [--old /tmp/kernels-old]
+    python bench/bench_kernels.py --warm [--rounds N] [--caches DIR] [--old /tmp/kernels-old]
 
 ``--compile`` (issue 44, item 4) profiles ``compile_kernels()`` alone on an empty cache, each
 tree in a child process of its own: the CPU time of each kernel's compile, exclusive of the
@@ -15,6 +16,14 @@ second core), the trees at once so that they see the same load (``--no-profile``
 alone): its wall time and the CPU time of both processes. On a loaded machine, read the
 CPU times and the ratios (the busier process's CPU time is what an idle machine's wall
 time follows); the wall time counts only on an idle one (the load is printed).
+
+``--warm`` (issue 44, item 2) measures a process's start with the kernels cached (each tree's
+cache compiled first, in ``--caches`` DIR/<tree> if given, kept there for the next time):
+the CPU time (process time) of ``import nsdrake``, of ``compile_kernels()`` (loads, or
+nothing when all is cached), of building fig3's ``ControllerStep`` and of its first and
+second step, which kernels the process loaded, and of ``import nsdrake.cli`` (every
+command's and subprocess's import) in a process of its own; medians of ``--rounds``
+rounds, the trees interleaved.
 
 ``--old`` is a checkout of the code to compare with (``git worktree add --detach
 /tmp/kernels-old main``); both trees run with this interpreter, each from its own folder
@@ -191,6 +200,40 @@ helpers = resource.getrusage(resource.RUSAGE_CHILDREN)
 print(time.monotonic() - start, time.process_time() - cpu, helpers.ru_utime + helpers.ru_stime)
 """
 
+# A process's start with a warm cache, as a user's meets it; prints one JSON object.
+WARM = """
+import json, sys, time
+clock = time.process_time
+rows, c0 = {}, clock()
+if sys.argv[1] == "cli":
+    import nsdrake.cli
+    cpu, pyplot = clock() - c0, "matplotlib" in sys.modules
+    print(json.dumps({"import nsdrake.cli": cpu, "matplotlib imported": pyplot}))
+    sys.exit(0)
+def mark(name, start):
+    rows[name] = clock() - start
+    return clock()
+c = c0
+import nsdrake
+c = mark("import nsdrake", c)
+import bench_controller as b
+import numpy as np
+from nsdrake.control import kernels as k
+c = mark("import bench_controller", c)
+k.compile_kernels()
+c = mark("compile_kernels()", c)
+step, q0, period = b.scenario_step("fig3")
+c = mark("fig3 ControllerStep built", c)
+n, x = step.model.n, np.zeros(step.plan.m_t)
+step.step(0.0, q0, np.zeros(n), np.zeros(6), x, x, x, 5.0)
+c = mark("first step", c)
+step.step(period, q0, np.zeros(n), np.zeros(6), x, x, x, 5.0)
+c = mark("second step", c)
+rows["to the second step"] = clock() - c0
+rows["kernels loaded"] = sum(1 for d, _ in k._dispatchers() if d.overloads)
+print(json.dumps(rows))
+"""
+
 STAGES = ("typing", "lowering", "numba passes", "LLVM function passes", "LLVM module passes")
 STAGES += ("machine code", "other")
 
@@ -319,6 +362,43 @@ def compile_profile(trees: dict[str, Path], profile: bool = True) -> dict:
     return {"profiles": profiles, "runs": runs, "load": [load_before, load_after]}
 
 
+def warm_start(trees: dict[str, Path], rounds: int, caches: Path | None) -> dict:
+    """The ``--warm`` figures (module docstring), printed; returned for the JSON line."""
+    load_before = os.getloadavg()
+    print(f"load before: {load_before[0]:.1f} {load_before[1]:.1f} {load_before[2]:.1f}", flush=True)
+    rows: dict[str, list[dict]] = {name: [] for name in trees}
+    with tempfile.TemporaryDirectory(prefix="bench-kernels-") as scratch:
+        root = caches or Path(scratch)
+        env = {name: {"NUMBA_CACHE_DIR": str(root / name)} for name in trees}
+        for name, tree in trees.items():  # the caches, compiled (or found warm)
+            done, _, cpu = child(tree, ["-c", COMPILE], env[name])
+            if done.returncode != 0:
+                print(done.stderr[-3000:], file=sys.stderr)
+                raise SystemExit(f"the compile of {name} failed")
+            print(f"  {name}: cache ready ({cpu:.1f} s CPU)", flush=True)
+        for k in range(rounds):
+            for name, tree in trees.items():
+                figures = {}
+                for what in ("step", "cli"):
+                    done, _, _ = child(tree, ["-c", WARM, what], env[name])
+                    if done.returncode != 0:
+                        print(done.stderr[-3000:], file=sys.stderr)
+                        raise SystemExit(f"the warm start of {name} failed")
+                    figures |= json.loads(done.stdout.strip().splitlines()[-1])
+                rows[name].append(figures)
+                print(f"  round {k + 1} {name}: {json.dumps(figures)}", flush=True)
+    medians = {
+        name: {key: statistics.median(r[key] for r in runs) for key in runs[0]} for name, runs in rows.items()
+    }
+    load_after = os.getloadavg()
+    print("a process's start with the kernels cached, CPU s, median of the rounds:")
+    for key in medians[next(iter(trees))]:
+        cells = "  ".join(f"{name} {float(m[key]):7.3f}" for name, m in medians.items())
+        print(f"  {key:28s} {cells}")
+    print(f"load after: {load_after[0]:.1f} {load_after[1]:.1f} {load_after[2]:.1f}")
+    return {"warm": medians, "rounds": rows, "load": [load_before, load_after]}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--old", type=Path, help="checkout of the code to compare with")
@@ -332,6 +412,8 @@ def main():
     parser.add_argument(
         "--keep", type=Path, help="keep the runs' folders here (old/, new/: compare the traces)"
     )
+    parser.add_argument("--warm", action="store_true", help="a process's start with the kernels cached")
+    parser.add_argument("--caches", type=Path, help="with --warm: keep each tree's cache in DIR/<tree>")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of the per-tick figures (median)")
     parser.add_argument("--calls", type=int, default=5000, help="ControllerStep calls per figure")
     args = parser.parse_args()
@@ -339,8 +421,12 @@ def main():
         trees = {"new": HERE} | ({"old": args.old.resolve()} if args.old else {})
         print(json.dumps(compile_profile(trees, profile=not args.no_profile)))
         return
+    if args.warm:
+        trees = {"new": HERE} | ({"old": args.old.resolve()} if args.old else {})
+        print(json.dumps(warm_start(trees, args.rounds, args.caches)))
+        return
     if args.old is None:
-        parser.error("--old is needed (but for --compile)")
+        parser.error("--old is needed (but for --compile and --warm)")
     trees = {"old": args.old.resolve(), "new": HERE}
     load_before = os.getloadavg()
     print(f"load before: {load_before[0]:.1f} {load_before[1]:.1f} {load_before[2]:.1f}", flush=True)

@@ -56,12 +56,15 @@ from pathlib import Path
 
 from numba.core import config, event
 from numba.core.caching import _CacheLocator
+from numba.core.extending import overload
 
 PACKAGE = Path(__file__).resolve().parents[1]  # the nsdrake folder
 STAMP = "nsdrake-kernels.stamp"
+CLAIMS = "nsdrake-kernels-"  # the claims folder's prefix in the temporary folder, then "<pid>-"
 # The one line a first run prints; the time is compile_kernels' wall time on 2 quiet cores of
 # the project's machine kind: about the CPU time of the busier of its two processes, 49 and
-# 54 CPU-s in a first fig3 run of 67.2 s wall on a quiet machine (docs/architecture.md).
+# 54 CPU-s in a first fig3 run of 67.2 s wall on a quiet machine (docs/architecture.md);
+# a whole first fig3 run took 38.9 s wall on 2026-12-02's idle host (main 6395e08).
 NOTICE = "nsdrake: compiling nsdrake's kernels, once per install (under a minute on 2 cores)…"
 
 
@@ -298,6 +301,44 @@ def _saves_locked():
         IndexDataCacheFile.save = original
 
 
+def _slice_mismatch(src_shapes, index_shape):
+    """What a kernel compiled by :func:`compile_kernels` calls when an array assigned to a
+    slice has another shape than the slice (numba's ``raise_with_shape_context``)."""
+    raise NotImplementedError  # compiled only
+
+
+@overload(_slice_mismatch)
+def _slice_mismatch_impl(src_shapes, index_shape):
+    def impl(src_shapes, index_shape):
+        raise ValueError("cannot assign slice from input of different size")
+
+    return impl
+
+
+@contextlib.contextmanager
+def _plain_slice_errors():
+    """A block in which a slice assignment's shape error compiles to numba's plain message
+    (:func:`_slice_mismatch`) instead of its message with both shapes: that one formats
+    strings in compiled code (``str.join``, ``str`` of ints, for each tuple length: 41 of
+    the 231 compiles of :func:`compile_kernels`), and its code is linked into, re-optimised
+    and emitted again in every kernel that assigns to a slice: without it, 0.92 of the
+    compile's CPU time in one process (docs/architecture.md). The error is never raised by
+    nsdrake's kernels (the layout fixes every shape), so nothing they compute changes; a
+    user's own kernels, compiled outside this block, keep numba's message."""
+    try:
+        from numba.np import arrayobj
+
+        original = arrayobj.raise_with_shape_context
+    except (ImportError, AttributeError):  # numba's internals moved: its own message
+        yield
+        return
+    arrayobj.raise_with_shape_context = _slice_mismatch
+    try:
+        yield
+    finally:
+        arrayobj.raise_with_shape_context = original
+
+
 def compile_kernels(helper: bool = True) -> None:
     """Compiles (or loads from numba's cache) every kernel nsdrake calls from Python, with
     the types of its call sites (:func:`_entry_points`), once per process. A first run
@@ -309,21 +350,27 @@ def compile_kernels(helper: bool = True) -> None:
     When kernels are missing from the cache, a second process (``helper``) and this one
     share the work (:func:`_share`): each takes the next kernel of :func:`_entry_points`
     that neither has taken, until none is left; this one then waits for the helper and
-    loads what it compiled."""
+    loads what it compiled. When none is missing, nothing is loaded here: a process loads
+    the kernels it calls, at their first call (a run of fig3 calls a third of them; the
+    drive's and the obstacle queries' kernels stay on disk)."""
     if getattr(compile_kernels, "done", False):
         return
-    with _saves_locked():
+    with _saves_locked(), _plain_slice_errors():
         _compile(_dispatchers(), helper)
     compile_kernels.done = True
 
 
 def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
+    missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
+    if not missing:  # all in numba's cache: each loads at its first call, if this process calls it
+        return
     if helper and (os.cpu_count() or 1) > 1:
-        missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
         if len(missing) > 1:
             # A compile from the notice on (compiling(): a Ctrl-C then ends the run at once),
             # waiting for the helper included.
-            with _notice.waiting(), tempfile.TemporaryDirectory(prefix="nsdrake-kernels-") as claims:
+            _remove_stale_claims()
+            prefix = f"{CLAIMS}{os.getpid()}-"
+            with _notice.waiting(), tempfile.TemporaryDirectory(prefix=prefix) as claims:
                 _notice.announce()
                 started, compiled = _start_helper(claims), False
                 try:
@@ -335,6 +382,25 @@ def _compile(kernels: list[tuple[object, tuple]], helper: bool) -> None:
                         _wait(started, compiled)
     for dispatcher, arguments in kernels:  # loads what the helper compiled, compiles what it did not
         dispatcher.compile(arguments)
+
+
+def _remove_stale_claims(folder: Path | None = None) -> None:
+    """Deletes the claims folders (:func:`_share`) of compiles whose process is gone: a run
+    killed outright (SIGKILL, no cleanup) leaves its folder behind; the next compile on
+    this machine removes it. A folder's name carries its process's id (``CLAIMS<pid>-``);
+    a folder of a live process (or of another user's: no permission to signal it) stays."""
+    import shutil
+
+    for path in Path(folder or tempfile.gettempdir()).glob(f"{CLAIMS}*-*"):
+        pid = path.name[len(CLAIMS) :].split("-", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(path, ignore_errors=True)
+        except OSError:  # alive, another user's
+            continue
 
 
 def _share(kernels, missing: list[int], claims: Path) -> None:
@@ -353,11 +419,16 @@ def _share(kernels, missing: list[int], claims: Path) -> None:
 def _start_helper(claims: str) -> subprocess.Popen | None:
     """Starts the helper process sharing the compile (:func:`_share`) through the folder
     ``claims``. It ends when this process ends (a thread of its own, started before it
-    imports nsdrake, reads its stdin until it closes) and at a Ctrl-C in the terminal
-    (SIGINT ends it: nothing to keep but whole cache files)."""
+    imports nsdrake, reads its stdin until it closes; it then deletes the claims folder,
+    which a process killed outright leaves behind) and at a Ctrl-C in the terminal (SIGINT
+    ends it: nothing to keep but whole cache files)."""
     code = (  # the watch first: importing nsdrake takes seconds on a busy machine
-        "import os, sys, threading\n"
-        "threading.Thread(target=lambda: (sys.stdin.buffer.read(), os._exit(1)), daemon=True).start()\n"
+        "import os, shutil, sys, threading\n"
+        "def watch():\n"
+        "    sys.stdin.buffer.read()\n"  # the run's process ended: its claims folder is not needed
+        "    shutil.rmtree(sys.argv[1], ignore_errors=True)\n"
+        "    os._exit(1)\n"
+        "threading.Thread(target=watch, daemon=True).start()\n"
         "from nsdrake.control.kernels import _helper\n"
         "_helper()"
     )
@@ -395,6 +466,6 @@ def _helper() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     _notice.printed = True  # the parent printed the notice
     kernels = _dispatchers()
-    with _saves_locked():
+    with _saves_locked(), _plain_slice_errors():
         missing = [k for k, (d, a) in enumerate(kernels) if not _cached(d, a)]
         _share(kernels, missing, Path(sys.argv[1]))

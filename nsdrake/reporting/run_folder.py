@@ -41,7 +41,6 @@ from nsdrake.reporting.metrics import (
     self_motion_metrics,
     write_metrics,
 )
-from nsdrake.reporting.plots import plot_fig3, plot_pose, plot_priority
 from nsdrake.reporting.replay import write_diagram_picture, write_replay
 from nsdrake.reporting.report import write_report
 from nsdrake.station.visualization import start_meshcat
@@ -299,6 +298,9 @@ def write_plots(
 ) -> list[Path]:
     """fig3.png, priority.png and pose.png, as the scenario's checks ask (none for an empty trace),
     titled ``title`` (what the run did: :func:`run_title`; default the scenario's description)."""
+    # matplotlib only here: a sweep's workers import this module for its metrics and plot nothing
+    from nsdrake.reporting.plots import plot_fig3, plot_pose, plot_priority
+
     title = scenario.description if title is None else title
     if len(traces) < 2:
         return []

@@ -6,13 +6,14 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 from numba.core import config
 
-from nsdrake.control.kernels import NOTICE, STAMP, _CompileNotice, cache_folder, refresh_cache
+from nsdrake.control.kernels import CLAIMS, NOTICE, STAMP, _CompileNotice, cache_folder, refresh_cache
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository: tests.vendor_arm imports from there
 
@@ -344,6 +345,32 @@ def test_the_helper_compiling_for_a_killed_run_ends_with_it(tmp_path):
     for p in alive:  # the test's own cleanup, whatever the verdict
         os.kill(p, signal.SIGKILL)
     assert alive == [], "the helper went on compiling after its run was killed"
+    left = list(Path(tempfile.gettempdir()).glob(f"{CLAIMS}{run.pid}-*"))
+    assert left == [], "the killed run's claims folder was left behind"
+
+
+def test_the_claims_folder_of_a_dead_compile_is_removed_and_a_live_one_s_kept(tmp_path):
+    """A compile killed with its helper (both SIGKILLed, no cleanup) leaves its claims
+    folder; the next compile removes it (kernels._remove_stale_claims). Catches folders
+    left forever in the temporary folder, and a live compile's claims removed under it
+    (both processes would then compile the kernels it had claimed)."""
+    from nsdrake.control.kernels import _remove_stale_claims
+
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()  # reaped: its id names no process
+    folders = {
+        "dead": tmp_path / f"{CLAIMS}{ended.pid}-abc",
+        "this process": tmp_path / f"{CLAIMS}{os.getpid()}-def",
+        "its parent": tmp_path / f"{CLAIMS}{os.getppid()}-ghi",
+        "not ours": tmp_path / f"{CLAIMS}jkl",
+    }
+    for folder in folders.values():
+        folder.mkdir()
+        (folder / "3").touch()  # a claim
+    _remove_stale_claims(tmp_path)
+    assert {name: folder.exists() for name, folder in folders.items()} == {
+        "dead": False, "this process": True, "its parent": True, "not ours": True,
+    }  # fmt: skip
 
 
 def _state(pid: int) -> str:
@@ -393,3 +420,28 @@ def test_the_two_processes_compile_each_missing_kernel_once(tmp_path):
         w.join()
     assert sorted(what for _, what in log) == sorted(names)
     assert {who for who, _ in log} == {"run", "helper"}
+
+
+def test_kernels_compiled_with_plain_slice_errors_still_raise_them_and_only_they():
+    """compile_kernels compiles with numba's plain message for an array assigned to a slice
+    of another shape (kernels._plain_slice_errors: numba's message with both shapes formats
+    strings in compiled code, linked into every kernel). Catches the error lost (a wrong-size
+    write going through silently) and the change leaking out of the block (a user's kernels
+    compiled afterwards must keep numba's message with the shapes)."""
+    import numpy as np
+    from numba import njit
+
+    from nsdrake.control.kernels import _plain_slice_errors
+
+    def assign(a, b):
+        a[1:3] = b
+        return a
+
+    with _plain_slice_errors():
+        inside = njit(assign)
+        assert list(inside(np.zeros(4), np.ones(2))) == [0.0, 1.0, 1.0, 0.0]  # compiled here
+    outside = njit(assign)
+    with pytest.raises(ValueError, match="^cannot assign slice from input of different size$"):
+        inside(np.zeros(4), np.ones(3))
+    with pytest.raises(ValueError, match=r"of shape \(2,\) from input of shape \(3,\)"):
+        outside(np.zeros(4), np.ones(3))
