@@ -211,21 +211,27 @@ def without_notices(err: str) -> str:
     return re.sub(r"(?m)^[^:\n]+: (\d+%|\d+/\d+ \w+)( \(\d+ failed\))?, [^\n]*\d+ s[^\n]*\n", "", err)
 
 
-@pytest.fixture(scope="session")
-def panda_wipe_direct(tmp_path_factory):
-    """(traces, built) of the shipped panda_wipe simulated directly for its whole 28 s: the
-    acceptance figures (experiment/test_panda_scenarios.py) and the drive's comparison with
-    the direct run (driver/test_drive_reproduces.py) read the same run, simulated once in the
-    whole test run (:func:`once_per_test_run`: the traces; ``built`` is the same scenario's
-    diagram built again in this worker, unsimulated, for its station). Read them, never
-    change them."""
+def shipped_run(tmp_path_factory, name: str):
+    """(traces, built) of the shipped scenario ``name`` simulated directly for its whole
+    duration (``run(load_scenario(name))``), once in the whole test run
+    (:func:`once_per_test_run`: the traces; ``built`` is the same scenario's diagram built
+    again in this worker, unsimulated, for its station). Read them, never change them."""
     from nsdrake.experiment.diagram import build_diagram
     from nsdrake.experiment.scenario import load_scenario
     from nsdrake.experiment.simulate import run
 
-    scenario = load_scenario("panda_wipe")
-    traces = once_per_test_run(tmp_path_factory, "panda_wipe", lambda folder: run(scenario)[0])
+    scenario = load_scenario(name)
+    traces = once_per_test_run(tmp_path_factory, f"shipped-{name}", lambda folder: run(scenario)[0])
     return traces, build_diagram(scenario)
+
+
+@pytest.fixture(scope="session")
+def panda_wipe_direct(tmp_path_factory):
+    """:func:`shipped_run` of panda_wipe (28 s): the acceptance figures
+    (experiment/test_panda_scenarios.py), the drive's comparison with the direct run
+    (driver/test_drive_reproduces.py) and the torque rate the law asks for at first contact
+    (experiment/test_first_contact.py) read the same run."""
+    return shipped_run(tmp_path_factory, "panda_wipe")
 
 
 @pytest.fixture(scope="session")

@@ -319,12 +319,15 @@ def check_interrupted(folder: Path, plan: dict) -> int | None:
     return commands
 
 
-# Both with the whole suite (issue 46): the fast twins of its rules are
+# With the whole suite (issue 46): the fast twins of its rules are
 # test_wire_faults.py::test_ctrl_c_during_a_wait_is_an_interrupt_not_a_bus_failure (the
 # interrupted wait's OSError, in process) and test_drive_interrupt.py (Ctrl-C waiting for the
-# first status on the lcm package's bus, and mid-drive, each in a process of its own).
+# first status on the lcm package's bus, and mid-drive, each in a process of its own). Ten
+# tries only: the 2-try run that was the fast subset's, then ran beside this one in the
+# whole suite, is the same script with one waiting and one mid-run try at random moments;
+# the ten make five of each, and must have a mid-run try that commanded.
 @pytest.mark.slow
-@pytest.mark.parametrize("tries", [2, 10], ids=["2 tries", "10 tries"])
+@pytest.mark.parametrize("tries", [10], ids=["10 tries"])
 def test_ctrl_c_at_random_moments_over_udp_is_an_interrupt(tmp_path, tries):
     """Issue 34, item 1: `nsdrake drive --lcm udpm://…` sent SIGINT at random moments
     (interrupt_script: waiting for the first status, and mid-run beside nsdrake

@@ -11,7 +11,6 @@ differences.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from pathlib import Path
 
@@ -300,21 +299,29 @@ def rates(traces: Traces) -> np.ndarray:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", panda_scenarios())
-def test_the_shipped_panda_scenario_asks_for_less_than_franka_torque_rate(name):
-    """The whole shipped run with its torque-rate limit taken off (so the traces hold what
-    the law asks for, not what the limiter let through): every joint's commanded torque
-    changes by less than 1000 N m/s between rows (finite differences of the tau columns),
-    the tool never leaves the table after it touched it, the force's peak while it settles is
-    within f_d + 10%. With the rate limit on (the shipped run, test_panda_scenarios.py) no
-    row is then clipped. On the old reference (a stop at once, touching at 13 mm/s) joint 2
-    asked for 12.8 kN m/s and the tool left the table for 17 ms."""
-    from nsdrake.experiment.simulate import run
+def test_the_shipped_panda_scenario_asks_for_less_than_franka_torque_rate(name, tmp_path_factory):
+    """The whole shipped run asks its actuator limiter for nothing: τ₀ never scaled (s = 1)
+    and no joint clipped in any row, so its traces hold what the law asks for, not what the
+    limiter let through; every joint's commanded torque changes by less than 1000 N m/s
+    between rows (finite differences of the tau columns), the tool never leaves the table
+    after it touched it, the force's peak while it settles is within f_d + 10%. On the old
+    reference (a stop at once, touching at 13 mm/s) joint 2 asked for 12.8 kN m/s and the
+    tool left the table for 17 ms.
+
+    The run is conftest's shipped_run, the one the acceptance figures and the drive's
+    comparison read (panda_wipe: 28 s, simulated once in the whole test run). Until
+    2026-12-02 this test simulated the run again with the torque-rate limit taken off; while
+    the limiter never acts (asserted first) the two runs are one: each tick's τ is
+    τ_task + 1·τ₀ inside both windows, so the states, and by induction every later tick,
+    are the same (checked bit-identical for both shipped Panda scenarios that day). A law
+    asking for more than the rate limit in some row makes the limiter act there: s < 1 or a
+    joint clipped, and the first assertion fails."""
+    from conftest import shipped_run
 
     scenario = load_scenario(name)
-    unlimited = dataclasses.replace(
-        scenario, actuator_limits=dataclasses.replace(scenario.actuator_limits, torque_rate={})
-    )
-    traces, _ = run(unlimited)
+    traces, _ = shipped_run(tmp_path_factory, name)
+    acted = np.flatnonzero((traces["tau0_scale"] != 1.0) | (traces["saturated_joints"] != 0))
+    assert acted.size == 0, f"the limiter acted in {acted.size} rows, first at t = {traces['t'][acted[0]]} s"
     asked = rates(traces)
     assert np.all(asked < FRANKA_RATE), dict(enumerate(np.round(asked, 1), start=1))
     metrics = {m.name: m for m in first_contact_metrics(traces, scenario.reference.contact_threshold)}

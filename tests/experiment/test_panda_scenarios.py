@@ -269,13 +269,15 @@ def test_without_the_null_space_task_the_elbow_reaches_the_post(wipe):
 
 
 @pytest.mark.slow
-def test_panda_self_motion_sweeps_the_elbow_while_the_tool_holds():
+def test_panda_self_motion_sweeps_the_elbow_while_the_tool_holds(tmp_path_factory):
     """The shipped panda_self_motion: the elbow swivels through ≥ 0.5 rad of the
     self-motion and back while the tool's in-plane position error stays ≤ 1 mm and the
     force error ≤ 2% RMS (Eq. 11 on a 7-joint arm with gravity). Catches a null-space law
-    whose τ₀ leaks into the task (J H⁻¹ τ₀ ≠ 0) at the Panda's speeds."""
-    scenario = load_scenario("panda_self_motion")
-    traces, built = run(scenario)
+    whose τ₀ leaks into the task (J H⁻¹ τ₀ ≠ 0) at the Panda's speeds. (The run is
+    conftest's shipped_run, which test_first_contact.py's torque-rate test reads too.)"""
+    from conftest import shipped_run
+
+    traces, built = shipped_run(tmp_path_factory, "panda_self_motion")
     metrics = self_motion_metrics(
         traces, normal=built.station.normal, task_axes=("x", "y", "z"), contact_threshold=0.5
     )
