@@ -26,7 +26,10 @@ import pytest
 from nsdrake.experiment.traces import Traces
 
 ROOT = Path(__file__).resolve().parents[1]
-DURATION = 3.0  # [s] simulated by each of the family's three variants (about 40 s in all, loaded)
+# [s] simulated by each of the family's three variants: long enough that the run outlasts the
+# moments drawn below on a fast host (12.8 s idle on 2026-12-02's host; with 3 s variants it
+# took 7.7 s there, and a moment drawn at 7.66 s came after its end)
+DURATION = 12.0
 COMMITTED = "the committed table\n"
 
 
@@ -111,8 +114,8 @@ def test_ctrl_c_while_the_comparison_starts_is_one_line_and_130(tmp_path):
 @pytest.mark.parametrize("seed", range(3))
 def test_ctrl_c_at_a_random_moment_is_one_line_and_130(tmp_path, seed):
     """SIGINT at a moment drawn uniformly over the first 8 s of the family's run (the
-    comparison of three 3 s variants takes 12.7-14.4 s on the idle 2-core machine, measured
-    by the draws that fell after its end, about 40 s loaded): exit 130, one line, no traceback; the
+    comparison of three 12 s variants, DURATION, outlasts it: its first 8 s hold the
+    imports, a variant's simulation and the start of the next): exit 130, one line, no traceback; the
     comparison's folder released, every variant that finished kept with its traces to the
     end, the others marked interrupted or not run; an interrupted family's committed table
     left as it was, a finished one's copied. Catches subprocess.run's kill of the child
