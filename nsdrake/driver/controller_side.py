@@ -50,6 +50,7 @@ from nsdrake.driver.panda import (
     payload_rating_problem,
     robot_gravity_problem,
 )
+from nsdrake.driver.rows import Rows
 from nsdrake.driver.tick import robot_torques
 from nsdrake.driver.wrench import wrench_from_external_torques
 from nsdrake.experiment.checks import check_with_model
@@ -235,17 +236,22 @@ class Recorder:
             sizes["p_joint_limits"] = 1
         if side.scenario.report.null_space_torque:
             sizes["tau0"] = n
-        self.slices, start = {}, 1
-        for name, size in sizes.items():
-            self.slices[name] = slice(start, start + size)
-            start += size
-        self.rows = np.zeros((max(1, capacity), start))
-        self.count = 0
+        self._rows = Rows(sizes, capacity)
+        self.slices = self._rows.slices
+
+    @property
+    def count(self) -> int:
+        """The ticks recorded."""
+        return self._rows.count
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The rows (column 0 the time, then each signal's ``slices[name]``); the first
+        :attr:`count` are recorded."""
+        return self._rows.rows
 
     def record(self, t: float, q, v, wrench, desired, result, command, in_contact: bool) -> None:
-        if self.count == self.rows.shape[0]:  # longer than planned: grow (rare)
-            self.rows = np.concatenate([self.rows, np.zeros_like(self.rows)])
-        row, s, n = self.rows[self.count], self.slices, self._n
+        row, s, n = self._rows.next_row(), self.slices, self._n
         row[0] = t
         state = row[s["state"]]
         state[:n], state[n:] = q, v
@@ -272,21 +278,7 @@ class Recorder:
             row[s["p_joint_limits"]] = c[3, n]
         if "tau0" in s:
             row[s["tau0"]] = result.null_space_torque
-        self.count += 1
+        self._rows.done()
 
     def logs(self) -> dict:
-        rows = self.rows[: self.count]
-        return {name: _Log(rows[:, 0], rows[:, part].T) for name, part in self.slices.items()}
-
-
-class _Log:
-    """A logger's record made of arrays (``sample_times()``, ``data()``)."""
-
-    def __init__(self, times: np.ndarray, data: np.ndarray):
-        self._times, self._data = times, data
-
-    def sample_times(self) -> np.ndarray:
-        return self._times
-
-    def data(self) -> np.ndarray:
-        return self._data
+        return self._rows.logs()

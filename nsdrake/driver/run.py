@@ -25,9 +25,10 @@ from pydrake.lcm import DrakeLcm
 from nsdrake.control.model_files import MODEL_WARNINGS
 from nsdrake.control.validation import ControllerInputError
 from nsdrake.driver.bus import Bus, DrakeBus
-from nsdrake.driver.controller_side import _Log, build_controller_side
+from nsdrake.driver.controller_side import build_controller_side
 from nsdrake.driver.loop import ControllerLoop, DriveFaultError, DriveInterruptedError
 from nsdrake.driver.realtime import RealtimeSettings, realtime_mode, realtime_settings
+from nsdrake.driver.rows import Log
 from nsdrake.driver.simulated_driver import SimulatedDriver
 from nsdrake.driver.stop import ctrl_c_requests
 from nsdrake.driver.timing import (
@@ -256,9 +257,9 @@ def drive_traces(run: DriveRun) -> Traces:
         truth = run.driver.logs()
         rows = np.searchsorted(truth["wrench"].sample_times(), times)
         for name in ("wrench", "forbidden_contacts", "applied"):
-            logs[name] = _Log(times, truth[name].data()[:, rows])
+            logs[name] = Log(times, truth[name].data()[:, rows])
     else:
-        logs["forbidden_contacts"] = _Log(times, np.full((1, times.size), np.nan))
+        logs["forbidden_contacts"] = Log(times, np.full((1, times.size), np.nan))
     traces = collect_traces(side, side.station_diagram.CreateDefaultContext(), logs=logs)
     columns = {name: traces[name] for name in traces.names}
     arm = side.station.arm_model

@@ -55,6 +55,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, MatrixGain
 
 from nsdrake.driver.panda import NUM_JOINTS
+from nsdrake.driver.rows import Rows
 from nsdrake.driver.wire import ForceTorqueWriter, StatusWriter, command_torque
 from nsdrake.experiment.diagram import controller_model
 from nsdrake.experiment.scenario import Scenario
@@ -122,24 +123,6 @@ def build_simulated_driver(scenario: Scenario, *, adds_gravity: bool = True) -> 
     )
 
 
-class _Logs:
-    """The record=True rows: (times, each signal's values) per period, preallocated."""
-
-    def __init__(self, sizes: dict[str, int], capacity: int):
-        self.times = np.zeros(capacity)
-        self.rows = {name: np.zeros((size, capacity)) for name, size in sizes.items()}
-        self.count = 0
-
-    def add(self, t: float, values: dict) -> None:
-        if self.count == self.times.size:  # longer than planned: grow (rare)
-            self.times = np.concatenate([self.times, np.zeros_like(self.times)])
-            self.rows = {name: np.hstack([rows, np.zeros_like(rows)]) for name, rows in self.rows.items()}
-        self.times[self.count] = t
-        for name, value in values.items():
-            self.rows[name][:, self.count] = value
-        self.count += 1
-
-
 class SimulatedDriver:
     """Runs the simulated driver one period at a time (lockstep, module docstring).
 
@@ -181,7 +164,7 @@ class SimulatedDriver:
         if record:
             n = station.plant.num_positions() + station.plant.num_velocities()
             capacity = int(round(scenario.duration / self.period)) + 2
-            self._logs = _Logs(
+            self._logs = Rows(
                 {"wrench": 6, "forbidden_contacts": 1, "state": n, "applied": NUM_JOINTS}, capacity
             )
         if lcm is not None:
@@ -287,13 +270,7 @@ class SimulatedDriver:
     def logs(self) -> dict:
         """{name: log} of :data:`LOGS` (``sample_times()``, ``data()``), one sample per period
         from t = 0; empty without ``record``."""
-        from nsdrake.driver.controller_side import _Log
-
-        if self._logs is None:
-            return {}
-        count = self._logs.count
-        times = self._logs.times[:count]
-        return {name: _Log(times, rows[:, :count]) for name, rows in self._logs.rows.items()}
+        return {} if self._logs is None else self._logs.logs()
 
 
 def wait_for_command(lcm: DrakeLcmInterface, received, deadline: float) -> bool:
